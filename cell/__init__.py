@@ -1,0 +1,1 @@
+"""The application: configuration, the command line, the tick loop and the cell's state."""

@@ -1,0 +1,267 @@
+"""The ``cell`` command line.
+
+User errors (bad values, unknown parts, malformed files) print one line naming the value, file
+and key, and exit with status 2 -- never a traceback. Programming errors still raise.
+
+Contract forms (scripts rely on them; keep them exactly):
+
+* ``cell analyze [--part NAME] --la 0.3 0.5 0.7 0.9 --mu-s 0.2 --mu-h 0.4 --mu-g 0.4
+  --grid 91 --out DIR [--json FILE]``
+* ``cell plan --part NAME [--json FILE]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cell.catalogue import Catalogue, load_catalogue
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Gripper
+from skills.mechanics.planner import PivotPlan, PlannerOptions, plan_pivot
+from skills.mechanics.region import (
+    HALF_PI,
+    alpha_axis,
+    beta_axis,
+    check_tilt,
+    min_alpha_for_tilt,
+    region_map,
+)
+
+DEFAULT_LA = [0.3, 0.5, 0.7, 0.9]
+
+
+class UserError(Exception):
+    """An error in what the user gave us: reported in one line, exit status 2."""
+
+
+def _deg(x: float | None) -> str:
+    return "-" if x is None else f"{math.degrees(x):.1f}"
+
+
+def _add_physics_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--mu-s", type=float, default=0.2, help="friction at S, finger on top (0.2)")
+    p.add_argument("--mu-h", type=float, default=0.4, help="friction at H, finger in hole (0.4)")
+    p.add_argument("--mu-g", type=float, default=0.4, help="friction at G, part on ground (0.4)")
+    p.add_argument(
+        "--catalogue", type=Path, default=None, help="part catalogue YAML (default: shipped one)"
+    )
+    p.add_argument(
+        "--finger-width", type=float, default=Gripper.finger_width,
+        help="finger pad width w in m (default 0.020)",
+    )
+    p.add_argument(
+        "--equation", choices=("auto", "eq7", "eq8"), default="auto",
+        help="force balance: auto = Eq. 7 when all frictions are 0 (as the paper), else Eq. 8",
+    )
+
+
+def _frictions(args: argparse.Namespace) -> Frictions:
+    return Frictions(mu_s=args.mu_s, mu_h=args.mu_h, mu_g=args.mu_g)
+
+
+def _write_json(path: Path, payload: Any) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(payload, indent=1) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"cannot write {path}: {exc.strerror}") from None
+
+
+def cmd_analyze(args: argparse.Namespace) -> int:
+    if args.grid < 2:
+        raise UserError(f"--grid must be >= 2, got {args.grid}")
+    catalogue = load_catalogue(args.catalogue)
+    part = catalogue.get(args.part)
+    frictions = _frictions(args)
+    gripper = Gripper(finger_width=args.finger_width)
+    section = part.section(gripper.finger_width)
+    la = np.asarray(args.la, dtype=float)
+    alphas, betas = alpha_axis(args.grid), beta_axis(args.grid)
+    stable = region_map(section, la, alphas, betas, frictions, args.equation)
+    from skills.mechanics.balance import resolve_equation
+
+    equation = resolve_equation(args.equation, frictions)
+
+    from cell.figures import plot_region_map
+
+    tag = f"muS{args.mu_s:g}_muH{args.mu_h:g}_muG{args.mu_g:g}"
+    png = plot_region_map(
+        args.out / f"region_{part.name}_{tag}.png", part.name, section, la, alphas, betas,
+        stable, frictions, equation,
+    )
+    print(
+        f"{part.name}: a = {section.a * 1e3:.1f} mm, b = {section.b * 1e3:.1f} mm, "
+        f"delta = {section.delta * 1e3:.2f} mm (w = {gripper.finger_width * 1e3:.1f} mm); "
+        f"{equation}; mu_S={args.mu_s:g} mu_H={args.mu_h:g} mu_G={args.mu_g:g}; "
+        f"grid {args.grid}x{args.grid}"
+    )
+    print(
+        f"{'l_a':>5} {'stable pts':>10} {'min alpha @beta=0':>18} "
+        f"{'min alpha tilt->CoM over G':>27} {'min alpha tilt->90':>19}  [deg]"
+    )
+    for k, value in enumerate(la):
+        at_zero = alphas[stable[k, :, 0]]
+        to_tip = min_alpha_for_tilt(section, float(value), frictions, section.tip_angle,
+                                    args.equation)
+        to_top = min_alpha_for_tilt(section, float(value), frictions, HALF_PI, args.equation)
+        print(
+            f"{value:5.2f} {int(stable[k].sum()):10d} "
+            f"{_deg(float(at_zero[0]) if at_zero.size else None):>18} "
+            f"{_deg(to_tip):>27} {_deg(to_top):>19}"
+        )
+    print(f"wrote {png}")
+    if args.json is not None:
+        _write_json(
+            args.json,
+            {
+                "part": part.name,
+                "l_a": la.tolist(),
+                "alpha": alphas.tolist(),
+                "beta": betas.tolist(),
+                "stable": stable.tolist(),
+                "equation": equation,
+                "mu": {"S": args.mu_s, "H": args.mu_h, "G": args.mu_g},
+            },
+        )
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _format_plan(plan: PivotPlan) -> str:
+    lines = [f"part          {plan.part}"]
+    if not plan.pivotable:
+        lines.append(f"verdict       NOT pivotable: {plan.reason}")
+        if plan.delta_m is not None:
+            lines.append(f"delta         {plan.delta_m * 1e3:.2f} mm")
+        return "\n".join(lines)
+    assert plan.alpha is not None and plan.delta_m is not None and plan.opening_m is not None
+    ub = plan.beta_ub
+    lines += [
+        "verdict       pivotable",
+        f"l_a           {plan.l_a:.2f}   (S is {plan.l_a * 100:.0f} % of the length from the open end)",
+        f"alpha         {plan.alpha:.4f} rad ({math.degrees(plan.alpha):.2f} deg)",
+        f"delta         {plan.delta_m * 1e3:.2f} mm",
+        f"stable beta   0 .. {_deg(plan.beta_stable_max)} deg"
+        + (f"  (beta_ub {_deg(ub)} deg)" if ub is not None else "  (whole tilt)"),
+        f"required      0 .. {_deg(plan.beta_required)} deg",
+        f"jaw opening   {plan.opening_m * 1e3:.1f} mm + {plan.gripper.clearance * 1e3:.0f} mm "
+        f"clearance of {plan.gripper.stroke * 1e3:.0f} mm stroke",
+    ]
+    return "\n".join(lines)
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    catalogue: Catalogue = load_catalogue(args.catalogue)
+    if args.all == (args.part is not None):
+        raise UserError("give exactly one of --part NAME or --all")
+    names = list(catalogue.parts) if args.all else [args.part]
+    gripper = Gripper(finger_width=args.finger_width, stroke=args.stroke, clearance=args.clearance)
+    options = PlannerOptions(la_max=args.la_max, full_tilt=args.full_tilt, equation=args.equation)
+    frictions = _frictions(args)
+    plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
+    print("\n\n".join(_format_plan(p) for p in plans))
+    if args.json is not None:
+        payload: Any = plans[0].to_json() if not args.all else {"plans": [p.to_json() for p in plans]}
+        _write_json(args.json, payload)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def cmd_check_tilt(args: argparse.Namespace) -> int:
+    catalogue = load_catalogue(args.catalogue)
+    part = catalogue.get(args.part)
+    section = part.section(args.finger_width)
+    required = HALF_PI if args.to == "top" else section.tip_angle
+    result = check_tilt(section, args.la, args.alpha, _frictions(args), required, args.equation)
+    verdict = "ok" if result.ok else "FAILS"
+    print(
+        f"{part.name}: l_a={args.la:g}, alpha={args.alpha:g} rad ({math.degrees(args.alpha):.1f}"
+        f" deg): stable for beta 0 .. {_deg(result.beta_stable_max)} deg; required "
+        f"0 .. {_deg(required)} deg: {verdict}"
+    )
+    return 0 if result.ok else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cell",
+        description="pivot-cell: hole grasps of hollow parts by asymmetric pivot manipulation.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser(
+        "analyze", help="stable-grasp regions in the (alpha, beta) plane (Fig. 5)",
+        description="Map the stable (alpha, beta) set of a part for several l_a, write a "
+        "Fig.-5-style PNG and, with --json, the boolean map indexed [l_a][alpha][beta].",
+    )
+    p.add_argument("--part", default="bushing", help="part name from the catalogue (bushing)")
+    p.add_argument(
+        "--la", type=float, nargs="+", default=DEFAULT_LA, metavar="L_A",
+        help="values of l_a = l/(2a) in (0, 1] (default 0.3 0.5 0.7 0.9)",
+    )
+    p.add_argument("--grid", type=int, default=91, help="points per axis (default 91)")
+    p.add_argument("--out", type=Path, default=Path("out"), help="directory for the PNG (out)")
+    p.add_argument("--json", type=Path, default=None, help="also write the map as JSON here")
+    _add_physics_options(p)
+    p.set_defaults(func=cmd_analyze)
+
+    p = sub.add_parser(
+        "plan", help="choose l_a and alpha for a part, or say why it cannot be pivoted",
+        description="Per-part pivot plan: the largest l_a the stroke allows and the smallest "
+        "alpha whose Tilt stays in force balance.",
+    )
+    p.add_argument("--part", default=None, help="part name from the catalogue")
+    p.add_argument("--all", action="store_true", help="plan every part of the catalogue")
+    p.add_argument("--json", type=Path, default=None, help="also write the plan as JSON here")
+    p.add_argument("--stroke", type=float, default=Gripper.stroke, help="gripper stroke, m (0.085)")
+    p.add_argument(
+        "--clearance", type=float, default=Gripper.clearance,
+        help="extra jaw opening for the approach, m (0.010)",
+    )
+    p.add_argument(
+        "--la-max", type=float, default=PlannerOptions.la_max,
+        help="largest l_a to consider (0.9, the paper's largest)",
+    )
+    p.add_argument(
+        "--full-tilt", action="store_true",
+        help="require balance up to beta = 90 deg, not only until the CoM is over G",
+    )
+    _add_physics_options(p)
+    p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser(
+        "check-tilt", help="path check of a given (l_a, alpha) along the Tilt",
+        description="Exit 0 when the Tilt at (l_a, alpha) stays in force balance over the "
+        "required range of beta, 1 when it does not.",
+    )
+    p.add_argument("--part", default="bushing", help="part name from the catalogue (bushing)")
+    p.add_argument("--la", type=float, required=True, help="l_a in (0, 1]")
+    p.add_argument("--alpha", type=float, required=True, help="gripper tilt alpha in rad")
+    p.add_argument(
+        "--to", choices=("tip", "top"), default="tip",
+        help="required range: until the CoM is over G (tip) or to 90 deg (top)",
+    )
+    _add_physics_options(p)
+    p.set_defaults(func=cmd_check_tilt)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (UserError, ValueError) as exc:
+        print(f"cell {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Device interfaces (arm, gripper, force-torque sensor, camera) and the real drivers."""

@@ -1,0 +1,1 @@
+"""Backend-agnostic skills. They only talk to the device interfaces in ``drivers``."""

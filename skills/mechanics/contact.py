@@ -1,0 +1,229 @@
+"""The planar contact model of the asymmetric pivot (paper Sec. III, Fig. 3-4, Tables 1-2).
+
+The lying hollow part is modelled in its side section as a rectangle of half length ``a`` and
+half height ``b`` (b = D/2). Three contacts hold it: S (the outer finger's tip on the top
+surface), H (the inner finger caught on the hole's upper lip at the open end) and G (the far
+bottom corner on the ground). Each contact contributes the two edges of its Coulomb friction
+cone as unit contact wrenches ``[m, F_x, F_y]`` (Eq. 6), which is Table 2.
+
+Readings of the paper (the paper is terse here; each choice below reproduces Table 2 exactly):
+
+* **Frames.** ``F_x, F_y`` are in the *world* frame: x horizontal, pointing from the pivot end
+  (G) towards the open end (H) while the part lies flat; y vertically up. The part is rotated
+  counter-clockwise by ``beta`` about G, so the open end rises.
+* **Contact points**, in the part frame (origin at the section centre, x along the axis towards
+  the open end, y towards the finger S): ``S = (a - l, b)``, ``H = (a, b - delta)``,
+  ``G = (-a, -b)``. So ``l`` is measured from the top corner *at the open end* and ``delta``
+  from the same corner down the end face. With these points every moment of Table 2 follows.
+* **Moments** are taken about the section centre (the centre of mass of a uniform part),
+  counter-clockwise positive. Hence gravity has no moment and ``F_ext = [0, 0, -m g]`` (Eq. 8).
+* **Directions.** A positive coefficient ``k_i`` means the contact *pushes* on the part: S
+  pushes along the top surface's inward normal, G pushes up, H pushes along the inner finger's
+  closing direction ``(-cos alpha, sin alpha)`` in the part frame, i.e. ``alpha`` is the angle
+  between the part's axis and the jaw's closing line (``alpha = 0`` is an end-to-end pinch,
+  ``alpha = pi/2`` a finger pushed straight down the hole, as in Sec. III-A).
+* **Friction edges.** Index 1 and 2 are the two cone edges, rotated by ``-gamma`` / ``+gamma``
+  as written in Table 2 (S1 and G2 lean towards +x, H1 leans by ``-gamma_H``).
+* **Units.** Lengths in metres; the wrenches are unit forces with moments in metres. Only
+  ratios matter for feasibility, so mass and scale drop out of the stability question.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: Column order of the 3x6 wrench matrix, as in Table 2.
+WRENCH_NAMES: tuple[str, ...] = ("S1", "S2", "H1", "H2", "G1", "G2")
+
+
+def _check_finite(name: str, value: float) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Frictions:
+    """Coulomb friction coefficients at S, H and G (dimensionless, >= 0).
+
+    Defaults are the set the paper infers from its experiments (Sec. IV-B).
+    """
+
+    mu_s: float = 0.2
+    mu_h: float = 0.4
+    mu_g: float = 0.4
+
+    def __post_init__(self) -> None:
+        for name in ("mu_s", "mu_h", "mu_g"):
+            value = _check_finite(name, getattr(self, name))
+            if value < 0.0:
+                raise ValueError(f"{name} must be >= 0 (a friction coefficient), got {value:g}")
+
+    @property
+    def gammas(self) -> tuple[float, float, float]:
+        """Friction-cone half angles ``gamma = atan(mu)`` at S, H, G (rad)."""
+        return (math.atan(self.mu_s), math.atan(self.mu_h), math.atan(self.mu_g))
+
+    @property
+    def frictionless(self) -> bool:
+        return self.mu_s == 0.0 and self.mu_h == 0.0 and self.mu_g == 0.0
+
+
+def hole_offset(hole: float, finger_width: float) -> float:
+    """Eq. 2: distance x (m) from the hole's axis to the flat face of a finger of width ``w``.
+
+    A flat finger of width ``w`` inside a round hole of diameter ``d`` touches the hole along a
+    chord of length ``w``; that chord lies ``x = d/2 * sqrt(1 - (w/d)^2)`` from the axis.
+    """
+    d = _check_finite("hole size d", hole)
+    w = _check_finite("finger width w", finger_width)
+    if d <= 0.0:
+        raise ValueError(f"hole size d must be > 0 m, got {d:g}")
+    if w <= 0.0:
+        raise ValueError(f"finger width w must be > 0 m, got {w:g}")
+    if w >= d:
+        raise ValueError(
+            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole d = {d * 1e3:.1f} mm:"
+            " the finger cannot enter the hole (Eq. 2 needs 0 < w/d < 1)"
+        )
+    return 0.5 * d * math.sqrt(1.0 - (w / d) ** 2)
+
+
+def delta_round(outer: float, hole: float, finger_width: float) -> float:
+    """Eq. 3 for a round hole: ``delta = D/2 - x`` (m), the depth of H below the top corner."""
+    outer = _check_finite("outer size D", outer)
+    x = hole_offset(hole, finger_width)
+    if outer <= hole:
+        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
+    return 0.5 * outer - x
+
+
+def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
+    """``delta`` (m) for a rectangular hole: the finger's face lies flat on the inner wall.
+
+    The contact is then the wall's inner edge, one wall thickness ``(D - d)/2`` below the top.
+    (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see README.)
+    """
+    outer = _check_finite("outer size D", outer)
+    hole = _check_finite("hole size d", hole)
+    w = _check_finite("finger width w", finger_width)
+    if hole <= 0.0 or outer <= hole:
+        raise ValueError(f"need 0 < d < D, got d = {hole:g} m, D = {outer:g} m")
+    if w <= 0.0:
+        raise ValueError(f"finger width w must be > 0 m, got {w:g}")
+    if w >= hole:
+        raise ValueError(
+            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole d = {hole * 1e3:.1f} mm:"
+            " the finger cannot enter the hole"
+        )
+    return 0.5 * (outer - hole)
+
+
+@dataclass(frozen=True)
+class Section:
+    """The constant geometry of Table 1 for one part and finger: ``a``, ``b``, ``delta`` (m)."""
+
+    a: float
+    b: float
+    delta: float
+
+    def __post_init__(self) -> None:
+        a = _check_finite("half length a", self.a)
+        b = _check_finite("half height b", self.b)
+        delta = _check_finite("delta", self.delta)
+        if a <= 0.0 or b <= 0.0:
+            raise ValueError(f"half length a and half height b must be > 0 m, got a={a:g}, b={b:g}")
+        if not 0.0 <= delta <= 2.0 * b:
+            raise ValueError(f"delta must lie in [0, D] = [0, {2 * b:g}] m, got {delta:g}")
+
+    @property
+    def tip_angle(self) -> float:
+        """Tilt ``beta`` (rad) at which the centre of mass passes over G: ``atan(a/b)``.
+
+        Beyond it gravity turns the part towards upright about G (Sec. III-B).
+        """
+        return math.atan2(self.a, self.b)
+
+
+def check_la(l_a: ArrayLike) -> NDArray[np.float64]:
+    arr = np.asarray(l_a, dtype=float)
+    bad = ~np.isfinite(arr) | (arr <= 0.0) | (arr > 1.0)
+    if np.any(bad):
+        raise ValueError(f"l_a must lie in (0, 1] (Eq. 1), got {arr[bad].ravel()[0]:g}")
+    return arr
+
+
+def check_alpha(alpha: ArrayLike) -> NDArray[np.float64]:
+    arr = np.asarray(alpha, dtype=float)
+    bad = ~np.isfinite(arr) | (arr <= 0.0) | (arr >= 0.5 * math.pi)
+    if np.any(bad):
+        raise ValueError(f"alpha must lie in (0, pi/2) rad (Eq. 4), got {arr[bad].ravel()[0]:g}")
+    return arr
+
+
+def check_beta(beta: ArrayLike) -> NDArray[np.float64]:
+    arr = np.asarray(beta, dtype=float)
+    bad = ~np.isfinite(arr) | (arr < 0.0) | (arr > 0.5 * math.pi + 1e-12)
+    if np.any(bad):
+        raise ValueError(f"beta must lie in [0, pi/2] rad (Eq. 5), got {arr[bad].ravel()[0]:g}")
+    return arr
+
+
+def contact_wrenches(
+    section: Section,
+    l_a: ArrayLike,
+    alpha: ArrayLike,
+    beta: ArrayLike,
+    frictions: Frictions,
+    *,
+    normalized: bool = False,
+) -> NDArray[np.float64]:
+    """Table 2: the six basis contact wrenches, shape ``broadcast(l_a, alpha, beta) + (3, 6)``.
+
+    Rows are ``(m, F_x, F_y)``, columns :data:`WRENCH_NAMES`. With ``normalized`` the moment row
+    is divided by ``a`` so all rows are O(1); that scaling does not change which force balances
+    exist (it is an invertible positive map of wrench space) and it keeps tolerances meaningful.
+    """
+    la = check_la(l_a)
+    al = check_alpha(alpha)
+    be = check_beta(beta)
+    la, al, be = np.broadcast_arrays(la, al, be)
+    a, b, delta = section.a, section.b, section.delta
+    g_s, g_h, g_g = frictions.gammas
+    l = 2.0 * a * la
+
+    out = np.empty(la.shape + (3, 6))
+    # S: finger tip on the top surface at (a - l, b).
+    out[..., 0, 0] = (l - a) * math.cos(g_s) - b * math.sin(g_s)
+    out[..., 1, 0] = np.sin(be + g_s)
+    out[..., 2, 0] = -np.cos(be + g_s)
+    out[..., 0, 1] = (l - a) * math.cos(g_s) + b * math.sin(g_s)
+    out[..., 1, 1] = np.sin(be - g_s)
+    out[..., 2, 1] = -np.cos(be - g_s)
+    # H: the hole's upper lip at (a, b - delta) against the inner finger's face.
+    out[..., 0, 2] = a * np.sin(al - g_h) + (b - delta) * np.cos(al - g_h)
+    out[..., 1, 2] = -np.cos(al - be - g_h)
+    out[..., 2, 2] = np.sin(al - be - g_h)
+    out[..., 0, 3] = a * np.sin(al + g_h) + (b - delta) * np.cos(al + g_h)
+    out[..., 1, 3] = -np.cos(al - be + g_h)
+    out[..., 2, 3] = np.sin(al - be + g_h)
+    # G: the far bottom corner (-a, -b) on the ground.
+    out[..., 0, 4] = -a * np.cos(g_g - be) - b * np.sin(g_g - be)
+    out[..., 1, 4] = -math.sin(g_g)
+    out[..., 2, 4] = math.cos(g_g)
+    out[..., 0, 5] = -a * np.cos(g_g + be) + b * np.sin(g_g + be)
+    out[..., 1, 5] = math.sin(g_g)
+    out[..., 2, 5] = math.cos(g_g)
+    if normalized:
+        out[..., 0, :] /= a
+    return out
+
+
+def gravity_wrench(normalized_mass: float = 1.0) -> NDArray[np.float64]:
+    """``F_ext = [0, 0, -m g]`` (Eq. 8): no moment about the centre of mass, weight downwards."""
+    return np.array([0.0, 0.0, -normalized_mass])

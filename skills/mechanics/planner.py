@@ -1,0 +1,188 @@
+"""Per-part pivot planner: choose ``l_a`` and ``alpha`` from the mechanics, not by hand.
+
+Policy (Sec. III-C, "grasp with as large an l_a as possible to permit a small alpha"):
+
+1. A deformable part is refused (the paper's water bottle, 0/10: the wall crushes at S).
+2. The finger must fit the hole (Eq. 2 needs ``w < d``); then ``delta`` follows from Eq. 3.
+3. For ``l_a`` from ``la_max`` downwards, take the smallest ``alpha`` whose Tilt is in force
+   balance for every ``beta`` from 0 to ``beta_required`` *and* whose jaw opening fits the stroke.
+   The first ``l_a`` that has one wins.
+
+``beta_required`` is, by default, the tilt at which the centre of mass passes over the pivot G,
+``atan(a/b)``: beyond it the paper observes (Sec. III-B, Fig. 7) that losing balance only lets
+gravity turn the part further towards upright while the finger in the hole keeps it. With
+``full_tilt`` the whole range to pi/2 is required instead.
+
+The jaw opening at the grasp is the distance between the finger faces along the closing line,
+``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skills.mechanics.contact import Frictions, Section, check_la
+from skills.mechanics.part import Gripper, Part
+from skills.mechanics.region import (
+    HALF_PI,
+    alpha_axis,
+    stable_beta_max,
+    tilt_ok_mask,
+)
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Search settings. ``la_max`` defaults to 0.9, the largest value the paper used, which
+    keeps the outer finger's pad on the top surface rather than over the far edge."""
+
+    la_max: float = 0.9
+    la_min: float = 0.05
+    la_step: float = 0.01
+    full_tilt: bool = False
+    equation: str = "auto"
+    alpha_samples: int = 179  # 0.5 degree scan, then bisection
+    beta_samples: int = 181  # 0.5 degree path samples
+
+    def __post_init__(self) -> None:
+        check_la(self.la_max)
+        check_la(self.la_min)
+        if self.la_min > self.la_max:
+            raise ValueError(f"la_min {self.la_min:g} exceeds la_max {self.la_max:g}")
+        if not 0 < self.la_step <= 1:
+            raise ValueError(f"la_step must lie in (0, 1], got {self.la_step:g}")
+
+
+@dataclass(frozen=True)
+class PivotPlan:
+    """The planner's answer for one part. Angles in rad, lengths in m."""
+
+    part: str
+    pivotable: bool
+    reason: str
+    l_a: float | None = None
+    alpha: float | None = None
+    delta_m: float | None = None
+    beta_required: float | None = None
+    beta_stable_max: float | None = None
+    opening_m: float | None = None
+    frictions: Frictions = Frictions()
+    gripper: Gripper = Gripper()
+
+    @property
+    def beta_ub(self) -> float | None:
+        """Where balance is lost during the tilt (the paper's beta_ub), None if never."""
+        if self.beta_stable_max is None or self.beta_stable_max >= HALF_PI - 1e-9:
+            return None
+        return self.beta_stable_max
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "part": self.part,
+            "pivotable": self.pivotable,
+            "reason": self.reason,
+            "l_a": self.l_a,
+            "alpha": self.alpha,
+            "alpha_deg": None if self.alpha is None else math.degrees(self.alpha),
+            "delta_m": self.delta_m,
+            "beta_stable": None
+            if self.beta_stable_max is None
+            else [0.0, self.beta_stable_max],
+            "beta_ub": self.beta_ub,
+            "beta_required": self.beta_required,
+            "opening_m": self.opening_m,
+            "stroke_m": self.gripper.stroke,
+            "finger_width_m": self.gripper.finger_width,
+            "mu": {"S": self.frictions.mu_s, "H": self.frictions.mu_h, "G": self.frictions.mu_g},
+        }
+
+
+def jaw_opening(section: Section, l_a: float, alpha: np.ndarray | float) -> np.ndarray | float:
+    """Finger-face distance along the closing line at the grasp (m)."""
+    l = 2.0 * section.a * l_a
+    return l * np.cos(alpha) + section.delta * np.sin(alpha)
+
+
+def plan_pivot(
+    part: Part,
+    gripper: Gripper = Gripper(),
+    frictions: Frictions = Frictions(),
+    options: PlannerOptions = PlannerOptions(),
+) -> PivotPlan:
+    """Plan the Grasp/Tilt for ``part``; a refusal carries the reason instead of numbers."""
+    common = {"part": part.name, "frictions": frictions, "gripper": gripper}
+    if not part.rigid:
+        return PivotPlan(
+            pivotable=False,
+            reason="deformable part: the outer finger crushes the wall at S and the part slides "
+            "at H (the paper's water bottle, 0/10)",
+            **common,
+        )
+    if gripper.finger_width >= part.hole:
+        return PivotPlan(
+            pivotable=False,
+            reason=f"hole narrower than the finger: d = {part.hole * 1e3:.1f} mm <= "
+            f"w = {gripper.finger_width * 1e3:.1f} mm",
+            **common,
+        )
+    section = part.section(gripper.finger_width)
+    beta_req = HALF_PI if options.full_tilt else min(HALF_PI, section.tip_angle)
+    usable = gripper.stroke - gripper.clearance
+    alphas = alpha_axis(options.alpha_samples)
+    n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + 1e-9)) + 1
+    stable_somewhere = False
+    for la in options.la_max - options.la_step * np.arange(n_la):
+        la = float(round(la, 10))
+
+        def feasible(al: np.ndarray, la: float = la) -> tuple[np.ndarray, np.ndarray]:
+            """(stable and fits the stroke, stable) for each alpha."""
+            ok = tilt_ok_mask(
+                section, la, al, frictions, beta_req, options.equation, options.beta_samples
+            )
+            return ok & (jaw_opening(section, la, al) <= usable + 1e-12), ok
+
+        both, ok = feasible(alphas)
+        stable_somewhere |= bool(ok.any())
+        if not both.any():
+            continue
+        i = int(np.argmax(both))
+        alpha = float(alphas[i])
+        if i > 0:
+            lo, hi = float(alphas[i - 1]), alpha
+            for _ in range(30):
+                mid = 0.5 * (lo + hi)
+                if feasible(np.array([mid]))[0][0]:
+                    hi = mid
+                else:
+                    lo = mid
+            alpha = hi
+        return PivotPlan(
+            pivotable=True,
+            reason="ok",
+            l_a=la,
+            alpha=alpha,
+            delta_m=section.delta,
+            beta_required=beta_req,
+            beta_stable_max=stable_beta_max(section, la, alpha, frictions, options.equation),
+            opening_m=float(jaw_opening(section, la, alpha)),
+            **common,
+        )
+    if stable_somewhere:
+        reason = (
+            f"stroke too short: every stable (l_a, alpha) needs a jaw opening above "
+            f"{usable * 1e3:.0f} mm (stroke {gripper.stroke * 1e3:.0f} mm less "
+            f"{gripper.clearance * 1e3:.0f} mm approach clearance)"
+        )
+    else:
+        reason = (
+            f"no stable path: no l_a in [{options.la_min:g}, {options.la_max:g}] and alpha in "
+            f"(0, 90) deg keeps force balance from beta = 0 to "
+            f"{math.degrees(beta_req):.1f} deg with mu_S={frictions.mu_s:g}, "
+            f"mu_H={frictions.mu_h:g}, mu_G={frictions.mu_g:g}"
+        )
+    return PivotPlan(
+        pivotable=False, reason=reason, delta_m=section.delta, beta_required=beta_req, **common
+    )
