@@ -146,7 +146,9 @@ def _format_plan(plan: PivotPlan) -> str:
     lines += [
         "verdict       pivotable",
         f"l_a           {plan.l_a:.2f}   (S is {plan.l_a * 100:.0f} % of the length from the open end)",
-        f"alpha         {plan.alpha:.4f} rad ({math.degrees(plan.alpha):.2f} deg)",
+        f"alpha         {plan.alpha:.4f} rad ({math.degrees(plan.alpha):.2f} deg; "
+        f"{_deg(plan.alpha_min)} deg + margin; hooking the hole needs >= "
+        f"{_deg(plan.alpha_hook)} deg)",
         f"delta         {plan.delta_m * 1e3:.2f} mm",
         f"stable beta   0 .. {_deg(plan.beta_stable_max)} deg"
         + (f"  (beta_ub {_deg(ub)} deg)" if ub is not None else "  (whole tilt)"),
@@ -163,7 +165,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         raise UserError("give exactly one of --part NAME or --all")
     names = list(catalogue.parts) if args.all else [args.part]
     gripper = Gripper(finger_width=args.finger_width, stroke=args.stroke, clearance=args.clearance)
-    options = PlannerOptions(la_max=args.la_max, full_tilt=args.full_tilt, equation=args.equation)
+    options = PlannerOptions(
+        la_max=args.la_max, full_tilt=args.full_tilt, equation=args.equation,
+        hook_depth=args.hook_depth,
+    )
     frictions = _frictions(args)
     plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
     print("\n\n".join(_format_plan(p) for p in plans))
@@ -228,6 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--la-max", type=float, default=PlannerOptions.la_max,
         help="largest l_a to consider (0.9, the paper's largest)",
+    )
+    p.add_argument(
+        "--hook-depth", type=float, default=PlannerOptions.hook_depth,
+        help="how far the inner finger's tip must reach behind the rim, m (0.005)",
     )
     p.add_argument(
         "--full-tilt", action="store_true",

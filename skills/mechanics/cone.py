@@ -52,9 +52,10 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
     g_raw = np.asarray(generators, dtype=float)
     t_raw = np.asarray(target, dtype=float)
     shape = np.broadcast_shapes(g_raw.shape[:-2], t_raw.shape[:-1])
-    g, _ = _unit(np.broadcast_to(g_raw, shape + g_raw.shape[-2:]), axis=-2)
-    t, t_norm = _unit(np.broadcast_to(t_raw, shape + (3,)), axis=-1)
-    n = g.shape[-1]
+    n = g_raw.shape[-1]
+    # Work on a flat batch (m, 3, n) so the degenerate branches can index points.
+    g, _ = _unit(np.broadcast_to(g_raw, shape + (3, n)).reshape(-1, 3, n), axis=-2)
+    t, t_norm = _unit(np.broadcast_to(t_raw, shape + (3,)).reshape(-1, 3), axis=-1)
     pairs = list(combinations(range(n), 2))
     gi = g[..., :, [i for i, _ in pairs]]
     gj = g[..., :, [j for _, j in pairs]]
@@ -82,7 +83,7 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
         along = np.einsum("...kn,...k->...n", g[idx], t[idx])
         separated[idx] = ~(along >= 1.0 - TOL).any(-1)
 
-    return ~separated | (t_norm <= _EPS_CROSS)
+    return (~separated | (t_norm <= _EPS_CROSS)).reshape(shape)
 
 
 def eq8_feasible(wrenches: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -4,14 +4,24 @@ Policy (Sec. III-C, "grasp with as large an l_a as possible to permit a small al
 
 1. A deformable part is refused (the paper's water bottle, 0/10: the wall crushes at S).
 2. The finger must fit the hole (Eq. 2 needs ``w < d``); then ``delta`` follows from Eq. 3.
-3. For ``l_a`` from ``la_max`` downwards, take the smallest ``alpha`` whose Tilt is in force
-   balance for every ``beta`` from 0 to ``beta_required`` *and* whose jaw opening fits the stroke.
+3. For ``l_a`` from ``la_max`` downwards, find the smallest ``alpha_min`` whose Tilt is in force
+   balance for every ``beta`` from 0 to ``beta_required``, whose jaw opening fits the stroke and
+   whose finger hooks the hole (below). The plan uses ``alpha = alpha_min + alpha_margin``
+   (2 deg by default) and only where the whole margin lies inside the feasible set: the smallest
+   feasible alpha sits on the stability boundary, where any tilt error of the arm would leave it.
    The first ``l_a`` that has one wins.
 
 ``beta_required`` is, by default, the tilt at which the centre of mass passes over the pivot G,
 ``atan(a/b)``: beyond it the paper observes (Sec. III-B, Fig. 7) that losing balance only lets
 gravity turn the part further towards upright while the finger in the hole keeps it. With
 ``full_tilt`` the whole range to pi/2 is required instead.
+
+The paper's model has no term for getting the inner finger *into* the hole: as ``alpha -> 0`` its
+contact H degenerates to pushing on the end face (the pinch of Sec. III-A), and Eq. 8 alone would
+happily pick ``alpha`` near 0 for large ``l_a``. The planner therefore also requires the finger's
+tip to reach ``hook_depth`` behind the rim: tilted by ``alpha`` and sliding down the hole's
+free height below H (``2x`` for a round hole, Eq. 2; ``d`` for a rectangular one) the tip gets
+``room * tan(alpha)`` in, so ``alpha >= atan(hook_depth / room)``.
 
 The jaw opening at the grasp is the distance between the finger faces along the closing line,
 ``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
@@ -24,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skills.mechanics.contact import Frictions, Section, check_la
+from skills.mechanics.contact import Frictions, Section, check_la, hole_offset
 from skills.mechanics.part import Gripper, Part
 from skills.mechanics.region import (
     HALF_PI,
@@ -44,14 +54,20 @@ class PlannerOptions:
     la_step: float = 0.01
     full_tilt: bool = False
     equation: str = "auto"
-    alpha_samples: int = 179  # 0.5 degree scan, then bisection
-    beta_samples: int = 181  # 0.5 degree path samples
+    hook_depth: float = 0.005  # m the inner finger's tip must reach behind the rim
+    alpha_margin: float = math.radians(2.0)  # rad kept inside the feasible set's edge
+    alpha_samples: int = 179  # 0.5 degree scan, then bisection at the edge
+    beta_samples: int = 181  # 0.5 degree path samples; the final plan is re-checked at 0.25
 
     def __post_init__(self) -> None:
         check_la(self.la_max)
         check_la(self.la_min)
         if self.la_min > self.la_max:
             raise ValueError(f"la_min {self.la_min:g} exceeds la_max {self.la_max:g}")
+        if not math.isfinite(self.alpha_margin) or not 0 <= self.alpha_margin < 0.5:
+            raise ValueError(f"alpha_margin must lie in [0, 0.5) rad, got {self.alpha_margin:g}")
+        if not math.isfinite(self.hook_depth) or self.hook_depth < 0:
+            raise ValueError(f"hook_depth must be >= 0 m, got {self.hook_depth:g}")
         if not 0 < self.la_step <= 1:
             raise ValueError(f"la_step must lie in (0, 1], got {self.la_step:g}")
 
@@ -65,10 +81,12 @@ class PivotPlan:
     reason: str
     l_a: float | None = None
     alpha: float | None = None
+    alpha_min: float | None = None
     delta_m: float | None = None
     beta_required: float | None = None
     beta_stable_max: float | None = None
     opening_m: float | None = None
+    alpha_hook: float | None = None
     frictions: Frictions = Frictions()
     gripper: Gripper = Gripper()
 
@@ -87,6 +105,7 @@ class PivotPlan:
             "l_a": self.l_a,
             "alpha": self.alpha,
             "alpha_deg": None if self.alpha is None else math.degrees(self.alpha),
+            "alpha_min": self.alpha_min,
             "delta_m": self.delta_m,
             "beta_stable": None
             if self.beta_stable_max is None
@@ -94,6 +113,7 @@ class PivotPlan:
             "beta_ub": self.beta_ub,
             "beta_required": self.beta_required,
             "opening_m": self.opening_m,
+            "alpha_hook": self.alpha_hook,
             "stroke_m": self.gripper.stroke,
             "finger_width_m": self.gripper.finger_width,
             "mu": {"S": self.frictions.mu_s, "H": self.frictions.mu_h, "G": self.frictions.mu_g},
@@ -104,6 +124,23 @@ def jaw_opening(section: Section, l_a: float, alpha: np.ndarray | float) -> np.n
     """Finger-face distance along the closing line at the grasp (m)."""
     l = 2.0 * section.a * l_a
     return l * np.cos(alpha) + section.delta * np.sin(alpha)
+
+
+def _run_starts(mask: np.ndarray, length: int) -> list[int]:
+    """Indices where ``mask`` starts ``length`` consecutive True values, in order."""
+    starts, run = [], 0
+    for i, value in enumerate(mask):
+        run = run + 1 if value else 0
+        if run >= length:
+            starts.append(i - length + 1)
+            run = 0
+    return starts
+
+
+def hook_alpha(part: Part, finger_width: float, hook_depth: float) -> float:
+    """Smallest alpha (rad) at which the inner finger's tip gets ``hook_depth`` behind the rim."""
+    room = 2.0 * hole_offset(part.hole, finger_width) if part.hole_shape == "circle" else part.hole
+    return math.atan2(hook_depth, room)
 
 
 def plan_pivot(
@@ -131,48 +168,54 @@ def plan_pivot(
     section = part.section(gripper.finger_width)
     beta_req = HALF_PI if options.full_tilt else min(HALF_PI, section.tip_angle)
     usable = gripper.stroke - gripper.clearance
+    alpha_hook = hook_alpha(part, gripper.finger_width, options.hook_depth)
     alphas = alpha_axis(options.alpha_samples)
     n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + 1e-9)) + 1
     stable_somewhere = False
+    margin_steps = int(math.ceil(options.alpha_margin / (alphas[1] - alphas[0]) - 1e-9))
     for la in options.la_max - options.la_step * np.arange(n_la):
         la = float(round(la, 10))
 
         def feasible(al: np.ndarray, la: float = la) -> tuple[np.ndarray, np.ndarray]:
-            """(stable and fits the stroke, stable) for each alpha."""
+            """(stable and fits the stroke and hooks the hole, stable) for each alpha."""
             ok = tilt_ok_mask(
                 section, la, al, frictions, beta_req, options.equation, options.beta_samples
             )
-            return ok & (jaw_opening(section, la, al) <= usable + 1e-12), ok
+            fits = (jaw_opening(section, la, al) <= usable + 1e-12) & (al >= alpha_hook)
+            return ok & fits, ok
 
         both, ok = feasible(alphas)
         stable_somewhere |= bool(ok.any())
-        if not both.any():
-            continue
-        i = int(np.argmax(both))
-        alpha = float(alphas[i])
-        if i > 0:
-            lo, hi = float(alphas[i - 1]), alpha
-            for _ in range(30):
-                mid = 0.5 * (lo + hi)
-                if feasible(np.array([mid]))[0][0]:
-                    hi = mid
-                else:
-                    lo = mid
-            alpha = hi
-        return PivotPlan(
-            pivotable=True,
-            reason="ok",
-            l_a=la,
-            alpha=alpha,
-            delta_m=section.delta,
-            beta_required=beta_req,
-            beta_stable_max=stable_beta_max(section, la, alpha, frictions, options.equation),
-            opening_m=float(jaw_opening(section, la, alpha)),
-            **common,
-        )
+        for first in _run_starts(both, margin_steps + 1):
+            # The edge of the feasible set, refined by bisection, then the margin inside it.
+            alpha_min = float(alphas[first])
+            if first > 0 and not both[first - 1]:
+                lo, hi = float(alphas[first - 1]), alpha_min
+                for _ in range(30):
+                    mid = 0.5 * (lo + hi)
+                    lo, hi = (lo, mid) if feasible(np.array([mid]))[0][0] else (mid, hi)
+                alpha_min = hi
+            alpha = alpha_min + options.alpha_margin
+            end = stable_beta_max(section, la, alpha, frictions, options.equation)
+            if end is None or end < beta_req - 1e-9:  # a sliver the scan stepped over
+                continue
+            return PivotPlan(
+                pivotable=True,
+                reason="ok",
+                l_a=la,
+                alpha=alpha,
+                alpha_min=alpha_min,
+                delta_m=section.delta,
+                beta_required=beta_req,
+                beta_stable_max=end,
+                opening_m=float(jaw_opening(section, la, alpha)),
+                alpha_hook=alpha_hook,
+                **common,
+            )
     if stable_somewhere:
         reason = (
-            f"stroke too short: every stable (l_a, alpha) needs a jaw opening above "
+            f"stroke too short: every stable (l_a, alpha) with alpha >= "
+            f"{math.degrees(alpha_hook):.1f} deg (to hook the hole) needs a jaw opening above "
             f"{usable * 1e3:.0f} mm (stroke {gripper.stroke * 1e3:.0f} mm less "
             f"{gripper.clearance * 1e3:.0f} mm approach clearance)"
         )
@@ -184,5 +227,10 @@ def plan_pivot(
             f"mu_H={frictions.mu_h:g}, mu_G={frictions.mu_g:g}"
         )
     return PivotPlan(
-        pivotable=False, reason=reason, delta_m=section.delta, beta_required=beta_req, **common
+        pivotable=False,
+        reason=reason,
+        delta_m=section.delta,
+        beta_required=beta_req,
+        alpha_hook=alpha_hook,
+        **common,
     )

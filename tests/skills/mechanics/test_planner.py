@@ -1,0 +1,88 @@
+"""The per-part planner: l_a and alpha from the mechanics, or a reason why not."""
+
+import math
+
+import pytest
+
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Gripper, Part
+from skills.mechanics.planner import PlannerOptions, hook_alpha, jaw_opening, plan_pivot
+from skills.mechanics.region import check_tilt
+
+BUSHING = Part("bushing", 0.068, 0.034, 0.028, "circle", 0.156)
+CAN = Part("cookie_can", 0.160, 0.066, 0.060, "circle", 0.12, open_ends=1)
+
+
+def test_bushing_plan_is_stable_along_the_tilt_and_fits_the_stroke() -> None:
+    plan = plan_pivot(BUSHING)
+    assert plan.pivotable, plan.reason
+    assert plan.l_a == pytest.approx(0.9)  # the largest allowed: the stroke is not the limit
+    assert plan.delta_m == pytest.approx(0.0072, abs=5e-5)
+    section = BUSHING.section(0.020)
+    assert check_tilt(section, plan.l_a, plan.alpha, Frictions(), section.tip_angle).ok
+    assert plan.alpha >= plan.alpha_hook
+    assert plan.opening_m + Gripper().clearance <= Gripper().stroke
+    # alpha keeps the margin above the smallest feasible alpha, which is the hook angle here
+    # (the mechanics alone would accept a flatter gripper at l_a = 0.9, see test_balance)
+    assert plan.alpha == pytest.approx(plan.alpha_min + PlannerOptions().alpha_margin)
+    assert plan.alpha_min == pytest.approx(plan.alpha_hook, abs=1e-6)
+
+
+def test_long_part_is_limited_by_the_stroke() -> None:
+    plan = plan_pivot(CAN)
+    assert plan.pivotable
+    section = CAN.section(0.020)
+    usable = Gripper().stroke - Gripper().clearance
+    assert plan.opening_m <= usable + 1e-9
+    # a smaller alpha at this l_a would need more opening than the stroke gives
+    assert jaw_opening(section, plan.l_a, plan.alpha_min - 1e-3) > usable
+    # Near alpha = 90 deg the opening shrinks to delta (4.7 mm): a stroke below that cannot grasp.
+    short = plan_pivot(CAN, Gripper(stroke=0.008, clearance=0.004))
+    assert not short.pivotable and short.reason.startswith("stroke too short")
+
+
+def test_refusals_carry_their_reason() -> None:
+    bottle = Part("water_bottle", 0.161, 0.030, 0.025, "circle", 0.02, rigid=False)
+    assert plan_pivot(bottle).reason.startswith("deformable part")
+    rail = Part("mounting_rail", 0.083, 0.0076, 0.0064, "rectangle", 0.02)
+    assert plan_pivot(rail).reason.startswith("hole narrower than the finger")
+    slippery = plan_pivot(BUSHING, frictions=Frictions(0.0, 0.0, 0.0))
+    assert not slippery.pivotable and slippery.reason.startswith("no stable path")
+
+
+def test_full_tilt_requirement_changes_the_plan() -> None:
+    loose = plan_pivot(BUSHING, frictions=Frictions(0.0, 0.0, 0.4))
+    strict = plan_pivot(
+        BUSHING, frictions=Frictions(0.0, 0.0, 0.4), options=PlannerOptions(full_tilt=True)
+    )
+    assert loose.pivotable and strict.pivotable
+    assert strict.l_a < loose.l_a  # beta_ub forces a smaller l_a (Fig. 7)
+    assert strict.beta_ub is None  # stable to 90 deg
+
+
+def test_hook_angle_grows_with_a_shallow_hole() -> None:
+    deep = hook_alpha(BUSHING, 0.020, 0.005)
+    assert deep == pytest.approx(math.atan(0.005 / (2 * 0.0098)), rel=1e-3)
+    narrow = Part("bottle", 0.083, 0.035, 0.022, "circle", 0.09)
+    assert hook_alpha(narrow, 0.020, 0.005) > deep
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [
+        ({"length": -0.01}, "length must be > 0"),
+        ({"hole": 0.04}, "hole (40 mm) must be smaller"),
+        ({"hole_shape": "oval"}, "hole_shape must be one of circle, rectangle"),
+        ({"open_ends": 3}, "open_ends must be 1 or 2"),
+    ],
+)
+def test_bad_part_raises(kwargs: dict, needle: str) -> None:
+    base = dict(name="p", length=0.068, outer=0.034, hole=0.028, hole_shape="circle", mass=0.1)
+    base.update(kwargs)
+    with pytest.raises(ValueError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+        Part(**base)
+
+
+def test_finger_wider_than_hole_raises_from_the_library() -> None:
+    with pytest.raises(ValueError, match="not narrower than the hole"):
+        BUSHING.section(0.030)
