@@ -28,6 +28,21 @@ class CatalogueError(ValueError):
     """A malformed catalogue; the message names the file and the key."""
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """Safe YAML that refuses a repeated key instead of silently keeping the last one."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: set[object] = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 @dataclass(frozen=True)
 class Catalogue:
     path: Path
@@ -56,7 +71,9 @@ def _parse_part(path: Path, name: str, entry: object) -> Part:
         raise CatalogueError(f"{path}: {where}: expected a mapping of keys, got {entry!r}")
     missing = [k for k in REQUIRED if k not in entry]
     if missing:
-        raise CatalogueError(f"{path}: {where}: missing key(s) {', '.join(missing)}")
+        raise CatalogueError(
+            f"{path}: {where}.{missing[0]}: missing (required: {', '.join(REQUIRED)})"
+        )
     unknown = [k for k in entry if k not in REQUIRED + OPTIONAL]
     if unknown:
         raise CatalogueError(
@@ -106,8 +123,10 @@ def load_catalogue(path: str | Path | None = None) -> Catalogue:
         text = p.read_text(encoding="utf-8")
     except OSError as exc:
         raise CatalogueError(f"{p}: cannot read the part catalogue: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise CatalogueError(f"{p}: not UTF-8 text (byte {exc.start})") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

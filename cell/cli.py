@@ -53,11 +53,15 @@ def _add_physics_options(p: argparse.ArgumentParser) -> None:
         "--catalogue", type=Path, default=None, help="part catalogue YAML (default: shipped one)"
     )
     p.add_argument(
-        "--finger-width", type=float, default=Gripper.finger_width,
+        "--finger-width",
+        type=float,
+        default=Gripper.finger_width,
         help="finger pad width w in m (default 0.020)",
     )
     p.add_argument(
-        "--equation", choices=("auto", "eq7", "eq8"), default="auto",
+        "--equation",
+        choices=("auto", "eq7", "eq8"),
+        default="auto",
         help="force balance: auto = Eq. 7 when all frictions are 0 (as the paper), else Eq. 8",
     )
 
@@ -75,8 +79,8 @@ def _write_json(path: Path, payload: Any) -> None:
 
 
 def cmd_analyze(args: argparse.Namespace) -> int:
-    if args.grid < 2:
-        raise UserError(f"--grid must be >= 2, got {args.grid}")
+    if not 2 <= args.grid <= 2001:
+        raise UserError(f"--grid must lie in [2, 2001], got {args.grid}")
     catalogue = load_catalogue(args.catalogue)
     part = catalogue.get(args.part)
     frictions = _frictions(args)
@@ -92,10 +96,20 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     from cell.figures import plot_region_map
 
     tag = f"muS{args.mu_s:g}_muH{args.mu_h:g}_muG{args.mu_g:g}"
-    png = plot_region_map(
-        args.out / f"region_{part.name}_{tag}.png", part.name, section, la, alphas, betas,
-        stable, frictions, equation,
-    )
+    try:
+        png = plot_region_map(
+            args.out / f"region_{part.name}_{tag}.png",
+            part.name,
+            section,
+            la,
+            alphas,
+            betas,
+            stable,
+            frictions,
+            equation,
+        )
+    except OSError as exc:
+        raise UserError(f"--out {args.out}: cannot write the picture: {exc.strerror}") from None
     print(
         f"{part.name}: a = {section.a * 1e3:.1f} mm, b = {section.b * 1e3:.1f} mm, "
         f"delta = {section.delta * 1e3:.2f} mm (w = {gripper.finger_width * 1e3:.1f} mm); "
@@ -108,8 +122,9 @@ def cmd_analyze(args: argparse.Namespace) -> int:
     )
     for k, value in enumerate(la):
         at_zero = alphas[stable[k, :, 0]]
-        to_tip = min_alpha_for_tilt(section, float(value), frictions, section.tip_angle,
-                                    args.equation)
+        to_tip = min_alpha_for_tilt(
+            section, float(value), frictions, section.tip_angle, args.equation
+        )
         to_top = min_alpha_for_tilt(section, float(value), frictions, HALF_PI, args.equation)
         print(
             f"{value:5.2f} {int(stable[k].sum()):10d} "
@@ -145,7 +160,8 @@ def _format_plan(plan: PivotPlan) -> str:
     ub = plan.beta_ub
     lines += [
         "verdict       pivotable",
-        f"l_a           {plan.l_a:.2f}   (S is {plan.l_a * 100:.0f} % of the length from the open end)",
+        f"l_a           {plan.l_a:.2f}   "
+        f"(S is {plan.l_a * 100:.0f} % of the length from the open end)",
         f"alpha         {plan.alpha:.4f} rad ({math.degrees(plan.alpha):.2f} deg; "
         f"{_deg(plan.alpha_min)} deg + margin; hooking the hole needs >= "
         f"{_deg(plan.alpha_hook)} deg)",
@@ -166,14 +182,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
     names = list(catalogue.parts) if args.all else [args.part]
     gripper = Gripper(finger_width=args.finger_width, stroke=args.stroke, clearance=args.clearance)
     options = PlannerOptions(
-        la_max=args.la_max, full_tilt=args.full_tilt, equation=args.equation,
+        la_max=args.la_max,
+        full_tilt=args.full_tilt,
+        equation=args.equation,
         hook_depth=args.hook_depth,
     )
     frictions = _frictions(args)
     plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
     print("\n\n".join(_format_plan(p) for p in plans))
     if args.json is not None:
-        payload: Any = plans[0].to_json() if not args.all else {"plans": [p.to_json() for p in plans]}
+        payload: Any = (
+            plans[0].to_json() if not args.all else {"plans": [p.to_json() for p in plans]}
+        )
         _write_json(args.json, payload)
         print(f"wrote {args.json}")
     return 0
@@ -202,13 +222,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser(
-        "analyze", help="stable-grasp regions in the (alpha, beta) plane (Fig. 5)",
+        "analyze",
+        help="stable-grasp regions in the (alpha, beta) plane (Fig. 5)",
         description="Map the stable (alpha, beta) set of a part for several l_a, write a "
         "Fig.-5-style PNG and, with --json, the boolean map indexed [l_a][alpha][beta].",
     )
     p.add_argument("--part", default="bushing", help="part name from the catalogue (bushing)")
     p.add_argument(
-        "--la", type=float, nargs="+", default=DEFAULT_LA, metavar="L_A",
+        "--la",
+        type=float,
+        nargs="+",
+        default=DEFAULT_LA,
+        metavar="L_A",
         help="values of l_a = l/(2a) in (0, 1] (default 0.3 0.5 0.7 0.9)",
     )
     p.add_argument("--grid", type=int, default=91, help="points per axis (default 91)")
@@ -218,7 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_analyze)
 
     p = sub.add_parser(
-        "plan", help="choose l_a and alpha for a part, or say why it cannot be pivoted",
+        "plan",
+        help="choose l_a and alpha for a part, or say why it cannot be pivoted",
         description="Per-part pivot plan: the largest l_a the stroke allows and the smallest "
         "alpha whose Tilt stays in force balance.",
     )
@@ -227,26 +253,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, default=None, help="also write the plan as JSON here")
     p.add_argument("--stroke", type=float, default=Gripper.stroke, help="gripper stroke, m (0.085)")
     p.add_argument(
-        "--clearance", type=float, default=Gripper.clearance,
+        "--clearance",
+        type=float,
+        default=Gripper.clearance,
         help="extra jaw opening for the approach, m (0.010)",
     )
     p.add_argument(
-        "--la-max", type=float, default=PlannerOptions.la_max,
+        "--la-max",
+        type=float,
+        default=PlannerOptions.la_max,
         help="largest l_a to consider (0.9, the paper's largest)",
     )
     p.add_argument(
-        "--hook-depth", type=float, default=PlannerOptions.hook_depth,
+        "--hook-depth",
+        type=float,
+        default=PlannerOptions.hook_depth,
         help="how far the inner finger's tip must reach behind the rim, m (0.005)",
     )
     p.add_argument(
-        "--full-tilt", action="store_true",
+        "--full-tilt",
+        action="store_true",
         help="require balance up to beta = 90 deg, not only until the CoM is over G",
     )
     _add_physics_options(p)
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser(
-        "check-tilt", help="path check of a given (l_a, alpha) along the Tilt",
+        "check-tilt",
+        help="path check of a given (l_a, alpha) along the Tilt",
         description="Exit 0 when the Tilt at (l_a, alpha) stays in force balance over the "
         "required range of beta, 1 when it does not.",
     )
@@ -254,7 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--la", type=float, required=True, help="l_a in (0, 1]")
     p.add_argument("--alpha", type=float, required=True, help="gripper tilt alpha in rad")
     p.add_argument(
-        "--to", choices=("tip", "top"), default="tip",
+        "--to",
+        choices=("tip", "top"),
+        default="tip",
         help="required range: until the CoM is over G (tip) or to 90 deg (top)",
     )
     _add_physics_options(p)

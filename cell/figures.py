@@ -80,23 +80,41 @@ def plot_region_map(
             al, be, det = frictionless_equilibrium_curve(section, float(la))
             if np.isfinite(det).any() and np.nanmin(det) < 0 < np.nanmax(det):
                 ax.contour(
-                    np.degrees(al), np.degrees(be), det, levels=[0.0], colors=[colors[k]],
-                    linewidths=1.4, linestyles="--",
+                    np.degrees(al),
+                    np.degrees(be),
+                    det,
+                    levels=[0.0],
+                    colors=[colors[k]],
+                    linewidths=1.4,
+                    linestyles="--",
                 )
         handles.append(
-            plt.Line2D([], [], color="k", ls="--",
-                       label="exact Eq. 7 solutions: a curve, missed by any grid")
+            plt.Line2D(
+                [],
+                [],
+                color="k",
+                ls="--",
+                label="exact Eq. 7 solutions: a curve, missed by any grid",
+            )
         )
     ax.axhline(math.degrees(section.tip_angle), color="0.4", lw=0.8, ls=":")
-    ax.text(1, math.degrees(section.tip_angle) + 0.8, "CoM over G: atan(a/b)", fontsize=7,
-            color="0.3")
+    ax.text(
+        1, math.degrees(section.tip_angle) + 0.8, "CoM over G: atan(a/b)", fontsize=7, color="0.3"
+    )
     ax.set_xlim(0, 90)
     ax.set_ylim(0, 90)
     ax.set_xlabel(r"$\alpha$ gripper tilt [deg]")
     ax.set_ylabel(r"$\beta$ part tilt [deg]")
     eq_label = "Eq. 7 (form closure)" if equation == "eq7" else "Eq. 8 (gravity)"
-    ax.text(89, 1, "outlines: boundary of each stable set;\nfilled panels below show which side",
-            fontsize=7, ha="right", va="bottom", color="0.3")
+    ax.text(
+        89,
+        1,
+        "outlines: boundary of each stable set;\nfilled panels below show which side",
+        fontsize=7,
+        ha="right",
+        va="bottom",
+        color="0.3",
+    )
     ax.set_title(
         f"{part_name}: stable grasps, {eq_label}\n"
         f"$\\mu_S$={frictions.mu_s:g}, $\\mu_H$={frictions.mu_h:g}, $\\mu_G$={frictions.mu_g:g}; "

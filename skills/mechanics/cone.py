@@ -53,34 +53,85 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
     t_raw = np.asarray(target, dtype=float)
     shape = np.broadcast_shapes(g_raw.shape[:-2], t_raw.shape[:-1])
     n = g_raw.shape[-1]
-    # Work on a flat batch (m, 3, n) so the degenerate branches can index points.
-    g, _ = _unit(np.broadcast_to(g_raw, shape + (3, n)).reshape(-1, 3, n), axis=-2)
-    t, t_norm = _unit(np.broadcast_to(t_raw, shape + (3,)).reshape(-1, 3), axis=-1)
-    pairs = list(combinations(range(n), 2))
-    gi = g[..., :, [i for i, _ in pairs]]
-    gj = g[..., :, [j for _, j in pairs]]
-    cross = np.cross(np.moveaxis(gi, -2, -1), np.moveaxis(gj, -2, -1))  # (..., P, 3)
-    y, y_norm = _unit(cross, axis=-1)
-    valid = y_norm > 1e-10
+    # Work on a flat batch (m, 3, n) so the degenerate branches can index points, and on
+    # contiguous unit-length component arrays (scaling a generator does not change the cone).
+    g_flat = np.broadcast_to(g_raw, shape + (3, n)).reshape(-1, 3, n)
+    m = g_flat.shape[0]
+    comp = []
+    for k in range(n):
+        c0, c1, c2 = (np.ascontiguousarray(g_flat[:, r, k]) for r in range(3))
+        norm = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        scale = np.where(norm > _EPS_CROSS, 1.0 / np.where(norm > _EPS_CROSS, norm, 1.0), 0.0)
+        comp.append((c0 * scale, c1 * scale, c2 * scale))
+    if t_raw.ndim == 1:  # one target for every point: normalise it once
+        t_unit, t_norm0 = _unit(t_raw, axis=-1)
+        t = np.broadcast_to(t_unit, (m, 3))
+        t_norm = np.full(m, float(t_norm0))
+    else:
+        t, t_norm = _unit(np.broadcast_to(t_raw, shape + (3,)).reshape(-1, 3), axis=-1)
+    t0, t1, t2 = (np.ascontiguousarray(t[:, r]) for r in range(3))
+    separated = np.zeros(m, dtype=bool)
+    any_valid = np.zeros(m, dtype=bool)
+    for i, j in combinations(range(n), 2):
+        (a0, a1, a2), (b0, b1, b2) = comp[i], comp[j]
+        y0 = a1 * b2 - a2 * b1
+        y1 = a2 * b0 - a0 * b2
+        y2 = a0 * b1 - a1 * b0
+        norm = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        valid = norm > 1e-10
+        tol = TOL * norm
+        all_pos = valid.copy()
+        all_neg = valid.copy()
+        for k in range(n):
+            if k == i or k == j:
+                continue
+            c0, c1, c2 = comp[k]
+            d = y0 * c0 + y1 * c1 + y2 * c2
+            all_pos &= d >= -tol
+            all_neg &= d <= tol
+        pt = y0 * t0 + y1 * t1 + y2 * t2
+        separated |= (all_pos & (pt < -tol)) | (all_neg & (pt > tol))
+        any_valid |= valid
 
-    separated = _separated(y, valid, g, t)
-
-    # Rank of the generator set: 3 if some pair normal is not orthogonal to every generator.
-    pg = np.abs(np.einsum("...pk,...kn->...pn", y, g))
-    rank3 = (valid & (pg > TOL).any(-1)).any(-1)
-    rank2 = valid.any(-1) & ~rank3
-    if np.any(rank2):
-        idx = np.nonzero(rank2)
-        best = np.argmax(y_norm[idx], axis=-1)
-        p = y[idx][np.arange(best.size), best]  # (m, 3) plane normals
-        g2 = g[idx]  # (m, 3, n)
-        inplane = np.cross(np.moveaxis(g2, -2, -1), p[:, None, :])  # (m, n, 3)
-        y2, y2_norm = _unit(inplane, axis=-1)
-        separated[idx] |= _separated(y2, y2_norm > 1e-10, g2, t[idx])
-    rank1 = ~valid.any(-1)
+    # The pair normals are the whole answer when the generators span R^3. Find the points where
+    # they span only a plane: one generic triple settles almost every point, all triples the rest.
+    unsure = ~separated & any_valid
+    if n >= 3 and unsure.any():
+        probe = (0, n // 3, (2 * n) // 3) if n >= 6 else (0, 1, 2)
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = (comp[k] for k in probe)
+        det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+        unsure &= np.abs(det) <= TOL
+    if unsure.any():
+        idx = np.nonzero(unsure)[0]
+        g = np.stack([np.stack(c, axis=-1) for c in comp], axis=-1)  # (m, 3, n) unit columns
+        gs = g[idx]
+        triples = list(combinations(range(n), 3))
+        dets = (
+            np.stack([np.linalg.det(gs[:, :, list(c)]) for c in triples], axis=-1)
+            if n >= 3
+            else np.zeros((idx.size, 1))
+        )
+        rank2 = idx[(np.abs(dets) <= TOL).all(-1)]
+        if rank2.size:
+            g2 = g[rank2]
+            pairs = list(combinations(range(n), 2))
+            cross = np.cross(
+                g2[:, :, [i for i, _ in pairs]].transpose(0, 2, 1),
+                g2[:, :, [j for _, j in pairs]].transpose(0, 2, 1),
+            )
+            norms = np.linalg.norm(cross, axis=-1)
+            best = np.argmax(norms, axis=-1)
+            p = cross[np.arange(rank2.size), best] / norms[np.arange(rank2.size), best, None]
+            inplane = np.cross(g2.transpose(0, 2, 1), p[:, None, :])  # (k, n, 3)
+            y2, y2_norm = _unit(inplane, axis=-1)
+            separated[rank2] |= _separated(y2, y2_norm > 1e-10, g2, t[rank2])
+    rank1 = ~any_valid
     if np.any(rank1):
-        idx = np.nonzero(rank1)
-        along = np.einsum("...kn,...k->...n", g[idx], t[idx])
+        idx = np.nonzero(rank1)[0]
+        along = np.stack(
+            [c0[idx] * t0[idx] + c1[idx] * t1[idx] + c2[idx] * t2[idx] for c0, c1, c2 in comp],
+            axis=-1,
+        )
         separated[idx] = ~(along >= 1.0 - TOL).any(-1)
 
     return (~separated | (t_norm <= _EPS_CROSS)).reshape(shape)

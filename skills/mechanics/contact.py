@@ -118,7 +118,8 @@ def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
         raise ValueError(f"finger width w must be > 0 m, got {w:g}")
     if w >= hole:
         raise ValueError(
-            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole d = {hole * 1e3:.1f} mm:"
+            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole "
+            f"d = {hole * 1e3:.1f} mm:"
             " the finger cannot enter the hole"
         )
     return 0.5 * (outer - hole)

@@ -53,7 +53,8 @@ class Part:
             )
         if self.hole_shape not in HOLE_SHAPES:
             raise ValueError(
-                f"{owner}: hole_shape must be one of {', '.join(HOLE_SHAPES)}, got {self.hole_shape!r}"
+                f"{owner}: hole_shape must be one of {', '.join(HOLE_SHAPES)}, "
+                f"got {self.hole_shape!r}"
             )
         if self.open_ends not in (1, 2):
             raise ValueError(f"{owner}: open_ends must be 1 or 2, got {self.open_ends!r}")

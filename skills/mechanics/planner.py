@@ -107,9 +107,7 @@ class PivotPlan:
             "alpha_deg": None if self.alpha is None else math.degrees(self.alpha),
             "alpha_min": self.alpha_min,
             "delta_m": self.delta_m,
-            "beta_stable": None
-            if self.beta_stable_max is None
-            else [0.0, self.beta_stable_max],
+            "beta_stable": None if self.beta_stable_max is None else [0.0, self.beta_stable_max],
             "beta_ub": self.beta_ub,
             "beta_required": self.beta_required,
             "opening_m": self.opening_m,

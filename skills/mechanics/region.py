@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from skills.mechanics.balance import resolve_equation
+from skills.mechanics.cone import eq7_feasible, eq8_feasible
 from skills.mechanics.contact import (
     Frictions,
     Section,
@@ -27,7 +28,6 @@ from skills.mechanics.contact import (
     check_la,
     contact_wrenches,
 )
-from skills.mechanics.cone import eq7_feasible, eq8_feasible
 
 HALF_PI = 0.5 * math.pi
 #: Default number of beta samples on [0, pi/2] for path questions (0.25 degree steps).
@@ -106,7 +106,9 @@ class TiltCheck:
 
     @property
     def ok(self) -> bool:
-        return self.beta_stable_max is not None and self.beta_stable_max >= self.beta_required - 1e-9
+        return (
+            self.beta_stable_max is not None and self.beta_stable_max >= self.beta_required - 1e-9
+        )
 
 
 def stable_beta_max(
@@ -154,7 +156,7 @@ def check_tilt(
     beta_required: float = HALF_PI,
     equation: str = "auto",
 ) -> TiltCheck:
-    """Path check of a planned ``(l_a, alpha)`` along the Tilt from beta = 0 to ``beta_required``."""
+    """Path check of a planned ``(l_a, alpha)`` along the Tilt, beta = 0 to ``beta_required``."""
     check_la(l_a)
     check_alpha(alpha)
     check_beta(beta_required)
@@ -202,7 +204,9 @@ def min_alpha_for_tilt(
         return float(al[0])
 
     def passes(alpha: float) -> bool:
-        return bool(tilt_ok_mask(section, l_a, np.array([alpha]), frictions, beta_required, equation)[0])
+        return bool(
+            tilt_ok_mask(section, l_a, np.array([alpha]), frictions, beta_required, equation)[0]
+        )
 
     lo, hi = float(al[first - 1]), float(al[first])
     for _ in range(30):  # f(lo) False, f(hi) True

@@ -73,8 +73,7 @@ def analyze_json(
 ) -> tuple[dict[str, Any], Path, str]:
     out_dir = tmp_path / "out"
     json_path = tmp_path / "sub" / "map.json"
-    argv = ["analyze", *extra, "--grid", str(GRID), "--out", str(out_dir), "--json",
-            str(json_path)]
+    argv = ["analyze", *extra, "--grid", str(GRID), "--out", str(out_dir), "--json", str(json_path)]
     code, out, err = run_cli(argv, capsys)
     assert code == 0, err
     assert "Traceback" not in err
@@ -103,8 +102,20 @@ def bushing_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     out_dir, json_path = tmp / "out", tmp / "sub" / "map.json"
     stdout, stderr = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-        code = main(["analyze", "--part", "bushing", *ANALYZE, "--grid", str(GRID),
-                     "--out", str(out_dir), "--json", str(json_path)])
+        code = main(
+            [
+                "analyze",
+                "--part",
+                "bushing",
+                *ANALYZE,
+                "--grid",
+                str(GRID),
+                "--out",
+                str(out_dir),
+                "--json",
+                str(json_path),
+            ]
+        )
     return {
         "code": code,
         "out": stdout.getvalue(),
@@ -203,8 +214,19 @@ def test_analyze_subprocess(tmp_path: Path) -> None:
     out_dir = tmp_path / "figs"
     json_path = tmp_path / "map.json"
     proc = run_subprocess(
-        ["analyze", "--part", "bushing", "--la", "0.9", "--grid", "5", "--out", str(out_dir),
-         "--json", str(json_path)],
+        [
+            "analyze",
+            "--part",
+            "bushing",
+            "--la",
+            "0.9",
+            "--grid",
+            "5",
+            "--out",
+            str(out_dir),
+            "--json",
+            str(json_path),
+        ],
         cwd=tmp_path,
     )
     assert proc.returncode == 0, proc.stderr
@@ -243,8 +265,15 @@ def test_plan_bushing_is_consistent_with_check_tilt(
     """Whatever (l_a, alpha) the planner picks, the path check must accept it."""
     data, _ = plan_json(tmp_path, capsys, "--part", "bushing")
     code, out, err = run_cli(
-        ["check-tilt", "--part", "bushing", "--la", repr(data["l_a"]), "--alpha",
-         repr(data["alpha"])],
+        [
+            "check-tilt",
+            "--part",
+            "bushing",
+            "--la",
+            repr(data["l_a"]),
+            "--alpha",
+            repr(data["alpha"]),
+        ],
         capsys,
     )
     assert code == 0, (out, err)
@@ -298,8 +327,18 @@ def test_plan_uses_a_custom_catalogue(tmp_path: Path, capsys: pytest.CaptureFixt
     catalogue = tmp_path / "mine.yaml"
     catalogue.write_text(
         yaml.safe_dump(
-            {"parts": {"tube": {"length_mm": 100, "outer_mm": 40, "hole_mm": 30,
-                                "hole_shape": "circle", "mass_kg": 0.1, "rigid": False}}}
+            {
+                "parts": {
+                    "tube": {
+                        "length_mm": 100,
+                        "outer_mm": 40,
+                        "hole_mm": 30,
+                        "hole_shape": "circle",
+                        "mass_kg": 0.1,
+                        "rigid": False,
+                    }
+                }
+            }
         ),
         encoding="utf-8",
     )
@@ -321,8 +360,11 @@ def test_plan_uses_a_custom_catalogue(tmp_path: Path, capsys: pytest.CaptureFixt
         (["analyze", "--mu-g", "-0.1"], "analyze", ("mu_g", "-0.1")),
         (["analyze", "--mu-s", "inf"], "analyze", ("mu_s",)),
         (["analyze", "--part", "nosuchpart"], "analyze", ("nosuchpart", "known parts", *PARTS)),
-        (["analyze", "--part", "bushing", "--finger-width", "0.03"], "analyze",
-         ("finger", "30.0 mm", "28.0 mm")),
+        (
+            ["analyze", "--part", "bushing", "--finger-width", "0.03"],
+            "analyze",
+            ("finger", "30.0 mm", "28.0 mm"),
+        ),
         (["analyze", "--finger-width", "-0.01"], "analyze", ("finger_width",)),
         (["analyze", "--grid", "1"], "analyze", ("--grid", "1")),
         (["analyze", "--grid", "0"], "analyze", ("--grid", "0")),
@@ -336,10 +378,16 @@ def test_plan_uses_a_custom_catalogue(tmp_path: Path, capsys: pytest.CaptureFixt
         (["check-tilt", "--la", "0.9", "--alpha", "0"], "check-tilt", ("alpha", "got 0")),
         (["check-tilt", "--la", "0.9", "--alpha", "-0.3"], "check-tilt", ("alpha", "-0.3")),
         (["check-tilt", "--la", "1.01", "--alpha", "0.3"], "check-tilt", ("l_a", "1.01")),
-        (["check-tilt", "--la", "0.9", "--alpha", "0.3", "--finger-width", "0.03"],
-         "check-tilt", ("finger", "30.0 mm")),
-        (["check-tilt", "--part", "nosuchpart", "--la", "0.9", "--alpha", "0.3"],
-         "check-tilt", ("nosuchpart", "known parts")),
+        (
+            ["check-tilt", "--la", "0.9", "--alpha", "0.3", "--finger-width", "0.03"],
+            "check-tilt",
+            ("finger", "30.0 mm"),
+        ),
+        (
+            ["check-tilt", "--part", "nosuchpart", "--la", "0.9", "--alpha", "0.3"],
+            "check-tilt",
+            ("nosuchpart", "known parts"),
+        ),
     ],
 )
 def test_user_errors_exit_2_with_one_line(
@@ -363,8 +411,17 @@ def _bad_catalogue(tmp_path: Path) -> Path:
     path = tmp_path / "bad.yaml"
     path.write_text(
         yaml.safe_dump(
-            {"parts": {"bushing": {"length_mm": -68, "outer_mm": 34, "hole_mm": 28,
-                                   "hole_shape": "circle", "mass_kg": 0.156}}}
+            {
+                "parts": {
+                    "bushing": {
+                        "length_mm": -68,
+                        "outer_mm": 34,
+                        "hole_mm": 28,
+                        "hole_shape": "circle",
+                        "mass_kg": 0.156,
+                    }
+                }
+            }
         ),
         encoding="utf-8",
     )
@@ -447,8 +504,9 @@ def test_check_tilt_failing_grasp_exits_1(capsys: pytest.CaptureFixture[str]) ->
 
 
 def test_check_tilt_subprocess(tmp_path: Path) -> None:
-    ok = run_subprocess(["check-tilt", "--part", "bushing", "--la", "0.9", "--alpha", "0.3142"],
-                        cwd=tmp_path)
+    ok = run_subprocess(
+        ["check-tilt", "--part", "bushing", "--la", "0.9", "--alpha", "0.3142"], cwd=tmp_path
+    )
     assert ok.returncode == 0, ok.stderr
     assert "Traceback" not in ok.stderr
     bad = run_subprocess(["check-tilt", "--la", "0.9", "--alpha", "2.0"], cwd=tmp_path)

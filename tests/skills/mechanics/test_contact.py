@@ -87,7 +87,9 @@ def test_table3_delta_consistent_with_one_finger_width_for_bushing_and_can() -> 
     assert widths["cookie_can"] == pytest.approx(20.0, abs=0.2)
     for name in ("bushing", "cookie_can"):
         d_outer, d_hole, paper = TABLE3_ROUND[name]
-        assert delta_round(d_outer / 1e3, d_hole / 1e3, 0.020) * 1e3 == pytest.approx(paper, abs=0.05)
+        assert delta_round(d_outer / 1e3, d_hole / 1e3, 0.020) * 1e3 == pytest.approx(
+            paper, abs=0.05
+        )
     # ... the bottle and the cup would need wider fingers (25 and 26.6 mm) ...
     assert widths["plastic_cup"] == pytest.approx(25.0, abs=0.2)
     assert widths["medicine_bottle"] == pytest.approx(26.6, abs=0.2)
@@ -110,11 +112,26 @@ def test_table3_prisms_list_twice_the_wall() -> None:
         (lambda: Frictions(mu_g=-0.1), "mu_g must be >= 0"),
         (lambda: Frictions(mu_s=float("nan")), "mu_s must be a finite number"),
         (lambda: Section(0.034, 0.017, 0.05), "delta must lie in"),
-        (lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 1.5, 0.3, 0.1, PAPER), "l_a must lie in (0, 1]"),
-        (lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.0, 0.3, 0.1, PAPER), "l_a must lie in (0, 1]"),
-        (lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, 0.0, 0.1, PAPER), "alpha must lie in (0, pi/2)"),
-        (lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, math.pi / 2, 0.1, PAPER), "alpha must lie"),
-        (lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, 0.3, -0.1, PAPER), "beta must lie in [0, pi/2]"),
+        (
+            lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 1.5, 0.3, 0.1, PAPER),
+            "l_a must lie in (0, 1]",
+        ),
+        (
+            lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.0, 0.3, 0.1, PAPER),
+            "l_a must lie in (0, 1]",
+        ),
+        (
+            lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, 0.0, 0.1, PAPER),
+            "alpha must lie in (0, pi/2)",
+        ),
+        (
+            lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, math.pi / 2, 0.1, PAPER),
+            "alpha must lie",
+        ),
+        (
+            lambda: contact_wrenches(Section(0.03, 0.01, 0.0), 0.5, 0.3, -0.1, PAPER),
+            "beta must lie in [0, pi/2]",
+        ),
     ],
 )
 def test_bad_values_raise_valueerror_naming_them(call, needle: str) -> None:
