@@ -122,7 +122,7 @@ def plot_region_map(
         f"$\\delta$={section.delta * 1e3:.1f} mm",
         fontsize=9,
     )
-    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.85)
+    ax.legend(handles=handles, loc="center right", fontsize=8, framealpha=0.9)
     ax.grid(alpha=0.25)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
