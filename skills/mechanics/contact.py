@@ -74,12 +74,8 @@ class Frictions:
         return self.mu_s == 0.0 and self.mu_h == 0.0 and self.mu_g == 0.0
 
 
-def hole_offset(hole: float, finger_width: float) -> float:
-    """Eq. 2: distance x (m) from the hole's axis to the flat face of a finger of width ``w``.
-
-    A flat finger of width ``w`` inside a round hole of diameter ``d`` touches the hole along a
-    chord of length ``w``; that chord lies ``x = d/2 * sqrt(1 - (w/d)^2)`` from the axis.
-    """
+def _finger_fits(hole: float, finger_width: float) -> tuple[float, float]:
+    """Validate ``0 < w < d`` (Eq. 2's ``0 < w/d < 1``) and return ``(d, w)``."""
     d = _check_finite("hole size d", hole)
     w = _check_finite("finger width w", finger_width)
     if d <= 0.0:
@@ -88,9 +84,19 @@ def hole_offset(hole: float, finger_width: float) -> float:
         raise ValueError(f"finger width w must be > 0 m, got {w:g}")
     if w >= d:
         raise ValueError(
-            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole d = {d * 1e3:.1f} mm:"
-            " the finger cannot enter the hole (Eq. 2 needs 0 < w/d < 1)"
+            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole "
+            f"d = {d * 1e3:.1f} mm: the finger cannot enter the hole (needs 0 < w/d < 1)"
         )
+    return d, w
+
+
+def hole_offset(hole: float, finger_width: float) -> float:
+    """Eq. 2: distance x (m) from the hole's axis to the flat face of a finger of width ``w``.
+
+    A flat finger of width ``w`` inside a round hole of diameter ``d`` touches the hole along a
+    chord of length ``w``; that chord lies ``x = d/2 * sqrt(1 - (w/d)^2)`` from the axis.
+    """
+    d, w = _finger_fits(hole, finger_width)
     return 0.5 * d * math.sqrt(1.0 - (w / d) ** 2)
 
 
@@ -110,18 +116,9 @@ def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
     (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see README.)
     """
     outer = _check_finite("outer size D", outer)
-    hole = _check_finite("hole size d", hole)
-    w = _check_finite("finger width w", finger_width)
-    if hole <= 0.0 or outer <= hole:
-        raise ValueError(f"need 0 < d < D, got d = {hole:g} m, D = {outer:g} m")
-    if w <= 0.0:
-        raise ValueError(f"finger width w must be > 0 m, got {w:g}")
-    if w >= hole:
-        raise ValueError(
-            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole "
-            f"d = {hole * 1e3:.1f} mm:"
-            " the finger cannot enter the hole"
-        )
+    hole, _ = _finger_fits(hole, finger_width)
+    if outer <= hole:
+        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
     return 0.5 * (outer - hole)
 
 

@@ -39,6 +39,7 @@ from skills.mechanics.part import Gripper, Part
 from skills.mechanics.region import (
     HALF_PI,
     alpha_axis,
+    bisect_edge,
     stable_beta_max,
     tilt_ok_mask,
 )
@@ -188,11 +189,11 @@ def plan_pivot(
             # The edge of the feasible set, refined by bisection, then the margin inside it.
             alpha_min = float(alphas[first])
             if first > 0 and not both[first - 1]:
-                lo, hi = float(alphas[first - 1]), alpha_min
-                for _ in range(30):
-                    mid = 0.5 * (lo + hi)
-                    lo, hi = (lo, mid) if feasible(np.array([mid]))[0][0] else (mid, hi)
-                alpha_min = hi
+                alpha_min = bisect_edge(
+                    lambda a: bool(feasible(np.array([a]))[0][0]),
+                    alpha_min,
+                    float(alphas[first - 1]),
+                )
             alpha = alpha_min + options.alpha_margin
             end = stable_beta_max(section, la, alpha, frictions, options.equation)
             if end is None or end < beta_req - 1e-9:  # a sliver the scan stepped over

@@ -13,6 +13,7 @@ why the defaults use 0.25 degree steps in beta.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,16 +80,21 @@ def region_map(
     )
 
 
-def _refine_edge(
-    f, lo: float, hi: float, iterations: int = 30
-) -> float:  # f(lo) is True, f(hi) is False
+def bisect_edge(
+    holds: Callable[[float], bool], inside: float, outside: float, iterations: int = 30
+) -> float:
+    """The point nearest ``outside`` where ``holds`` is still True, by bisection.
+
+    ``holds(inside)`` must be True and ``holds(outside)`` False; either may be the larger.
+    30 halvings of a 0.25 deg step leave an error below 1e-11 rad.
+    """
     for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        if f(mid):
-            lo = mid
+        mid = 0.5 * (inside + outside)
+        if holds(mid):
+            inside = mid
         else:
-            hi = mid
-    return lo
+            outside = mid
+    return inside
 
 
 @dataclass(frozen=True)
@@ -130,7 +136,7 @@ def stable_beta_max(
     if ok.all():
         return HALF_PI
     first_bad = int(np.argmin(ok))
-    return _refine_edge(
+    return bisect_edge(
         lambda b: bool(stable(section, l_a, alpha, b, frictions, equation)),
         float(be[first_bad - 1]),
         float(be[first_bad]),
@@ -208,14 +214,7 @@ def min_alpha_for_tilt(
             tilt_ok_mask(section, l_a, np.array([alpha]), frictions, beta_required, equation)[0]
         )
 
-    lo, hi = float(al[first - 1]), float(al[first])
-    for _ in range(30):  # f(lo) False, f(hi) True
-        mid = 0.5 * (lo + hi)
-        if passes(mid):
-            hi = mid
-        else:
-            lo = mid
-    return hi
+    return bisect_edge(passes, float(al[first]), float(al[first - 1]))
 
 
 def min_alpha_full_tilt(

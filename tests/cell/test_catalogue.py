@@ -19,15 +19,7 @@ from cell.catalogue import (
 )
 from skills.mechanics.part import Part
 
-TABLE3 = (
-    "bushing",
-    "medicine_bottle",
-    "plastic_cup",
-    "cookie_can",
-    "wiring_duct",
-    "mounting_rail",
-    "water_bottle",
-)
+from .conftest import TABLE3_PARTS as TABLE3
 
 # name: (length m, outer m, hole m, hole_shape, rigid, open_ends)
 EXPECTED = {

@@ -21,16 +21,9 @@ from cell.cli import main
 from skills.mechanics.contact import Frictions
 from skills.mechanics.region import alpha_axis, beta_axis, region_map
 
+from .conftest import TABLE3_PARTS as PARTS
+
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-PARTS = (
-    "bushing",
-    "medicine_bottle",
-    "plastic_cup",
-    "cookie_can",
-    "wiring_duct",
-    "mounting_rail",
-    "water_bottle",
-)
 GRID = 21
 ANALYZE = ["--la", "0.3", "0.9", "--mu-s", "0.2", "--mu-h", "0.4", "--mu-g", "0.4"]
 
