@@ -1,0 +1,51 @@
+"""The eye-in-hand RGB-D camera interface (a RealSense D435 or its twin)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.pose import Pose
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels; ``width`` x ``height`` image."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def matrix(self) -> NDArray[np.float64]:
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1.0]])
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One aligned capture: ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres, 0 = invalid."""
+
+    rgb: NDArray[np.uint8]
+    depth: NDArray[np.float32]
+    stamp: float  #: capture time (s) on the cell's clock
+
+
+@runtime_checkable
+class Camera(Protocol):
+    def intrinsics(self) -> Intrinsics:
+        """Colour-aligned intrinsics (pixels)."""
+        ...
+
+    def tool_T_camera(self) -> Pose:
+        """Pose of the optical frame (z forward, x right, y down) in the tool frame (m, rad)."""
+        ...
+
+    def capture(self) -> Frame:
+        """Newest aligned frame. Raises ``TimeoutError`` when none arrives in time."""
+        ...

@@ -1,0 +1,20 @@
+"""Time for the control loop: simulation time in the twin, monotonic wall time on hardware."""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Clock(Protocol):
+    def now(self) -> float:
+        """Seconds since an arbitrary origin; never goes backwards."""
+        ...
+
+
+class WallClock:
+    """Monotonic wall time, for hardware."""
+
+    def now(self) -> float:
+        return time.monotonic()

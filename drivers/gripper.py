@@ -1,0 +1,35 @@
+"""The parallel-jaw gripper interface (a Robotiq 2F-85 or its twin). Commands return at once."""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Gripper(Protocol):
+    stroke: float  #: largest opening between the finger pads (m)
+    finger_width: float  #: pad width, the ``w`` of the paper's Eq. 2 (m)
+
+    def open(self, width: float | None = None, speed: float = 0.1) -> None:
+        """Start opening to ``width`` (m; full stroke if None) at ``speed`` (m/s)."""
+        ...
+
+    def close(self, force: float, speed: float = 0.05) -> None:
+        """Start closing with at most ``force`` (N) per finger at ``speed`` (m/s)."""
+        ...
+
+    def width(self) -> float:
+        """Current opening between the pads (m)."""
+        ...
+
+    def moving(self) -> bool:
+        """True while the fingers still travel."""
+        ...
+
+    def object_detected(self) -> bool:
+        """True when the fingers stalled on an object before reaching their target."""
+        ...
+
+    def fault(self) -> str | None:
+        """A fault description, or None when healthy."""
+        ...
