@@ -67,9 +67,14 @@ class SimWorld:
         )
         self.rng = np.random.default_rng(seed)
         self.clock = SimClock()
+        self._before_step: list[Callable[[], None]] = []
         self._before_substep: list[Callable[[], None]] = []
         self._after_step: list[Callable[[], None]] = []
         self.steps = 0
+
+    def before_step(self, fn: Callable[[], None]) -> None:
+        """Call ``fn`` once at the start of every control step (motion targets, IK)."""
+        self._before_step.append(fn)
 
     def before_substep(self, fn: Callable[[], None]) -> None:
         """Call ``fn`` before every physics substep (device actuation)."""
@@ -81,6 +86,8 @@ class SimWorld:
 
     def step(self) -> None:
         """Advance one control period."""
+        for fn in self._before_step:
+            fn()
         for _ in range(self.settings.substeps):
             for fn in self._before_substep:
                 fn()
