@@ -1,0 +1,171 @@
+"""Guarded motion: every arm or gripper motion of a skill runs under a force-torque limit and a
+timeout, and is advanced one control step at a time.
+
+A :class:`GuardedMotion` wraps one command (a callable that starts it) and a completion test.
+``tick()`` never blocks: it checks the wrench and the clock, then polls. On a guard trip it stops
+the arm at once and fails with the reason; the gripper keeps its state (dropping a part is rarely
+the safer choice).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.arm import Arm, MotionState
+from drivers.clock import Clock
+from drivers.ft_sensor import ForceTorqueSensor
+from drivers.gripper import Gripper
+from skills.status import RUNNING, Status, StepResult
+
+
+@dataclass(frozen=True)
+class Guard:
+    """Limits for one motion: force (N) and torque (N*m) magnitudes in the tool frame, time (s)."""
+
+    max_force: float = 60.0
+    max_torque: float = 6.0
+    timeout: float = 10.0
+
+
+class GuardedMotion:
+    """Start ``command`` on ``start()``; succeed when ``finished()`` holds; fail on a guard."""
+
+    def __init__(
+        self,
+        name: str,
+        command: Callable[[], None],
+        finished: Callable[[], bool],
+        arm: Arm,
+        ft: ForceTorqueSensor,
+        clock: Clock,
+        guard: Guard,
+        failed: Callable[[], str | None] | None = None,
+    ) -> None:
+        self.name = name
+        self._command = command
+        self._finished = finished
+        self._failed = failed
+        self.arm, self.ft, self.clock, self.guard = arm, ft, clock, guard
+        self._t0: float | None = None
+        self.peak_force = 0.0
+
+    def start(self) -> None:
+        self._t0 = self.clock.now()
+        self.peak_force = 0.0
+        self._command()
+
+    def tick(self) -> StepResult:
+        if self._t0 is None:
+            self.start()
+        w = self.ft.wrench()
+        force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
+        self.peak_force = max(self.peak_force, force)
+        if force > self.guard.max_force or torque > self.guard.max_torque:
+            self.arm.stop()
+            return StepResult(
+                Status.FAILURE,
+                f"{self.name}: force-torque guard: |F| = {force:.1f} N (limit "
+                f"{self.guard.max_force:g}), |T| = {torque:.2f} N*m (limit "
+                f"{self.guard.max_torque:g}); arm stopped",
+            )
+        elapsed = self.clock.now() - (self._t0 or 0.0)
+        if elapsed > self.guard.timeout:
+            self.arm.stop()
+            return StepResult(
+                Status.FAILURE, f"{self.name}: timeout after {elapsed:.1f} s; arm stopped"
+            )
+        if self._failed is not None:
+            reason = self._failed()
+            if reason:
+                self.arm.stop()
+                return StepResult(Status.FAILURE, f"{self.name}: {reason}")
+        if self._finished():
+            return StepResult(Status.SUCCESS, f"{self.name}: done")
+        return RUNNING
+
+    def halt(self) -> None:
+        """Stop what this motion started (idempotent)."""
+        if self._t0 is not None:
+            self.arm.stop()
+
+
+def arm_motion(
+    name: str,
+    arm: Arm,
+    ft: ForceTorqueSensor,
+    clock: Clock,
+    guard: Guard,
+    command: Callable[[], None],
+) -> GuardedMotion:
+    """A guarded arm motion that finishes when the arm reports DONE and fails on FAULT/STOPPED."""
+
+    def failed() -> str | None:
+        st = arm.status()
+        if st.state is MotionState.FAULT:
+            return f"arm fault: {st.message}"
+        if st.state is MotionState.STOPPED:
+            return f"arm stopped: {st.message}"
+        return None
+
+    return GuardedMotion(
+        name, command, lambda: arm.status().state is MotionState.DONE, arm, ft, clock, guard, failed
+    )
+
+
+def gripper_motion(
+    name: str,
+    gripper: Gripper,
+    arm: Arm,
+    ft: ForceTorqueSensor,
+    clock: Clock,
+    guard: Guard,
+    command: Callable[[], None],
+    settle: float = 0.1,
+) -> GuardedMotion:
+    """A guarded gripper motion that finishes once the fingers stop moving (after ``settle`` s)."""
+    state = {"t": None}
+
+    def finished() -> bool:
+        if gripper.moving():
+            state["t"] = None
+            return False
+        if state["t"] is None:
+            state["t"] = clock.now()
+        return clock.now() - state["t"] >= settle
+
+    def failed() -> str | None:
+        fault = gripper.fault()
+        return f"gripper fault: {fault}" if fault else None
+
+    def command_and_reset() -> None:
+        state["t"] = None
+        command()
+
+    return GuardedMotion(name, command_and_reset, finished, arm, ft, clock, guard, failed)
+
+
+class Sequence:
+    """Run steps one after the other, one tick at a time; the first failure ends the sequence."""
+
+    def __init__(self, name: str, steps: list[GuardedMotion]) -> None:
+        self.name = name
+        self.steps = steps
+        self.index = 0
+
+    def tick(self) -> StepResult:
+        while self.index < len(self.steps):
+            result = self.steps[self.index].tick()
+            if result.status is Status.RUNNING:
+                return StepResult(Status.RUNNING, f"{self.name}: {self.steps[self.index].name}")
+            if result.status is Status.FAILURE:
+                return result
+            self.index += 1
+            return StepResult(Status.RUNNING, result.message)
+        return StepResult(Status.SUCCESS, f"{self.name}: done")
+
+    def halt(self) -> None:
+        if self.index < len(self.steps):
+            self.steps[self.index].halt()

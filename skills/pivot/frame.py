@@ -1,0 +1,111 @@
+"""Where the pivot happens in the world: the part's vertical plane and the poses of Fig. 10.
+
+The maneuver is planar (Sec. II-B). Its plane contains the part's axis ``u`` (towards the open
+end) and the vertical ``up``; ``s`` runs along ``u`` from the part's centre, ``h`` up from the
+floor. In that plane the mechanics' points are ``S = (a - l, 2b)``, ``H = (a, 2b - delta)`` and
+the pivot ``P_c = G = (-a, 0)`` (the far bottom corner).
+
+Tool frame (see ``drivers``): ``z`` along the fingers (approach), ``x`` the closing line from the
+finger in the hole (H finger, on -x) towards the outer finger (S finger, on +x). At the grasp
+``x = (-cos alpha) u + (sin alpha) up`` -- alpha is the angle between the part's axis and the
+closing line, as in the mechanics -- and ``z = (-sin alpha) u - (cos alpha) up``.
+
+With equal fingers the two fingertips sit at the same depth along ``z``; the S finger's tip rests
+on the top surface, so the H finger reaches ``e_H = l sin(alpha) - delta cos(alpha)`` past the
+rim contact H (negative would mean it misses the lip).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from drivers.pose import Pose
+from skills.mechanics.contact import Section
+
+
+def _rotation_about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
+    return Rotation.from_rotvec(np.asarray(axis, float) * angle).as_matrix()
+
+
+@dataclass(frozen=True)
+class PivotFrame:
+    """The pivot plane of one lying part: centre (m, world), yaw of ``u`` (rad), floor height."""
+
+    section: Section
+    center: NDArray[np.float64]
+    yaw: float
+    floor_z: float = 0.0
+
+    @property
+    def u(self) -> NDArray[np.float64]:
+        return np.array([math.cos(self.yaw), math.sin(self.yaw), 0.0])
+
+    @property
+    def up(self) -> NDArray[np.float64]:
+        return np.array([0.0, 0.0, 1.0])
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        """``up x u``: the tool's y axis; the tilt lifts the open end about ``-normal``."""
+        return np.cross(self.up, self.u)
+
+    def point(self, s: float, h: float) -> NDArray[np.float64]:
+        """World point at ``s`` along the axis from the centre and ``h`` above the floor (m)."""
+        base = np.array([self.center[0], self.center[1], self.floor_z])
+        return base + s * self.u + h * self.up
+
+    @property
+    def pivot(self) -> NDArray[np.float64]:
+        """``P_c``: the far bottom corner G, the centre of the Tilt (Fig. 10)."""
+        return self.point(-self.section.a, 0.0)
+
+    def opening(self, l_a: float, alpha: float) -> float:
+        """Distance between the finger faces at the grasp (m)."""
+        l = 2.0 * self.section.a * l_a
+        return l * math.cos(alpha) + self.section.delta * math.sin(alpha)
+
+    def hook_depth(self, l_a: float, alpha: float) -> float:
+        """``e_H``: how far the H finger reaches past the rim contact along the finger (m)."""
+        l = 2.0 * self.section.a * l_a
+        return l * math.sin(alpha) - self.section.delta * math.cos(alpha)
+
+    def grasp_rotation(self, alpha: float) -> NDArray[np.float64]:
+        x = -math.cos(alpha) * self.u + math.sin(alpha) * self.up
+        z = -math.sin(alpha) * self.u - math.cos(alpha) * self.up
+        return np.column_stack([x, np.cross(z, x), z])
+
+    def grasp_pose(self, l_a: float, alpha: float, tip_offset: float) -> Pose:
+        """``P_i``: TCP pose at the grasp. ``tip_offset``: TCP to fingertip along z (m)."""
+        a, b = self.section.a, self.section.b
+        l = 2.0 * a * l_a
+        rot = self.grasp_rotation(alpha)
+        s_point = self.point(a - l, 2.0 * b)
+        tcp = s_point - 0.5 * self.opening(l_a, alpha) * rot[:, 0] - tip_offset * rot[:, 2]
+        return Pose(tcp, rot)
+
+    def tilt_pose(self, grasp: Pose, theta: float) -> Pose:
+        """The grasp carried along the arc about ``P_c`` by ``theta`` (rad): the open end rises."""
+        r = _rotation_about(-self.normal, theta)
+        p = self.pivot + r @ (grasp.position - self.pivot)
+        return Pose(p, r @ grasp.rotation)
+
+    def tilt_path(self, grasp: Pose, theta: float, step: float = math.radians(2.0)) -> list[Pose]:
+        n = max(1, int(math.ceil(theta / step)))
+        return [self.tilt_pose(grasp, theta * k / n) for k in range(1, n + 1)]
+
+    def radius(self, grasp: Pose) -> float:
+        """``r`` of Fig. 10: distance of the TCP from the pivot (m)."""
+        return float(np.linalg.norm(grasp.position - self.pivot))
+
+
+def rotate_about_point(
+    pose: Pose, point: NDArray[np.float64], axis: NDArray[np.float64], angle: float
+) -> Pose:
+    """``pose`` rotated by ``angle`` (rad) about the line through ``point`` along ``axis``."""
+    r = _rotation_about(axis, angle)
+    return Pose(point + r @ (pose.position - point), r @ pose.rotation)

@@ -1,0 +1,28 @@
+"""Parameters of the pivot skills (SI units). ``l_a`` and ``alpha`` come from the planner."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from skills.motion import Guard
+
+
+@dataclass(frozen=True)
+class PivotParams:
+    l_a: float
+    alpha: float  #: rad
+    grip_force: float = 40.0  #: N per finger while pinching
+    approach_clearance: float = 0.010  #: m of extra jaw opening during the approach
+    approach_distance: float = 0.06  #: m back along the fingers before the final approach
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
+    approach_speed: float = 0.05  #: m/s
+    tilt_speed: float = 0.03  #: m/s of the TCP along the arc (quasi-static, Sec. II-B)
+    acceleration: float = 0.3  #: m/s^2
+    tilt_angle: float = math.radians(90.0)  #: theta of Fig. 10
+    lift_height: float = 0.05  #: m, the lift after Align
+    release: float = 0.004  #: m the jaws open to let go of the pinch before Align
+    wall_depth: float = 0.015  #: m the fingertips reach below the rim for the hole grasp
+    wall_gap: float = 0.004  #: m between each finger and the wall before the final pinch
+    guard: Guard = field(default_factory=Guard)  #: FT and time limits of every motion
+    tilt_guard: Guard = field(default_factory=lambda: Guard(max_force=80.0, timeout=20.0))

@@ -1,0 +1,139 @@
+"""Fake devices for tick-level skill tests: they obey the interfaces and move by rules, not physics.
+
+A fake arm reaches each commanded pose after a fixed number of ticks; a fake gripper closes onto a
+configurable object width. Tests advance them with ``tick()``, as the world's step would.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from drivers.arm import ArmStatus, MotionState
+from drivers.pose import Pose
+
+
+class FakeClock:
+    def __init__(self, dt: float = 0.008) -> None:
+        self.t, self.dt = 0.0, dt
+
+    def now(self) -> float:
+        return self.t
+
+
+class FakeArm:
+    def __init__(self, pose: Pose | None = None, ticks_per_move: int = 3) -> None:
+        self.pose = pose or Pose(np.array([0.4, 0.0, 0.3]))
+        self.ticks_per_move = ticks_per_move
+        self.queue: list[Pose] = []
+        self.remaining = 0
+        self.state = MotionState.IDLE
+        self.commands: list[tuple[str, object]] = []
+        self.stops = 0
+
+    def tool_pose(self) -> Pose:
+        return self.pose
+
+    def move_path(self, waypoints: Sequence[Pose], speed: float, acceleration: float) -> None:
+        self.commands.append(("path", list(waypoints)))
+        self.queue = list(waypoints)
+        self.remaining = self.ticks_per_move
+        self.state = MotionState.MOVING
+
+    def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:
+        self.move_path([pose], speed, acceleration)
+
+    def servo(self, target: Pose) -> None:
+        self.pose = target
+
+    def force_mode(self, selection, wrench, speed_limits) -> None:
+        self.commands.append(("force", tuple(wrench)))
+        self.state = MotionState.MOVING
+
+    def stop(self) -> None:
+        self.stops += 1
+        self.queue = []
+        self.state = MotionState.STOPPED
+
+    def status(self) -> ArmStatus:
+        return ArmStatus(self.state)
+
+    def joint_positions(self) -> np.ndarray:
+        return np.zeros(6)
+
+    def tick(self) -> None:
+        if self.state is MotionState.MOVING and self.queue:
+            self.remaining -= 1
+            if self.remaining <= 0:
+                self.pose = self.queue[-1]
+                self.queue = []
+                self.state = MotionState.DONE
+
+
+class FakeGripper:
+    stroke = 0.085
+    finger_width = 0.020
+
+    def __init__(self, object_width: float | None = 0.003) -> None:
+        self.object_width = object_width
+        self._width = 0.085
+        self._target = 0.085
+        self._moving = False
+        self.closed_on: float | None = None
+
+    def open(self, width: float | None = None, speed: float = 0.1) -> None:
+        self._target = self.stroke if width is None else width
+        self._moving = True
+        self.closed_on = None
+
+    def close(self, force: float, speed: float = 0.05) -> None:
+        self._target = self.object_width if self.object_width is not None else 0.0
+        self._moving = True
+        self.closed_on = self.object_width
+
+    def width(self) -> float:
+        return self._width
+
+    def moving(self) -> bool:
+        return self._moving
+
+    def object_detected(self) -> bool:
+        return self.closed_on is not None and not self._moving
+
+    def fault(self) -> str | None:
+        return None
+
+    def tick(self) -> None:
+        if self._moving:
+            self._width = self._target
+            self._moving = False
+
+
+class FakeFT:
+    def __init__(self) -> None:
+        self.value = np.zeros(6)
+
+    def wrench(self) -> np.ndarray:
+        return self.value.copy()
+
+    def bias(self) -> None:
+        self.value = np.zeros(6)
+
+    def age(self) -> float:
+        return 0.0
+
+
+def run(skill, devices, max_ticks: int = 2000, on_tick=None):
+    """Tick ``skill`` until it is done; advance the fakes between ticks like the world would."""
+    clock = devices["clock"]
+    for i in range(max_ticks):
+        if on_tick:
+            on_tick(i)
+        result = skill.tick()
+        if result.done:
+            return result, i
+        devices["arm"].tick()
+        devices["gripper"].tick()
+        clock.t += clock.dt
+    raise AssertionError("skill did not finish")
