@@ -29,7 +29,10 @@ class Intrinsics:
 
 @dataclass(frozen=True)
 class Frame:
-    """One aligned capture: ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres, 0 = invalid."""
+    """One aligned capture: ``rgb`` (H, W, 3) uint8 and ``depth`` (H, W) float32 in metres.
+
+    A depth of 0 marks an invalid pixel.
+    """
 
     rgb: NDArray[np.uint8]
     depth: NDArray[np.float32]

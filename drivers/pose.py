@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 @dataclass(frozen=True)
 class Pose:
-    """``position`` (m, shape 3) and ``rotation`` (3x3, columns = the frame's axes in the parent)."""
+    """``position`` (m, shape 3) and ``rotation`` (3x3; columns: the frame's axes in the parent)."""
 
     position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
     rotation: NDArray[np.float64] = field(default_factory=lambda: np.eye(3))
