@@ -222,7 +222,8 @@ def spawn_part(
     ``lateral_friction`` is the part's own coefficient; PyBullet multiplies it with the other
     body's, so the cell keeps 1.0 here and puts the per-contact values on fingers and floor.
     ``rolling_friction`` / ``spinning_friction`` (m) are small on purpose: the part must pivot
-    freely about its floor contact; they too are multiplied with the other body's values.
+    freely about its floor contact. Bullet combines them as ``r_part * mu_other + r_other *
+    mu_part``, so with fixtures at 0 the effective value is this one times the floor's friction.
     ``staves`` (round sections only) must leave room for the bottom within 16 child shapes.
     """
     if part.hole_shape == "circle" and not (3 <= staves <= MAX_CHILD_SHAPES - 1):
