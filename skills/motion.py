@@ -169,3 +169,23 @@ class Sequence:
     def halt(self) -> None:
         if self.index < len(self.steps):
             self.steps[self.index].halt()
+
+
+@dataclass(frozen=True)
+class Devices:
+    """The devices a motion skill uses, handed in by the caller (never looked up)."""
+
+    arm: Arm
+    gripper: Gripper
+    ft: ForceTorqueSensor
+    clock: Clock
+
+    def move(self, name: str, guard: Guard, command: Callable[[], None]) -> GuardedMotion:
+        return arm_motion(name, self.arm, self.ft, self.clock, guard, command)
+
+    def grip(
+        self, name: str, guard: Guard, command: Callable[[], None], settle: float = 0.1
+    ) -> GuardedMotion:
+        return gripper_motion(
+            name, self.gripper, self.arm, self.ft, self.clock, guard, command, settle
+        )

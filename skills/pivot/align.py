@@ -15,13 +15,9 @@ import math
 
 import numpy as np
 
-from drivers.arm import Arm
-from drivers.clock import Clock
-from drivers.ft_sensor import ForceTorqueSensor
-from drivers.gripper import Gripper
 from drivers.pose import Pose
 from skills.mechanics.part import Part
-from skills.motion import Sequence, arm_motion, gripper_motion
+from skills.motion import Devices, Sequence
 from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult
@@ -42,11 +38,9 @@ class Align:
         frame: PivotFrame,
         part: Part,
         params: PivotParams,
-        arm: Arm,
-        gripper: Gripper,
-        ft: ForceTorqueSensor,
-        clock: Clock,
+        dev: Devices,
     ) -> None:
+        arm, gripper = dev.arm, dev.gripper
         self.frame, self.part, self.params = frame, part, params
         self.arm, self.gripper = arm, gripper
         p = params
@@ -108,23 +102,19 @@ class Align:
         self.sequence = Sequence(
             "align",
             [
-                gripper_motion("release the pinch", gripper, arm, ft, clock, g, release),
-                arm_motion("swing about the rim", arm, ft, clock, g, swing),
-                arm_motion("out of the hole", arm, ft, clock, g, out_of_hole),
-                gripper_motion("narrow the jaws", gripper, arm, ft, clock, g, narrow),
-                arm_motion("over the wall", arm, ft, clock, g, over_wall),
-                arm_motion("into the hole", arm, ft, clock, g, down),
-                gripper_motion(
+                dev.grip("release the pinch", g, release),
+                dev.move("swing about the rim", g, swing),
+                dev.move("out of the hole", g, out_of_hole),
+                dev.grip("narrow the jaws", g, narrow),
+                dev.move("over the wall", g, over_wall),
+                dev.move("into the hole", g, down),
+                dev.grip(
                     "pinch the wall",
-                    gripper,
-                    arm,
-                    ft,
-                    clock,
                     g,
                     lambda: gripper.close(p.grip_force),
                     settle=0.2,
                 ),
-                arm_motion("lift", arm, ft, clock, g, lift),
+                dev.move("lift", g, lift),
             ],
         )
         self._checked_pinch = False

@@ -12,7 +12,8 @@ from skills.motion import Guard
 class PivotParams:
     l_a: float
     alpha: float  #: rad
-    grip_force: float = 40.0  #: N per finger while pinching
+    grip_force: float = 15.0  #: N per finger while pinching
+    press_depth: float = 0.003  #: m the arm presses S down after closing (holds S against sliding)
     approach_clearance: float = 0.010  #: m of extra jaw opening during the approach
     approach_distance: float = 0.06  #: m back along the fingers before the final approach
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis

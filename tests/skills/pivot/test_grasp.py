@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from skills.mechanics.contact import Section, delta_round
-from skills.motion import Guard
+from skills.motion import Devices, Guard
 from skills.pivot import Grasp, PivotFrame, PivotParams, Tilt
 from skills.status import Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
@@ -25,8 +25,12 @@ def devices(object_width=0.003):
     }
 
 
+def dev(d) -> Devices:
+    return Devices(d["arm"], d["gripper"], d["ft"], d["clock"])
+
+
 def make_grasp(d):
-    return Grasp(FRAME, PARAMS, d["arm"], d["gripper"], d["ft"], d["clock"])
+    return Grasp(FRAME, PARAMS, dev(d))
 
 
 def test_grasp_opens_approaches_and_closes() -> None:
@@ -34,9 +38,11 @@ def test_grasp_opens_approaches_and_closes() -> None:
     result, ticks = run(make_grasp(d), d)
     assert result.status is Status.SUCCESS, result.message
     kinds = [c[0] for c in d["arm"].commands]
-    assert kinds == ["path", "path"]  # above the open end, then along the fingers
-    final = d["arm"].commands[-1][1][-1]
-    assert np.allclose(final.position, FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005).position)
+    assert kinds == ["path", "path", "path"]  # above the open end, along the fingers, press
+    at_grasp = d["arm"].commands[1][1][-1]
+    assert np.allclose(at_grasp.position, FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005).position)
+    pressed = d["arm"].commands[2][1][-1]
+    assert np.allclose(at_grasp.position - pressed.position, [0, 0, PARAMS.press_depth])
     assert d["gripper"].closed_on == pytest.approx(0.003)
 
 
@@ -64,7 +70,7 @@ def test_timeout_stops_the_arm() -> None:
     d = devices()
     d["arm"].ticks_per_move = 10**9  # never arrives
     params = PivotParams(l_a=0.9, alpha=0.3, guard=Guard(timeout=0.5))
-    grasp = Grasp(FRAME, params, d["arm"], d["gripper"], d["ft"], d["clock"])
+    grasp = Grasp(FRAME, params, dev(d))
     result, tick = run(grasp, d)
     assert result.status is Status.FAILURE and "timeout" in result.message
     # the limit is per motion: the jaws opened first (about 0.1 s), then the move timed out
@@ -82,7 +88,8 @@ def test_grasp_refuses_an_opening_beyond_the_stroke() -> None:
 def test_tilt_follows_the_arc() -> None:
     d = devices()
     grasp_pose = FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005)
-    tilt = Tilt(FRAME, PARAMS, grasp_pose, d["arm"], d["gripper"], d["ft"], d["clock"])
+    d["arm"].pose = grasp_pose
+    tilt = Tilt(FRAME, PARAMS, dev(d))
     result, _ = run(tilt, d)
     assert result.status is Status.SUCCESS
     path = d["arm"].commands[0][1]

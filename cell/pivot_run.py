@@ -1,0 +1,185 @@
+"""Pivot trials in the twin: spawn a part, run Grasp -> Tilt -> Align, judge from the physics.
+
+Each trial perturbs the world away from what the skills are told (position +-3 mm, yaw +-3 deg,
+frictions +-20 %, mass +-10 %): the skills get the part's *nominal* pose and the planner's
+``(l_a, alpha)``, never the true pose. The outcome comes from :func:`sim.judge.judge` on the
+simulated state after the lift.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cell.stats import wilson_interval
+from drivers.pose import Pose
+from sim.cell_layout import CellLayout, build_cell
+from sim.judge import judge
+from sim.part_body import lying_pose, spawn_part
+from sim.robot import SimRobot
+from sim.world import SimWorld
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Part
+from skills.mechanics.planner import PivotPlan
+from skills.motion import Devices
+from skills.pivot import Align, Grasp, PivotFrame, PivotParams, Tilt
+from skills.status import Status
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """Half-widths of the uniform trial perturbations."""
+
+    position: float = 0.003  # m
+    yaw: float = math.radians(3.0)  # rad
+    friction: float = 0.20  # relative
+    mass: float = 0.10  # relative
+
+
+@dataclass(frozen=True)
+class TrialSetup:
+    part: Part
+    plan: PivotPlan
+    frictions: Frictions = Frictions()
+    perturbation: Perturbation = field(default_factory=Perturbation)
+    nominal_xy: tuple[float, float] = (0.45, 0.0)
+    nominal_yaw: float = 0.5 * math.pi
+    max_time: float = 40.0  # s of simulated time for the whole maneuver
+    params: dict[str, float] = field(default_factory=dict)  # PivotParams overrides
+
+
+@dataclass
+class TrialResult:
+    seed: int
+    success: bool
+    failure: str | None
+    phase: str
+    tilt_deg: float
+    height_m: float
+    sim_time: float
+    wall_time: float
+    true_pose: dict[str, float]
+    frictions: dict[str, float]
+
+    def to_json(self) -> dict[str, object]:
+        return dataclasses.asdict(self)
+
+
+def run_trial(
+    setup: TrialSetup,
+    seed: int,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
+    frame_every: int = 6,
+    close_gripper_anyway: bool = True,
+) -> TrialResult:
+    """One perturbed trial, judged from the simulated state."""
+    wall0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    pert = setup.perturbation
+
+    def jitter(value: float, rel: float) -> float:
+        return value * (1.0 + rng.uniform(-rel, rel))
+
+    mu_s = jitter(setup.frictions.mu_s, pert.friction)
+    mu_h = jitter(setup.frictions.mu_h, pert.friction)
+    mu_g = jitter(setup.frictions.mu_g, pert.friction)
+    true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
+    x = setup.nominal_xy[0] + rng.uniform(-pert.position, pert.position)
+    y = setup.nominal_xy[1] + rng.uniform(-pert.position, pert.position)
+    yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
+
+    world = SimWorld(seed=seed)
+    try:
+        cell = build_cell(world, CellLayout(), floor_friction=mu_g)
+        robot = SimRobot(world)
+        # finger_a (tool +x) is the outer finger on S; finger_b goes into the hole (H).
+        robot.gripper.set_finger_friction(mu_s, mu_h)
+        body = spawn_part(world, true_part, lying_pose(true_part, x, y, yaw), lateral_friction=1.0)
+        for _ in range(int(0.3 / world.settings.control_dt)):  # let the part settle
+            world.step()
+        robot.ft.bias()
+
+        assert setup.plan.l_a is not None and setup.plan.alpha is not None
+        params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
+        section = setup.part.section(robot.gripper.finger_width)
+        frame = PivotFrame(
+            section,
+            np.array([setup.nominal_xy[0], setup.nominal_xy[1], 0.5 * setup.part.outer]),
+            setup.nominal_yaw,
+        )
+        dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock)
+        phases = [
+            ("grasp", Grasp(frame, params, dev)),
+            ("tilt", Tilt(frame, params, dev)),
+            ("align", Align(frame, setup.part, params, dev)),
+        ]
+        failure: str | None = None
+        phase_name = "done"
+        t_end = world.clock.now() + setup.max_time
+        for phase_name, skill in phases:
+            result = skill.tick()
+            while not result.done and world.clock.now() < t_end:
+                world.step()
+                if on_frame is not None and world.steps % frame_every == 0:
+                    on_frame(world, robot)
+                result = skill.tick()
+            if not result.done:
+                skill.halt()
+                failure = f"{phase_name}: out of time"
+                break
+            if result.status is Status.FAILURE:
+                failure = result.message
+                break
+        else:
+            phase_name = "done"
+        for _ in range(int(0.3 / world.settings.control_dt)):  # hold still, then judge
+            world.step()
+            if on_frame is not None and world.steps % frame_every == 0:
+                on_frame(world, robot)
+        tips = {}
+        for name in ("finger_a", "finger_b"):
+            pose = robot.link_pose(name)
+            tips[name] = pose.transform([0.0, 0.0, 0.5 * 0.055])
+        verdict = judge(
+            world,
+            body,
+            cell.floor,
+            robot.body_id,
+            {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
+            tips,
+        )
+        success = failure is None and verdict.success
+        return TrialResult(
+            seed=seed,
+            success=success,
+            failure=None if success else (failure or verdict.failure),
+            phase=phase_name,
+            tilt_deg=verdict.tilt_deg,
+            height_m=verdict.height_m,
+            sim_time=world.clock.now(),
+            wall_time=time.perf_counter() - wall0,
+            true_pose={"x": x, "y": y, "yaw": yaw},
+            frictions={"S": mu_s, "H": mu_h, "G": mu_g},
+        )
+    finally:
+        world.close()
+
+
+def summarize(part: str, results: list[TrialResult]) -> dict[str, object]:
+    k, n = sum(r.success for r in results), len(results)
+    lo, hi = wilson_interval(k, n)
+    return {
+        "part": part,
+        "trials": n,
+        "successes": k,
+        "wilson95": [lo, hi],
+        "per_trial": [r.to_json() for r in results],
+    }
+
+
+__all__ = ["Perturbation", "Pose", "TrialResult", "TrialSetup", "run_trial", "summarize"]
