@@ -1,0 +1,517 @@
+"""The twin's arm: Cartesian motion of the UR5's TCP, advanced one control step at a time.
+
+Every command returns at once; :meth:`SimWorld.step` moves the arm. Poses are of the ``tcp``
+link in the robot base frame (UR ``Base``; see :mod:`sim.robot_model`), metres and radians.
+
+How it moves, and why:
+
+* **Trajectories** (:meth:`SimArm.move_to`, :meth:`SimArm.move_path`) are straight lines in
+  position with the rotation slerped along (:meth:`drivers.pose.Pose.interpolate`), timed by one
+  trapezoidal speed profile over the whole path. The path length counts rotation as
+  :data:`ROTATION_LENGTH` m per rad, so ``speed`` also bounds the turning rate. The whole path is
+  checked for reachability before the arm moves; an unreachable one faults at once.
+* **Inverse kinematics** is damped least squares on the model's own Jacobian
+  (:func:`sim.robot_model.jacobian`, the same chain as the URDF, in plain float arithmetic),
+  seeded with the last command so it never jumps branches: one step per control step while
+  following (about 1e-7 m, see :meth:`SimArm._track`), iterated to 1e-9 m for checks and jumps.
+  PyBullet's ``calculateInverseKinematics`` (100 iterations, threshold 1e-5) leaves about
+  1e-5 m here and starts from the body's live state; ours is cheaper per step as well.
+* **Joint control** is PyBullet POSITION_CONTROL with the joint torque limits, fed a position
+  target interpolated per physics substep and the matching velocity as feed-forward. A line at
+  constant speed stays on the line to micrometres; along it the TCP trails the command by one
+  physics substep (4 ms, 0.2 mm at 0.05 m/s). The joint speed limit (pi rad/s) is enforced on
+  the commands.
+* **Force mode** drops the joint motors for torque control: gravity compensation
+  (``calculateInverseDynamics``) plus a Cartesian spring-damper to a virtual target pose. Along
+  selected axes the virtual target moves by admittance on the wrist sensor,
+  ``v = gain * (wrench - measured)`` clipped to the speed limits; along the others it holds. The
+  spring gives the contact a finite stiffness (:data:`FORCE_STIFFNESS`), which a stiff position
+  servo against a rigid simulated contact cannot: there the force jumps from zero to the joint
+  torque limit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from drivers.arm import ArmStatus, MotionState
+from drivers.pose import Pose
+from sim.ft_sensor import SimForceTorqueSensor
+from sim.robot_model import ARM_EFFORT, ARM_LIMIT, ARM_VELOCITY, TCP_Z, jacobian
+from sim.robot_model import forward_kinematics as fk
+from sim.world import SimWorld
+
+ROTATION_LENGTH = 0.1  #: m of path length per rad of rotation (couples turning to ``speed``)
+REACH_TOLERANCE = 0.005  #: m: an IK residual above this is "target unreachable"
+DONE_POSITION = 0.001  #: m: the TCP within this of the goal (and DONE_ANGLE) ends a move
+DONE_ANGLE = np.radians(0.5)  #: rad
+SETTLE_TIME = 0.5  #: s after the profile ends before a move is reported done regardless
+POSITION_GAIN = 0.5  #: PyBullet motor position gain (fraction of the error corrected per substep)
+JUMP = 0.002  #: m: a servo target farther than this from the command gets the full IK solve
+CHECK_STEP = 0.01  #: m of path length between poses checked for reachability before a move
+
+# Force mode (impedance to a virtual target + admittance on the sensor).
+FORCE_STIFFNESS = np.array([4000.0] * 3 + [30.0] * 3)  #: N/m, N*m/rad at the TCP
+FORCE_DAMPING = np.array([80.0] * 3 + [0.3] * 3)  #: N*s/m, N*m*s/rad at the TCP
+ADMITTANCE_GAIN = np.array([0.005] * 3 + [0.5] * 3)  #: (m/s)/N, (rad/s)/(N*m)
+
+
+@dataclass(frozen=True)
+class _Path:
+    """Poses joined by straight segments and one trapezoidal profile over their length."""
+
+    poses: tuple[Pose, ...]
+    cumulative: NDArray[np.float64]  # path length (m) at each pose
+    turns: NDArray[np.float64]  # per segment, the rotation vector (rad) in the segment's start
+    speed: float  # m/s
+    acceleration: float  # m/s^2
+
+    @classmethod
+    def through(cls, poses: Sequence[Pose], speed: float, acceleration: float) -> _Path:
+        lengths = [0.0]
+        turns = []
+        for a, b in zip(poses[:-1], poses[1:], strict=True):
+            turn = Rotation.from_matrix(a.rotation.T @ b.rotation).as_rotvec()
+            d = float(np.linalg.norm(b.position - a.position))
+            lengths.append(max(d, ROTATION_LENGTH * float(np.linalg.norm(turn))))
+            turns.append(turn)
+        return cls(tuple(poses), np.cumsum(lengths), np.array(turns), speed, acceleration)
+
+    @property
+    def length(self) -> float:
+        return float(self.cumulative[-1])
+
+    @property
+    def duration(self) -> float:
+        v, a, length = self.speed, self.acceleration, self.length
+        if length <= 0.0:
+            return 0.0
+        if length < v * v / a:  # triangular: never reaches full speed
+            return 2.0 * np.sqrt(length / a)
+        return length / v + v / a
+
+    def distance_at(self, t: float) -> float:
+        """Path length (m) covered at time ``t`` (s) from the start."""
+        v, a, length = self.speed, self.acceleration, self.length
+        total = self.duration
+        if t <= 0.0 or length <= 0.0:
+            return 0.0
+        if t >= total:
+            return length
+        t_acc = min(v / a, total / 2.0)
+        peak = a * t_acc
+        if t < t_acc:
+            return 0.5 * a * t * t
+        if t > total - t_acc:
+            rest = total - t
+            return length - 0.5 * a * rest * rest
+        return 0.5 * a * t_acc * t_acc + peak * (t - t_acc)
+
+    def pose_at(self, s: float) -> Pose:
+        """Pose at path length ``s`` (m): :meth:`Pose.interpolate` within the segment (the same
+        formula, with the segment's rotation vector computed once)."""
+        if s >= self.length:
+            return self.poses[-1]
+        i = int(np.searchsorted(self.cumulative, s, side="right")) - 1
+        i = min(max(i, 0), len(self.poses) - 2)
+        seg = self.cumulative[i + 1] - self.cumulative[i]
+        u = 0.0 if seg <= 0.0 else float((s - self.cumulative[i]) / seg)
+        a, b = self.poses[i], self.poses[i + 1]
+        position = a.position + u * (b.position - a.position)
+        return Pose(position, a.rotation @ _rotation(u * self.turns[i]))
+
+
+def _rotvec(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation vector (rad) of a rotation matrix; a scalar formula, several times faster than
+    scipy's on one matrix, which matters in the per-step IK."""
+    cos = min(max((m[0, 0] + m[1, 1] + m[2, 2] - 1.0) * 0.5, -1.0), 1.0)
+    angle = float(np.arccos(cos))
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * w
+    if angle > np.pi - 1e-3:  # near a half turn the skew part vanishes: let scipy decide
+        return Rotation.from_matrix(m).as_rotvec()
+    return (angle / (2.0 * np.sin(angle))) * w
+
+
+def _rotation(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rotation matrix of a rotation vector (rad), Rodrigues' formula."""
+    angle = float(np.sqrt(v @ v))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = v / angle
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * (kx @ kx)
+
+
+def _pose_error(target: Pose, current: Pose) -> NDArray[np.float64]:
+    """``[dp; dphi]``: position error (m) and rotation vector (rad), both in the base frame."""
+    rotation = _rotvec(target.rotation @ current.rotation.T)
+    return np.concatenate([target.position - current.position, rotation])
+
+
+def _residual(err: NDArray[np.float64]) -> float:
+    """Size of a pose error (m): position error plus ``ROTATION_LENGTH`` times the angle."""
+    return float(np.sqrt(err[:3] @ err[:3]) + ROTATION_LENGTH * np.sqrt(err[3:] @ err[3:]))
+
+
+def _dls_step(jac: NDArray[np.float64], err: NDArray[np.float64], damping: float = 1e-3):
+    """Damped-least-squares joint step (rad) for a pose error; at most 0.3 rad per joint."""
+    dq = jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(6), err)
+    biggest = float(np.max(np.abs(dq)))
+    if biggest > 0.3:
+        dq *= 0.3 / biggest
+    return dq
+
+
+def solve_ik(
+    target: Pose, seed: ArrayLike, iterations: int = 50, tolerance: float = 1e-9
+) -> tuple[NDArray[np.float64], float]:
+    """Joints (rad) putting the TCP at ``target`` (base frame), and the residual (m).
+
+    Damped least squares from ``seed``, each step at most 0.3 rad, joints kept in +-2 pi. The
+    residual is the position error plus ``ROTATION_LENGTH`` times the angle error.
+    """
+    q = np.array(seed, float)
+    for _ in range(iterations):
+        jac, pose = jacobian(q)
+        err = _pose_error(target, pose)
+        if _residual(err) < tolerance:
+            return q, _residual(err)
+        q = np.clip(q + _dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
+    return q, _residual(_pose_error(target, fk(q)))
+
+
+class SimArm:
+    """Implements :class:`drivers.arm.Arm` for the ``tcp`` link of a loaded robot body."""
+
+    def __init__(
+        self,
+        world: SimWorld,
+        body_id: int,
+        joint_indices: Sequence[int],
+        ft: SimForceTorqueSensor | None = None,
+        home_joints: ArrayLike | None = None,
+    ) -> None:
+        """``joint_indices``: the body's six arm joints, base to wrist 3; ``ft`` enables
+        :meth:`force_mode`; ``home_joints`` (rad) is where :meth:`home` goes."""
+        self._world = world
+        self._p = world.p
+        self._body = body_id
+        self._joints = list(joint_indices)
+        self._ft = ft
+        self._dt = world.settings.control_dt
+        self._substeps = world.settings.substeps
+        self._effort = list(ARM_EFFORT)
+        self._home = None if home_joints is None else np.asarray(home_joints, float)
+        # Every movable joint of the body (inverse dynamics wants them all) and where ours are.
+        movable = [
+            j for j in range(self._p.getNumJoints(body_id))
+            if self._p.getJointInfo(body_id, j)[2] != self._p.JOINT_FIXED
+        ]
+        self._movable = (movable, [movable.index(j) for j in self._joints])
+        # The command: joints at the start and end of the current control step.
+        self._q_from = self.joint_positions()
+        self._q_to = self._q_from.copy()
+        self._substep = 0
+        self._mode = "hold"  # hold | path | servo | force
+        self._state = MotionState.IDLE
+        self._message = ""
+        self._path: _Path | None = None
+        self._t = 0.0
+        self._servo_target: Pose | None = None
+        self._last_target: Pose | None = None  # the pose commanded for the step just run
+        self._clipped = False  # the last step was slowed to the joint speed limit
+        self._force: dict[str, NDArray[np.float64]] = {}
+        self._virtual: Pose | None = None
+        world.before_step(self._control)
+        world.before_substep(self._actuate)
+
+    # --- setup helpers (not part of the interface) ---------------------------------------
+
+    def reset_joints(self, q: ArrayLike) -> None:
+        """Teleport the arm to joints ``q`` (rad) and hold them; setup only, before contact."""
+        q = np.asarray(q, float).reshape(6)
+        for joint, angle in zip(self._joints, q, strict=True):
+            self._p.resetJointState(self._body, joint, float(angle))
+        self._hold(q)
+        self._state, self._message = MotionState.IDLE, ""
+
+    def home(self, speed: float = 0.25, acceleration: float = 1.0) -> None:
+        """Start a straight-line move to the home joints' TCP pose (m/s, m/s^2)."""
+        if self._home is None:
+            raise ValueError("this arm has no home joints")
+        self.move_to(fk(self._home), speed, acceleration)
+
+    @property
+    def home_joints(self) -> NDArray[np.float64] | None:
+        return None if self._home is None else self._home.copy()
+
+    def commanded_joints(self) -> NDArray[np.float64]:
+        """The joint target (rad) at the end of the current control step."""
+        return self._q_to.copy()
+
+    # --- the Arm interface ---------------------------------------------------------------
+
+    def tool_pose(self) -> Pose:
+        """Current TCP pose in the base frame (m, rad), from the measured joints."""
+        return fk(self.joint_positions())
+
+    def joint_positions(self) -> NDArray[np.float64]:
+        """Measured joint angles (rad), base to wrist 3."""
+        return np.array([s[0] for s in self._p.getJointStates(self._body, self._joints)])
+
+    def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:
+        """Start a straight-line move of the TCP to ``pose`` (m/s, m/s^2)."""
+        self.move_path([pose], speed, acceleration)
+
+    def move_path(self, waypoints: Sequence[Pose], speed: float, acceleration: float) -> None:
+        """Start a straight-line path from the commanded pose through ``waypoints``.
+
+        One trapezoidal profile (``speed`` m/s, ``acceleration`` m/s^2) spans the whole path, so
+        the TCP does not stop at intermediate waypoints. The path is checked first: if IK cannot
+        follow it to within :data:`REACH_TOLERANCE`, the arm holds and reports FAULT.
+        """
+        if speed <= 0 or acceleration <= 0:
+            raise ValueError(f"speed and acceleration must be > 0, got {speed}, {acceleration}")
+        self._leave_force_mode()
+        start_q = self._q_to.copy()
+        path = _Path.through([fk(start_q), *waypoints], float(speed), float(acceleration))
+        samples = max(1, int(np.ceil(path.length / CHECK_STEP)))
+        q = start_q
+        for s in np.linspace(0.0, path.length, samples + 1)[1:]:
+            q, residual = solve_ik(path.pose_at(float(s)), q, iterations=100)
+            if residual > REACH_TOLERANCE:
+                self._fault("target unreachable", start_q)
+                return
+        self._path, self._t = path, 0.0
+        self._last_target = None
+        self._mode = "path"
+        self._state, self._message = MotionState.MOVING, ""
+
+    def servo(self, target: Pose) -> None:
+        """Set the TCP target (base frame) for the next control step.
+
+        The caller streams targets close together; the joints move there within one step if
+        the joint speed limit allows, and otherwise as fast as it does.
+        """
+        self._leave_force_mode()
+        if self._mode != "servo":
+            self._last_target = None
+        self._servo_target = target
+        self._mode = "servo"
+        self._path = None
+        self._state, self._message = MotionState.MOVING, ""
+
+    def force_mode(
+        self,
+        selection: Sequence[bool],
+        wrench: Sequence[float],
+        speed_limits: Sequence[float],
+    ) -> None:
+        """Push with ``wrench`` (N, N*m; the force the TCP applies to the environment, base
+        frame, torques about the TCP) on the ``selection`` axes, moving at most
+        ``speed_limits`` (m/s, rad/s) there; hold the other axes. Runs until :meth:`stop`."""
+        if self._ft is None:
+            raise RuntimeError("force mode needs the wrist force-torque sensor")
+        sel = np.asarray(selection, bool).reshape(6)
+        if self._mode != "force":
+            self._virtual = self.tool_pose()
+            self._p.setJointMotorControlArray(
+                self._body, self._joints, self._p.VELOCITY_CONTROL,
+                targetVelocities=[0.0] * 6, forces=[0.0] * 6,
+            )
+        self._force = {
+            "selection": sel,
+            "wrench": np.asarray(wrench, float).reshape(6),
+            "speed": np.abs(np.asarray(speed_limits, float).reshape(6)),
+        }
+        self._mode = "force"
+        self._path = None
+        self._state, self._message = MotionState.MOVING, ""
+
+    def stop(self) -> None:
+        """Hold the last commanded joints (force mode: the measured ones); a motion in progress
+        ends STOPPED, a finished or faulted one keeps its state.
+
+        The arm comes to standstill within about one control step; at the twin's slow skill
+        speeds that is the UR's stop with a high deceleration. Idempotent.
+        """
+        if self._mode == "force":
+            self._leave_force_mode()
+        elif self._mode != "hold":
+            self._hold(self._q_to)
+        if self._state is MotionState.MOVING:
+            self._state, self._message = MotionState.STOPPED, ""
+
+    def status(self) -> ArmStatus:
+        """State of the last commanded motion."""
+        return ArmStatus(self._state, self._message)
+
+    # --- per-step control ----------------------------------------------------------------
+
+    def _hold(self, q: ArrayLike) -> None:
+        self._q_from = np.array(q, float)
+        self._q_to = self._q_from.copy()
+        self._mode = "hold"
+        self._path = None
+        self._servo_target = None
+        self._last_target = None
+        self._send(self._q_to, np.zeros(6))
+
+    def _fault(self, message: str, q_hold: ArrayLike) -> None:
+        self._hold(q_hold)
+        self._state, self._message = MotionState.FAULT, message
+
+    def _leave_force_mode(self) -> None:
+        if self._mode == "force":
+            self._hold(self.joint_positions())
+
+    def _control(self) -> None:
+        """Once per control step, before physics: the next joint target."""
+        self._substep = 0
+        if self._mode == "path":
+            self._follow_path()
+        elif self._mode == "servo":
+            self._follow_servo()
+        elif self._mode == "force":
+            self._update_virtual()
+        else:
+            self._q_from = self._q_to.copy()
+
+    def _advance_to(self, q_next: NDArray[np.float64]) -> None:
+        """Start a control step from the last target to ``q_next``, within the speed limit."""
+        self._q_from = self._q_to.copy()
+        dq = q_next - self._q_from
+        biggest = float(np.max(np.abs(dq)))
+        limit = ARM_VELOCITY * self._dt
+        self._clipped = biggest > limit
+        if self._clipped:
+            dq *= limit / biggest
+        self._q_to = self._q_from + dq
+
+    def _track(self, target: Pose, servo: bool = False) -> None:
+        """Command the joints towards ``target`` for the end of this control step.
+
+        One damped-least-squares step from the last command per control step: the target moves
+        well under a millimetre per step, so one Newton step leaves about 1e-7 m, and the next
+        step starts from the true error again, so nothing accumulates. A jump over
+        :data:`JUMP` (a new servo target far away) gets the full iterative solve. The error
+        still left from the previous step's target is the tracking check: above
+        :data:`REACH_TOLERANCE` the arm cannot follow and faults, with "joint speed limit" when
+        the commands were being slowed to pi rad/s (a path through a singularity) and "target
+        unreachable" otherwise. A servo target the speed limit keeps out of reach for a while
+        is not a fault: the arm goes there as fast as it may.
+        """
+        jac, pose = jacobian(self._q_to)
+        if self._last_target is not None:
+            behind = _pose_error(self._last_target, pose)
+            if _residual(behind) > REACH_TOLERANCE and not (servo and self._clipped):
+                reason = "joint speed limit" if self._clipped else "target unreachable"
+                self._fault(reason, self._q_to)
+                return
+        err = _pose_error(target, pose)
+        if _residual(err) > JUMP:
+            q_next, residual = solve_ik(target, self._q_to)
+            if residual > REACH_TOLERANCE:
+                self._fault("target unreachable", self._q_to)
+                return
+        else:
+            q_next = np.clip(self._q_to + _dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
+        self._last_target = target
+        self._advance_to(q_next)
+
+    def _follow_path(self) -> None:
+        assert self._path is not None
+        path = self._path
+        self._t += self._dt
+        goal = path.poses[-1]
+        if self._t <= path.duration + self._dt:
+            self._track(path.pose_at(path.distance_at(self._t)))
+            return
+        self._q_from = self._q_to.copy()
+        d, angle = self.tool_pose().distance(goal)
+        settled = d <= DONE_POSITION and angle <= DONE_ANGLE
+        if settled or self._t > path.duration + SETTLE_TIME:
+            self._mode = "hold"
+            self._path = None
+            self._last_target = None
+            self._state = MotionState.DONE
+            if not settled:
+                self._message = (
+                    f"settled {d * 1e3:.1f} mm, {np.degrees(angle):.2f} deg from goal"
+                )
+
+    def _follow_servo(self) -> None:
+        assert self._servo_target is not None
+        self._track(self._servo_target, servo=True)
+
+    def _actuate(self) -> None:
+        """Before each physics substep: joint targets interpolated through the step, or torques."""
+        if self._mode == "force":
+            self._apply_impedance()
+            return
+        self._substep += 1
+        u = min(self._substep / self._substeps, 1.0)
+        target = self._q_from + u * (self._q_to - self._q_from)
+        self._send(target, (self._q_to - self._q_from) / self._dt)
+
+    def _send(self, q: NDArray[np.float64], qd: NDArray[np.float64]) -> None:
+        self._p.setJointMotorControlArray(
+            self._body,
+            self._joints,
+            self._p.POSITION_CONTROL,
+            targetPositions=q.tolist(),
+            targetVelocities=qd.tolist(),
+            forces=self._effort,
+            positionGains=[POSITION_GAIN] * 6,
+            velocityGains=[1.0] * 6,
+        )
+
+    # --- force mode ----------------------------------------------------------------------
+
+    def applied_wrench(self) -> NDArray[np.float64]:
+        """The wrench the TCP applies to the environment (N, N*m about the TCP, base frame),
+        from the sensor; the quantity :meth:`force_mode` regulates."""
+        assert self._ft is not None
+        w = self._ft.wrench()
+        force_tool, torque_sensor = w[:3], w[3:]
+        # Environment's moment about the TCP: T_tcp = T_sensor + (sensor - tcp) x F.
+        torque_tool = torque_sensor + np.cross(np.array([0.0, 0.0, -TCP_Z]), force_tool)
+        rotation = self.tool_pose().rotation
+        return -np.concatenate([rotation @ force_tool, rotation @ torque_tool])
+
+    def _update_virtual(self) -> None:
+        """Admittance: move the virtual target along the selected axes (once per step)."""
+        assert self._virtual is not None
+        sel, cmd, limit = self._force["selection"], self._force["wrench"], self._force["speed"]
+        velocity = np.clip(ADMITTANCE_GAIN * (cmd - self.applied_wrench()), -limit, limit)
+        velocity[~sel] = 0.0
+        v = self._virtual
+        rotation = Rotation.from_rotvec(velocity[3:] * self._dt).as_matrix() @ v.rotation
+        self._virtual = Pose(v.position + velocity[:3] * self._dt, rotation)
+
+    def _apply_impedance(self) -> None:
+        """Torques: gravity and Coriolis compensation plus a spring-damper to the target."""
+        assert self._virtual is not None
+        movable, arm_cols = self._movable
+        states = self._p.getJointStates(self._body, movable)
+        q_all = [s[0] for s in states]
+        qd_all = [s[1] for s in states]
+        q = np.array([q_all[i] for i in arm_cols])
+        qd = np.array([qd_all[i] for i in arm_cols])
+        bias = self._p.calculateInverseDynamics(self._body, q_all, qd_all, [0.0] * len(movable))
+        jac, pose = jacobian(q)
+        twist = jac @ qd
+        wrench = FORCE_STIFFNESS * _pose_error(self._virtual, pose) - FORCE_DAMPING * twist
+        tau = np.array([bias[i] for i in arm_cols]) + jac.T @ wrench
+        tau = np.clip(tau, -np.asarray(self._effort), self._effort)
+        self._q_to = q
+        self._p.setJointMotorControlArray(
+            self._body, self._joints, self._p.TORQUE_CONTROL, forces=tau.tolist()
+        )

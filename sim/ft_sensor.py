@@ -1,0 +1,104 @@
+"""The twin's wrist force-torque sensor: PyBullet's reaction at ``ft_joint``, FT300-like.
+
+Sign and frame convention (the :class:`drivers.ft_sensor.ForceTorqueSensor` contract, "the load
+the tool puts on the sensor"):
+
+* Axes are the tool frame's (``tool0``: z = approach, out of the flange towards the fingertips;
+  x = the closing axis, ``finger_a`` on +x). Torques are about the sensor origin, which is the
+  flange centre, :data:`sim.robot_model.TCP_Z` (m) behind the TCP on the tool z axis.
+* The force is the one the tool (puck, gripper, fingers and whatever they hold or touch) exerts
+  on the sensor. Hanging still with the tool pointing down, the raw reading is ``+m g`` along tool
+  z (the tool pulls away from the flange). Pressing the fingertips down onto a floor, the floor
+  pushes the tool back towards the flange: after :meth:`bias`, **Fz is negative**, about minus the
+  pressing force. In general, after a bias at rest, the reading is the external wrench that the
+  environment applies to the tool (quasi-statically); the force the tool applies to the
+  environment is its negative.
+
+The simulation gives the reaction wrench of the parent on the child at ``ft_joint`` in the joint
+frame, its torque taken about the child link's centre of mass; :meth:`SimForceTorqueSensor.sample`
+negates it and moves the torque to the joint origin. That reaction is exact with the tool hanging
+straight down; turned sideways it is off by up to about 0.15 N and 0.03 N*m (about 1 % of the
+tool's weight, varying with the orientation; a PyBullet effect, with or without joint motors),
+which a bias at the working orientation removes.
+
+Realism: one sample per control step (125 Hz, the FT300 streams at 100 Hz), Gaussian noise of
+0.1 N and 0.003 N*m per axis, and a constant random offset of a few newtons that :meth:`bias`
+removes, as on the real sensor after power-up.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.world import SimWorld
+
+FORCE_NOISE = 0.1  #: N, standard deviation per force axis
+TORQUE_NOISE = 0.003  #: N*m, standard deviation per torque axis
+FORCE_OFFSET = 3.0  #: N, the power-up offset is uniform in +-this per force axis
+TORQUE_OFFSET = 0.1  #: N*m, the power-up offset is uniform in +-this per torque axis
+BIAS_SAMPLES = 8  #: samples averaged by bias() (64 ms at 125 Hz), so the zero carries less noise
+
+
+class SimForceTorqueSensor:
+    """Implements :class:`drivers.ft_sensor.ForceTorqueSensor` on a fixed joint of a body."""
+
+    def __init__(self, world: SimWorld, body_id: int, joint_index: int) -> None:
+        self._world = world
+        self._p = world.p
+        self._body = body_id
+        self._joint = joint_index
+        self._p.enableJointForceTorqueSensor(body_id, joint_index, True)
+        # The child's centre of mass in the joint frame (the child link frame): the simulator
+        # reports the reaction torque about it.
+        self._com = np.asarray(self._p.getDynamicsInfo(body_id, joint_index)[3], float)
+        rng = world.rng
+        self._offset = np.concatenate(
+            [
+                rng.uniform(-FORCE_OFFSET, FORCE_OFFSET, 3),
+                rng.uniform(-TORQUE_OFFSET, TORQUE_OFFSET, 3),
+            ]
+        )
+        self._sigma = np.array([FORCE_NOISE] * 3 + [TORQUE_NOISE] * 3)
+        self._zero = np.zeros(6)
+        self._newest = self._offset.copy()
+        self._recent: deque[NDArray[np.float64]] = deque(maxlen=BIAS_SAMPLES)
+        self._stamp = -np.inf
+        world.after_step(self.sample)
+
+    def true_load(self) -> NDArray[np.float64]:
+        """The noiseless, offset-free load of the tool on the sensor now (N, N*m; tool frame).
+
+        For tests and the twin's own controllers; skills use :meth:`wrench`.
+        """
+        fx, fy, fz, tx, ty, tz = self._p.getJointState(self._body, self._joint)[2]
+        cx, cy, cz = self._com
+        # Negate (parent-on-child -> tool-on-sensor) and move the torque from the child's COM
+        # to the joint origin, T_o = T_c + r_c x F, written out (numpy.cross is slow here).
+        return -np.array(
+            [fx, fy, fz, tx + cy * fz - cz * fy, ty + cz * fx - cx * fz, tz + cx * fy - cy * fx]
+        )
+
+    def sample(self) -> None:
+        """Take one reading (called by the world after each control step)."""
+        reading = self.true_load() + self._offset + self._sigma * self._world.rng.standard_normal(6)
+        self._newest = reading
+        self._recent.append(reading)
+        self._stamp = self._world.clock.now()
+
+    def wrench(self) -> NDArray[np.float64]:
+        """Newest ``[Fx, Fy, Fz, Tx, Ty, Tz]`` (N, N*m) in the tool frame, bias removed."""
+        return self._newest - self._zero
+
+    def bias(self) -> None:
+        """Zero the reading on the mean of the last :data:`BIAS_SAMPLES` samples (at rest)."""
+        if self._recent:
+            self._zero = np.mean(np.asarray(self._recent), axis=0)
+        else:
+            self._zero = self._newest.copy()
+
+    def age(self) -> float:
+        """Seconds (simulation time) since the newest sample; ``inf`` before the first."""
+        return float(self._world.clock.now() - self._stamp)

@@ -1,0 +1,156 @@
+"""The twin's parallel gripper: two mirrored, force-limited prismatic fingers (2F-85-like).
+
+Each finger is a PyBullet POSITION_CONTROL motor whose force is capped: closing on a part, a
+finger stops where the part blocks it and then presses with exactly the commanded force, which is
+how the 2F-85's grip-force setting behaves. Both fingers get the same command (mirrored about the
+tool z axis); they are not mechanically coupled, so each one stops at its own contact and the pinch
+does not push the part sideways.
+
+Finger geometry (tool frame: x the closing axis, ``finger_a`` on +x): finger ``k`` has joint
+position ``q_k`` in [0, 0.0425] m, its pad face at ``|x| = q_k``; the opening is
+``q_a + q_b`` (0..0.085 m).
+
+:meth:`SimGripper.set_finger_friction` sets each finger link's lateral friction. PyBullet
+multiplies the two bodies' coefficients at a contact, so with a part of friction 1.0 the finger's
+own coefficient is the contact's: the cell gives the finger inside the hole mu_H and the outer
+one mu_S.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.robot_model import FINGER_EFFORT, FINGER_TRAVEL, FINGER_VELOCITY, FINGER_WIDTH
+from sim.world import SimWorld
+
+FINGER_NAMES = ("finger_a", "finger_b")
+STILL_SPEED = 0.002  #: m/s: a finger slower than this is still
+STALL_STEPS = 5  #: control steps a finger must stay still to count as stalled (40 ms at 125 Hz)
+ARRIVED = 0.001  #: m: a finger within this of its target has arrived
+OPEN_FORCE = 100.0  #: N per finger when opening
+LOST = 0.003  #: m: after a stall, the opening closing in by this much means the part is lost
+
+
+class SimGripper:
+    """Implements :class:`drivers.gripper.Gripper` on the robot body's ``finger_a``/``finger_b``."""
+
+    stroke: float = 2 * FINGER_TRAVEL  #: 0.085 m, largest opening between the pads
+    finger_width: float = FINGER_WIDTH  #: 0.020 m, pad width ``w``
+
+    def __init__(self, world: SimWorld, body_id: int, joint_indices: dict[str, int]) -> None:
+        """``joint_indices`` maps ``finger_a``/``finger_b`` to the body's joint (= link) index."""
+        self._world = world
+        self._p = world.p
+        self._body = body_id
+        self._joints = tuple(joint_indices[name] for name in FINGER_NAMES)
+        self._target: float | None = None  # opening (m) of the command being watched
+        self._still = 0  # consecutive control steps with both fingers still
+        self._steps = 0  # control steps since the last command
+        self._active = False  # a command is in progress (fingers not yet arrived or stalled)
+        self._stalled = False
+        self._stall_width = 0.0  # opening (m) where the fingers stalled
+        world.after_step(self._watch)
+
+    # --- setup helpers (not part of the interface) ---------------------------------------
+
+    def finger_link(self, name: str) -> int:
+        """Link index of ``finger_a`` or ``finger_b`` (for friction, contact queries)."""
+        if name not in FINGER_NAMES:
+            raise ValueError(f"unknown finger {name!r}; valid: {', '.join(FINGER_NAMES)}")
+        return self._joints[FINGER_NAMES.index(name)]
+
+    def set_finger_friction(self, mu_a: float, mu_b: float) -> None:
+        """Lateral friction coefficient of ``finger_a`` and ``finger_b`` (dimensionless, >= 0)."""
+        for joint, mu in zip(self._joints, (mu_a, mu_b), strict=True):
+            if mu < 0:
+                raise ValueError(f"friction must be >= 0, got {mu}")
+            self._p.changeDynamics(self._body, joint, lateralFriction=float(mu))
+
+    def reset_width(self, width: float) -> None:
+        """Teleport both fingers to ``width`` (m) and hold it; setup only, before any contact."""
+        q = float(np.clip(width, 0.0, self.stroke)) / 2
+        for joint in self._joints:
+            self._p.resetJointState(self._body, joint, q)
+        self._command(2 * q, FINGER_VELOCITY, OPEN_FORCE)
+        self._active = False
+        self._target = None
+
+    # --- the Gripper interface -----------------------------------------------------------
+
+    def open(self, width: float | None = None, speed: float = 0.1) -> None:
+        """Start opening (or moving) to ``width`` (m, full stroke if None); ``speed`` (m/s) is
+        each finger's speed, so the opening changes at twice it."""
+        target = self.stroke if width is None else float(np.clip(width, 0.0, self.stroke))
+        self._command(target, speed, OPEN_FORCE)
+
+    def close(self, force: float, speed: float = 0.05) -> None:
+        """Start closing fully with at most ``force`` (N) per finger, each finger at ``speed``
+        (m/s). On a part the fingers stall and keep pressing with ``force``."""
+        self._command(0.0, speed, float(np.clip(force, 0.0, FINGER_EFFORT)))
+
+    def width(self) -> float:
+        """Current opening between the pads (m), from the joint states."""
+        return float(sum(self._p.getJointState(self._body, j)[0] for j in self._joints))
+
+    def moving(self) -> bool:
+        """True while a command is in progress: fingers neither arrived nor stalled."""
+        return self._active
+
+    def object_detected(self) -> bool:
+        """True when both fingers stalled short of the commanded opening (a part between them)."""
+        return self._stalled
+
+    def fault(self) -> str | None:
+        """The twin's gripper never faults."""
+        return None
+
+    # --- internals -----------------------------------------------------------------------
+
+    def _command(self, opening: float, speed: float, force: float) -> None:
+        self._target = opening
+        speed = float(np.clip(speed, 1e-4, FINGER_VELOCITY))
+        for joint in self._joints:
+            self._p.setJointMotorControl2(
+                self._body,
+                joint,
+                self._p.POSITION_CONTROL,
+                targetPosition=opening / 2,
+                force=force,
+                maxVelocity=speed,
+                positionGain=0.2,
+            )
+        self._active = True
+        self._stalled = False
+        self._still = 0
+        self._steps = 0
+
+    def _watch(self) -> None:
+        """After each control step: has the command arrived, or stalled on something?
+
+        Watching goes on after a stall: if the opening then moves more than :data:`LOST` (m)
+        towards the target, the part slipped out, and the fingers count as moving again
+        (``moving()`` True, ``object_detected()`` False) until they arrive or stall anew. Small
+        finger motion in a pinch (a part turning) does not end the stall.
+        """
+        if self._target is None:
+            return
+        self._steps += 1
+        states = self._p.getJointStates(self._body, self._joints)
+        q = np.array([s[0] for s in states])
+        v = np.array([s[1] for s in states])
+        if np.all(np.abs(q - self._target / 2) < ARRIVED):
+            self._active = False
+            self._stalled = False
+            self._target = None
+            return
+        self._still = self._still + 1 if np.all(np.abs(v) < STILL_SPEED) else 0
+        width = float(q.sum())
+        if self._stalled:
+            if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:
+                self._stalled = False
+                self._active = True
+                self._still = 0
+        elif self._still >= STALL_STEPS and self._steps > STALL_STEPS:
+            self._active = False
+            self._stalled = True
+            self._stall_width = width

@@ -1,0 +1,80 @@
+"""The twin's robot: the URDF loaded into a world, with its arm, gripper and wrist sensor.
+
+``SimRobot(world, base_pose)`` places the UR5's base frame (UR ``Base``, z up) at ``base_pose``
+in the world. The workspace is in front of the robot along the base's +x: at home the tool points
+straight down (tool z = -base z, tool x = +base x) with the TCP at (0.5, 0, 0.3) m in the base
+frame, so a cell puts its bin about 0.5 m along the base's +x.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from drivers.pose import Pose
+from sim.arm import SimArm, solve_ik
+from sim.ft_sensor import SimForceTorqueSensor
+from sim.gripper import FINGER_NAMES, SimGripper
+from sim.robot_model import ARM_JOINTS, forward_kinematics, write_urdf
+from sim.world import SimWorld
+
+#: Home TCP pose in the base frame: 0.5 m in front, 0.3 m up, tool pointing down.
+HOME_TCP = Pose(np.array([0.5, 0.0, 0.3]), np.diag([1.0, -1.0, -1.0]))
+#: Joint angles (rad) of a home: elbow up, upper arm near vertical, wrist down (seed of the IK).
+_HOME_SEED = np.array([2.9215, -1.5621, 1.4454, -1.4541, -1.5708, -1.7909])
+HOME_JOINTS: NDArray[np.float64] = solve_ik(HOME_TCP, _HOME_SEED)[0]
+
+
+class SimRobot:
+    """A UR5 + FT300 + 2F-85 twin in ``world``: ``.arm``, ``.gripper``, ``.ft``, ``.body_id``."""
+
+    def __init__(
+        self,
+        world: SimWorld,
+        base_pose: Pose | None = None,
+        home_joints: ArrayLike | None = None,
+    ) -> None:
+        """Load the robot with its base frame at ``base_pose`` (world frame; default: origin),
+        arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open."""
+        self.world = world
+        self.base_pose = base_pose or Pose()
+        p = world.p
+        self.body_id = p.loadURDF(
+            str(write_urdf()),
+            self.base_pose.position.tolist(),
+            self.base_pose.quaternion.tolist(),
+            useFixedBase=True,
+            flags=p.URDF_USE_INERTIA_FROM_FILE,
+        )
+        infos = [p.getJointInfo(self.body_id, j) for j in range(p.getNumJoints(self.body_id))]
+        #: Joint name -> index, and child link name -> index (PyBullet: link i = joint i's child).
+        self.joint_index = {info[1].decode(): j for j, info in enumerate(infos)}
+        self.link_index = {info[12].decode(): j for j, info in enumerate(infos)}
+        self.ft = SimForceTorqueSensor(world, self.body_id, self.joint_index["ft_joint"])
+        self.gripper = SimGripper(
+            world, self.body_id, {name: self.joint_index[name] for name in FINGER_NAMES}
+        )
+        home = HOME_JOINTS if home_joints is None else np.asarray(home_joints, float)
+        arm_joints = [self.joint_index[name] for name in ARM_JOINTS]
+        self.arm = SimArm(world, self.body_id, arm_joints, self.ft, home_joints=home)
+        self.arm.reset_joints(home)
+        self.gripper.reset_width(self.gripper.stroke)
+
+    def world_pose(self, base_pose: Pose) -> Pose:
+        """A pose in the robot base frame, expressed in the world frame."""
+        return self.base_pose @ base_pose
+
+    def base_frame_pose(self, world_pose: Pose) -> Pose:
+        """A pose in the world frame, expressed in the robot base frame."""
+        return self.base_pose.inverse() @ world_pose
+
+    def link_pose(self, link: str) -> Pose:
+        """World pose of a link's frame (``tcp``, ``tool0``, ``finger_a``, ...)."""
+        state = self.world.p.getLinkState(
+            self.body_id, self.link_index[link], computeForwardKinematics=True
+        )
+        return Pose.from_quaternion(state[4], state[5])
+
+    def tcp_world(self) -> Pose:
+        """The TCP pose in the world frame, from the model (same as ``link_pose("tcp")``)."""
+        return self.base_pose @ forward_kinematics(self.arm.joint_positions())

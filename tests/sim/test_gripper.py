@@ -1,0 +1,93 @@
+"""The twin's gripper: widths, force-limited closing, stall detection, finger friction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from drivers.arm import MotionState
+from drivers.pose import Pose
+from sim.robot import HOME_TCP, SimRobot
+from sim.world import SimWorld
+
+from .conftest import add_box, add_floor, run_motion, run_until
+
+
+def test_opens_and_closes_to_a_width(world: SimWorld, robot: SimRobot) -> None:
+    g = robot.gripper
+    assert (g.stroke, g.finger_width) == (0.085, 0.020)
+    assert g.width() == pytest.approx(0.085)
+    assert not g.moving() and g.fault() is None
+    g.open(0.03, speed=0.1)
+    assert g.moving()
+    elapsed = run_until(world, lambda: not g.moving(), 2.0)
+    assert g.width() == pytest.approx(0.03, abs=2e-3)
+    assert not g.object_detected()
+    assert elapsed < 0.5  # 27.5 mm per finger at 0.1 m/s, plus the approach
+    g.open()
+    run_until(world, lambda: not g.moving(), 2.0)
+    assert g.width() == pytest.approx(0.085, abs=2e-3)
+    for _ in range(50):
+        world.step()
+    assert g.width() == pytest.approx(0.085, abs=2e-4)
+
+
+def test_closing_on_nothing_closes_fully(world: SimWorld, robot: SimRobot) -> None:
+    g = robot.gripper
+    g.close(force=40.0, speed=0.1)
+    run_until(world, lambda: not g.moving(), 2.0)
+    assert not g.object_detected()
+    assert g.width() < 2e-3
+
+
+def test_closing_on_a_box_stalls_and_detects_it(world: SimWorld) -> None:
+    add_floor(world)
+    robot = SimRobot(world)
+    box = add_box(world, [0.02, 0.015, 0.03], [0.5, 0.0, 0.03], mass=0.1)  # 40 mm along x
+    robot.arm.move_to(Pose(np.array([0.5, 0.0, 0.04]), HOME_TCP.rotation), 0.2, 1.0)
+    run_motion(world, robot)
+    g = robot.gripper
+    g.close(force=40.0, speed=0.05)
+    run_until(world, lambda: not g.moving(), 2.0)
+    assert g.object_detected()
+    assert g.width() == pytest.approx(0.040, abs=1.5e-3)
+    # The pinch holds the box up while the arm lifts it.
+    robot.arm.move_to(Pose(np.array([0.5, 0.0, 0.14]), HOME_TCP.rotation), 0.1, 0.5)
+    run_motion(world, robot)
+    assert robot.arm.status().state is MotionState.DONE
+    assert world.p.getBasePositionAndOrientation(box)[0][2] == pytest.approx(0.13, abs=3e-3)
+    assert g.object_detected()
+    # Letting go: the fingers open and the detection clears.
+    g.open()
+    run_until(world, lambda: not g.moving(), 2.0)
+    assert not g.object_detected()
+    assert g.width() == pytest.approx(0.085, abs=2e-3)
+
+
+def test_grip_force_is_the_commanded_force(world: SimWorld) -> None:
+    add_floor(world)
+    robot = SimRobot(world)
+    box = add_box(world, [0.02, 0.015, 0.03], [0.5, 0.0, 0.03], mass=0.1)
+    robot.arm.move_to(Pose(np.array([0.5, 0.0, 0.04]), HOME_TCP.rotation), 0.2, 1.0)
+    run_motion(world, robot)
+    robot.gripper.close(force=30.0)
+    run_until(world, lambda: not robot.gripper.moving(), 2.0)
+    for _ in range(10):
+        world.step()
+    for name in ("finger_a", "finger_b"):
+        link = robot.gripper.finger_link(name)
+        contacts = world.p.getContactPoints(robot.body_id, box, link)
+        normal = sum(c[9] for c in contacts)
+        assert normal == pytest.approx(30.0, rel=0.05), name
+
+
+def test_finger_friction_and_links(robot: SimRobot) -> None:
+    g, p = robot.gripper, robot.world.p
+    g.set_finger_friction(0.4, 0.2)
+    assert p.getDynamicsInfo(robot.body_id, g.finger_link("finger_a"))[1] == pytest.approx(0.4)
+    assert p.getDynamicsInfo(robot.body_id, g.finger_link("finger_b"))[1] == pytest.approx(0.2)
+    assert g.finger_link("finger_a") == robot.link_index["finger_a"]
+    with pytest.raises(ValueError, match="finger_a, finger_b"):
+        g.finger_link("thumb")
+    with pytest.raises(ValueError):
+        g.set_finger_friction(-0.1, 0.2)
