@@ -6,6 +6,13 @@ how the 2F-85's grip-force setting behaves. Both fingers get the same command (m
 tool z axis); they are not mechanically coupled, so each one stops at its own contact and the pinch
 does not push the part sideways.
 
+Self-locking (on by default): the 2F-85 drives its fingers through a lead screw that the load
+cannot turn back, so a part pressed in the pinch does not push the fingers open, however hard it
+pushes; the motor only adds the set force inwards. The twin does the same with a ratchet: while
+a close command runs, each finger's opening-side joint limit follows it in (``q +``
+:data:`RATCHET_SLACK`), and an open command releases it. With ``self_locking=False`` a finger
+yields as soon as the part pushes back harder than the grip force.
+
 Finger geometry (tool frame: x the closing axis, ``finger_a`` on +x): finger ``k`` has joint
 position ``q_k`` in [0, 0.0425] m, its pad face at ``|x| = q_k``; the opening is
 ``q_a + q_b`` (0..0.085 m).
@@ -29,6 +36,7 @@ STALL_STEPS = 5  #: control steps a finger must stay still to count as stalled (
 ARRIVED = 0.001  #: m: a finger within this of its target has arrived
 OPEN_FORCE = 100.0  #: N per finger when opening
 LOST = 0.003  #: m: after a stall, the opening closing in by this much means the part is lost
+RATCHET_SLACK = 0.0002  #: m a self-locking finger may be pushed back open
 
 
 class SimGripper:
@@ -37,8 +45,16 @@ class SimGripper:
     stroke: float = 2 * FINGER_TRAVEL  #: 0.085 m, largest opening between the pads
     finger_width: float = FINGER_WIDTH  #: 0.020 m, pad width ``w``
 
-    def __init__(self, world: SimWorld, body_id: int, joint_indices: dict[str, int]) -> None:
-        """``joint_indices`` maps ``finger_a``/``finger_b`` to the body's joint (= link) index."""
+    def __init__(
+        self,
+        world: SimWorld,
+        body_id: int,
+        joint_indices: dict[str, int],
+        self_locking: bool = True,
+    ) -> None:
+        """``joint_indices`` maps ``finger_a``/``finger_b`` to the body's joint (= link) index;
+        ``self_locking``: fingers cannot be pushed back open while closing (see module doc)."""
+        self.self_locking = self_locking
         self._world = world
         self._p = world.p
         self._body = body_id
@@ -49,7 +65,9 @@ class SimGripper:
         self._active = False  # a command is in progress (fingers not yet arrived or stalled)
         self._stalled = False
         self._stall_width = 0.0  # opening (m) where the fingers stalled
-        world.after_step(self._watch)
+        self._locking = False  # the ratchet is engaged (a close command runs, self-locking)
+        self._limits = [FINGER_TRAVEL, FINGER_TRAVEL]  # each finger's upper joint limit now (m)
+        world.after_step(self._after_step)
 
     # --- setup helpers (not part of the interface) ---------------------------------------
 
@@ -69,6 +87,7 @@ class SimGripper:
     def reset_width(self, width: float) -> None:
         """Teleport both fingers to ``width`` (m) and hold it; setup only, before any contact."""
         q = float(np.clip(width, 0.0, self.stroke)) / 2
+        self._release()
         for joint in self._joints:
             self._p.resetJointState(self._body, joint, q)
         self._command(2 * q, FINGER_VELOCITY, OPEN_FORCE)
@@ -107,6 +126,10 @@ class SimGripper:
     # --- internals -----------------------------------------------------------------------
 
     def _command(self, opening: float, speed: float, force: float) -> None:
+        if opening < self.width() and self.self_locking:
+            self._locking = True
+        else:
+            self._release()
         self._target = opening
         speed = float(np.clip(speed, 1e-4, FINGER_VELOCITY))
         for joint in self._joints:
@@ -123,6 +146,32 @@ class SimGripper:
         self._stalled = False
         self._still = 0
         self._steps = 0
+
+    def _release(self) -> None:
+        """Free the fingers to open again (full travel)."""
+        self._locking = False
+        for i, joint in enumerate(self._joints):
+            if self._limits[i] != FINGER_TRAVEL:
+                self._limits[i] = FINGER_TRAVEL
+                self._p.changeDynamics(
+                    self._body, joint, jointLowerLimit=0.0, jointUpperLimit=FINGER_TRAVEL
+                )
+
+    def _after_step(self) -> None:
+        if self._locking:
+            self._ratchet()
+        self._watch()
+
+    def _ratchet(self) -> None:
+        """Move each finger's opening limit in behind it: it may close further, not reopen."""
+        for i, joint in enumerate(self._joints):
+            q = self._p.getJointState(self._body, joint)[0]
+            limit = max(q + RATCHET_SLACK, RATCHET_SLACK)
+            if limit < self._limits[i] - 1e-5:
+                self._limits[i] = limit
+                self._p.changeDynamics(
+                    self._body, joint, jointLowerLimit=0.0, jointUpperLimit=limit
+                )
 
     def _watch(self) -> None:
         """After each control step: has the command arrived, or stalled on something?

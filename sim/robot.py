@@ -33,9 +33,12 @@ class SimRobot:
         world: SimWorld,
         base_pose: Pose | None = None,
         home_joints: ArrayLike | None = None,
+        gripper_self_locking: bool = True,
     ) -> None:
         """Load the robot with its base frame at ``base_pose`` (world frame; default: origin),
-        arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open."""
+        arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open.
+        ``gripper_self_locking``: see :mod:`sim.gripper` (the 2F-85's fingers are not pushed
+        back open by the part)."""
         self.world = world
         self.base_pose = base_pose or Pose()
         p = world.p
@@ -52,7 +55,10 @@ class SimRobot:
         self.link_index = {info[12].decode(): j for j, info in enumerate(infos)}
         self.ft = SimForceTorqueSensor(world, self.body_id, self.joint_index["ft_joint"])
         self.gripper = SimGripper(
-            world, self.body_id, {name: self.joint_index[name] for name in FINGER_NAMES}
+            world,
+            self.body_id,
+            {name: self.joint_index[name] for name in FINGER_NAMES},
+            self_locking=gripper_self_locking,
         )
         home = HOME_JOINTS if home_joints is None else np.asarray(home_joints, float)
         arm_joints = [self.joint_index[name] for name in ARM_JOINTS]

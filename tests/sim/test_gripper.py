@@ -91,3 +91,37 @@ def test_finger_friction_and_links(robot: SimRobot) -> None:
         g.finger_link("thumb")
     with pytest.raises(ValueError):
         g.set_finger_friction(-0.1, 0.2)
+
+
+@pytest.mark.parametrize("self_locking", [True, False])
+def test_a_self_locking_pinch_is_not_pushed_open(world: SimWorld, self_locking: bool) -> None:
+    """Pushing finger_a outwards with 3x the grip force: the 2F-85's lead screw holds; a plain
+    force-limited finger yields."""
+    add_floor(world)
+    robot = SimRobot(world, gripper_self_locking=self_locking)
+    add_box(world, [0.02, 0.015, 0.03], [0.5, 0.0, 0.03], mass=0.1)
+    robot.arm.move_to(Pose(np.array([0.5, 0.0, 0.04]), HOME_TCP.rotation), 0.2, 1.0)
+    run_motion(world, robot)
+    g = robot.gripper
+    g.close(force=20.0)
+    run_until(world, lambda: not g.moving(), 2.0)
+    gripped = g.width()
+    link = g.finger_link("finger_a")
+    outwards = robot.link_pose("tcp").rotation[:, 0] * 60.0  # tool +x, N
+
+    def push() -> None:
+        at = robot.link_pose("finger_a").position.tolist()
+        world.p.applyExternalForce(robot.body_id, link, outwards.tolist(), at, world.p.WORLD_FRAME)
+
+    world.before_substep(push)
+    for _ in range(50):
+        world.step()
+    if self_locking:
+        assert g.width() == pytest.approx(gripped, abs=5e-4)
+        assert g.object_detected()
+    else:
+        assert g.width() > gripped + 2e-3
+    # Opening releases the lock either way.
+    g.open()
+    run_until(world, lambda: not g.moving(), 2.0)
+    assert g.width() > 0.08
