@@ -28,6 +28,10 @@ How it moves, and why:
   spring gives the contact a finite stiffness (:data:`FORCE_STIFFNESS`), which a stiff position
   servo against a rigid simulated contact cannot: there the force jumps from zero to the joint
   torque limit.
+* **Protective stop**: like a UR5 at its default 150 N safety limit, the arm faults with
+  ``protective_stop=True`` and holds where it is when the force on the tool (less its weight)
+  stays above :data:`PROTECTIVE_FORCE`; the next motion command clears it. Position control
+  into a rigid surface trips it after a fraction of a millimetre.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from scipy.spatial.transform import Rotation
 from drivers.arm import ArmStatus, MotionState
 from drivers.pose import Pose
 from sim.ft_sensor import SimForceTorqueSensor
-from sim.robot_model import ARM_EFFORT, ARM_LIMIT, ARM_VELOCITY, TCP_Z, jacobian
+from sim.robot_model import ARM_EFFORT, ARM_LIMIT, ARM_VELOCITY, TCP_Z, TOOL_MASS, jacobian
 from sim.robot_model import forward_kinematics as fk
 from sim.world import SimWorld
 
@@ -54,6 +58,12 @@ SETTLE_TIME = 0.5  #: s after the profile ends before a move is reported done re
 POSITION_GAIN = 0.5  #: PyBullet motor position gain (fraction of the error corrected per substep)
 JUMP = 0.002  #: m: a servo target farther than this from the command gets the full IK solve
 CHECK_STEP = 0.01  #: m of path length between poses checked for reachability before a move
+
+# Protective stop, as a UR5's default safety force limit: the contact force at the tool (the
+# sensor's true load less the tool's own weight) above PROTECTIVE_FORCE for PROTECTIVE_STEPS
+# control steps in a row (so one solver spike does not trip it).
+PROTECTIVE_FORCE = 150.0  #: N
+PROTECTIVE_STEPS = 3
 
 # Force mode (impedance to a virtual target + admittance on the sensor).
 FORCE_STIFFNESS = np.array([4000.0] * 3 + [30.0] * 3)  #: N/m, N*m/rad at the TCP
@@ -227,6 +237,8 @@ class SimArm:
         self._servo_target: Pose | None = None
         self._last_target: Pose | None = None  # the pose commanded for the step just run
         self._clipped = False  # the last step was slowed to the joint speed limit
+        self._over = 0  # control steps in a row with the tool force over the protective limit
+        self._protective = False  # the current FAULT is a protective stop
         self._force: dict[str, NDArray[np.float64]] = {}
         self._virtual: Pose | None = None
         world.before_step(self._control)
@@ -240,7 +252,8 @@ class SimArm:
         for joint, angle in zip(self._joints, q, strict=True):
             self._p.resetJointState(self._body, joint, float(angle))
         self._hold(q)
-        self._state, self._message = MotionState.IDLE, ""
+        self._state, self._message, self._protective = MotionState.IDLE, "", False
+        self._over = 0
 
     def home(self, speed: float = 0.25, acceleration: float = 1.0) -> None:
         """Start a straight-line move to the home joints' TCP pose (m/s, m/s^2)."""
@@ -292,7 +305,7 @@ class SimArm:
         self._path, self._t = path, 0.0
         self._last_target = None
         self._mode = "path"
-        self._state, self._message = MotionState.MOVING, ""
+        self._start_motion()
 
     def servo(self, target: Pose) -> None:
         """Set the TCP target (base frame) for the next control step.
@@ -306,7 +319,7 @@ class SimArm:
         self._servo_target = target
         self._mode = "servo"
         self._path = None
-        self._state, self._message = MotionState.MOVING, ""
+        self._start_motion()
 
     def force_mode(
         self,
@@ -333,7 +346,7 @@ class SimArm:
         }
         self._mode = "force"
         self._path = None
-        self._state, self._message = MotionState.MOVING, ""
+        self._start_motion()
 
     def stop(self) -> None:
         """Hold the last commanded joints (force mode: the measured ones); a motion in progress
@@ -350,8 +363,8 @@ class SimArm:
             self._state, self._message = MotionState.STOPPED, ""
 
     def status(self) -> ArmStatus:
-        """State of the last commanded motion."""
-        return ArmStatus(self._state, self._message)
+        """State of the last commanded motion; ``protective_stop`` after a force-limit trip."""
+        return ArmStatus(self._state, self._message, self._protective)
 
     # --- per-step control ----------------------------------------------------------------
 
@@ -364,17 +377,54 @@ class SimArm:
         self._last_target = None
         self._send(self._q_to, np.zeros(6))
 
+    def _start_motion(self) -> None:
+        """A new command clears any fault, a protective stop included (as unlocking it does)."""
+        self._state, self._message, self._protective = MotionState.MOVING, "", False
+
     def _fault(self, message: str, q_hold: ArrayLike) -> None:
         self._hold(q_hold)
-        self._state, self._message = MotionState.FAULT, message
+        self._state, self._message, self._protective = MotionState.FAULT, message, False
 
     def _leave_force_mode(self) -> None:
         if self._mode == "force":
             self._hold(self.joint_positions())
 
+    def contact_force(self) -> float:
+        """Magnitude (N) of the force on the tool other than its own weight, from the sensor's
+        newest noiseless sample; what the protective stop watches (0 without a sensor)."""
+        if self._ft is None:
+            return 0.0
+        weight = np.array([0.0, 0.0, -TOOL_MASS * self._world.settings.gravity])
+        load = self._ft.sampled_true_load()[:3]
+        return float(np.linalg.norm(load - self.tool_pose().rotation.T @ weight))
+
+    def _protective_stop(self) -> bool:
+        """Trip the protective stop if the contact force stayed over the limit; True if so."""
+        if self._state is MotionState.FAULT or self._ft is None:
+            return False
+        # |load - weight| <= |load| + |weight|: most steps need no kinematics to rule it out.
+        load = self._ft.sampled_true_load()[:3]
+        weight = TOOL_MASS * self._world.settings.gravity
+        if float(np.sqrt(load @ load)) + weight <= PROTECTIVE_FORCE:
+            self._over = 0
+            return False
+        force = self.contact_force()
+        self._over = self._over + 1 if force > PROTECTIVE_FORCE else 0
+        if self._over < PROTECTIVE_STEPS:
+            return False
+        self._leave_force_mode()
+        self._hold(self.joint_positions())
+        self._state = MotionState.FAULT
+        self._message = f"protective stop: tool force {force:.0f} N > {PROTECTIVE_FORCE:.0f} N"
+        self._protective = True
+        self._over = 0
+        return True
+
     def _control(self) -> None:
         """Once per control step, before physics: the next joint target."""
         self._substep = 0
+        if self._protective_stop():
+            return
         if self._mode == "path":
             self._follow_path()
         elif self._mode == "servo":
@@ -493,7 +543,7 @@ class SimArm:
         velocity = np.clip(ADMITTANCE_GAIN * (cmd - self.applied_wrench()), -limit, limit)
         velocity[~sel] = 0.0
         v = self._virtual
-        rotation = Rotation.from_rotvec(velocity[3:] * self._dt).as_matrix() @ v.rotation
+        rotation = _rotation(velocity[3:] * self._dt) @ v.rotation
         self._virtual = Pose(v.position + velocity[:3] * self._dt, rotation)
 
     def _apply_impedance(self) -> None:

@@ -64,6 +64,7 @@ class SimForceTorqueSensor:
         self._sigma = np.array([FORCE_NOISE] * 3 + [TORQUE_NOISE] * 3)
         self._zero = np.zeros(6)
         self._newest = self._offset.copy()
+        self._true = np.zeros(6)
         self._recent: deque[NDArray[np.float64]] = deque(maxlen=BIAS_SAMPLES)
         self._stamp = -np.inf
         world.after_step(self.sample)
@@ -81,9 +82,14 @@ class SimForceTorqueSensor:
             [fx, fy, fz, tx + cy * fz - cz * fy, ty + cz * fx - cx * fz, tz + cx * fy - cy * fx]
         )
 
+    def sampled_true_load(self) -> NDArray[np.float64]:
+        """The noiseless load (N, N*m; tool frame) at the newest sample, without a new query."""
+        return self._true
+
     def sample(self) -> None:
         """Take one reading (called by the world after each control step)."""
-        reading = self.true_load() + self._offset + self._sigma * self._world.rng.standard_normal(6)
+        self._true = self.true_load()
+        reading = self._true + self._offset + self._sigma * self._world.rng.standard_normal(6)
         self._newest = reading
         self._recent.append(reading)
         self._stamp = self._world.clock.now()

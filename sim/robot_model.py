@@ -79,6 +79,8 @@ FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH
 TCP_Z = FINGER_TIP_Z - 0.005
 #: Pose of the TCP in the flange frame ``tool0``.
 TOOL0_T_TCP = Pose(np.array([0.0, 0.0, TCP_Z]), np.eye(3))
+#: Mass (kg) hanging on the wrist sensor: puck, gripper body, fingers (and the massless tcp link).
+TOOL_MASS = FT_MASS + GRIPPER_BODY_MASS + 2 * FINGER_MASS + 1e-4
 
 
 @dataclass(frozen=True)
@@ -276,7 +278,9 @@ def _links() -> list[LinkSpec]:
         LinkSpec("base", 1e-3),
         LinkSpec(
             "base_link", 4.0, (0, 0, 0.04), _cylinder_inertia(4.0, 0.06, 0.05),
-            (Shape("cylinder", (0.075, 0.086), (0, 0, 0.043)),),
+            # 3 mm clear of the mounting plane: a fixed base resting on a static floor would
+            # only feed the solver contacts that can do nothing.
+            (Shape("cylinder", (0.075, 0.083), (0, 0, 0.0445)),),
         ),
         LinkSpec(
             "shoulder_link", m[0], (0, 0, 0), _cylinder_inertia(m[0], 0.06, 0.15),
@@ -320,7 +324,7 @@ def _links() -> list[LinkSpec]:
         ),
         _finger_link("finger_a", +1.0),
         _finger_link("finger_b", -1.0),
-        LinkSpec("tcp", 1e-4),
+        LinkSpec("tcp", 1e-4),  # in TOOL_MASS
     ]
 
 

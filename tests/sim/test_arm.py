@@ -163,6 +163,32 @@ def test_joint_positions_and_reset(world: SimWorld, robot: SimRobot) -> None:
     assert np.allclose(robot.arm.joint_positions(), q, atol=1e-4)
 
 
+def test_pushing_into_the_floor_trips_the_protective_stop(world: SimWorld) -> None:
+    add_floor(world)
+    robot = SimRobot(world)
+    arm = robot.arm
+    above = Pose(np.array([0.5, 0.0, 0.01]), HOME_TCP.rotation)  # fingertips 5 mm up
+    arm.move_to(above, 0.25, 1.0)
+    run_motion(world, robot)
+    arm.move_to(Pose(np.array([0.5, 0.0, -0.01]), HOME_TCP.rotation), 0.02, 0.5)
+    run_motion(world, robot)
+    status = arm.status()
+    assert status.state is MotionState.FAULT and status.protective_stop
+    assert status.message.startswith("protective stop: tool force")
+    # It stopped within a millimetre of touching, and holds there.
+    depth = 0.005 - arm.tool_pose().position[2]  # fingertips below the floor's top (m)
+    assert -1e-3 < depth < 1e-3
+    held = arm.tool_pose()
+    for _ in range(50):
+        world.step()
+    assert arm.tool_pose().distance(held)[0] < 2e-4
+    assert arm.status().protective_stop  # stays faulted
+    arm.move_to(above, 0.05, 0.5)  # a new command clears it
+    assert not arm.status().protective_stop
+    run_motion(world, robot)
+    assert arm.status().state is MotionState.DONE
+
+
 def test_force_mode_presses_a_floor_with_the_commanded_force(world: SimWorld) -> None:
     add_floor(world)
     robot = SimRobot(world)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.arm import MotionState
 from drivers.pose import Pose
 from sim import ft_sensor as fts
 from sim import robot_model as rm
@@ -82,12 +81,13 @@ def test_pressing_the_fingertips_into_a_floor_gives_negative_fz(world: SimWorld)
     arm.move_to(Pose(np.array([0.5, 0.0, 0.02]), HOME_TCP.rotation), 0.25, 1.0)
     run_motion(world, robot)
     ft.bias()
-    # Fingertips are 5 mm beyond the TCP: 3 mm into the floor.
+    # Fingertips are 5 mm beyond the TCP: 3 mm into the floor, a stiff position servo against
+    # a rigid floor; the arm's protective stop (150 N) ends it.
     arm.move_to(Pose(np.array([0.5, 0.0, 0.002]), HOME_TCP.rotation), 0.02, 0.5)
     run_motion(world, robot)
-    assert arm.status().state is MotionState.DONE
+    assert arm.status().protective_stop
     w = ft.wrench()
-    assert w[2] < -50.0  # the floor pushes the tool back towards the flange
+    assert w[2] < -30.0  # the floor pushes the tool back towards the flange
     assert abs(w[0]) < 0.2 * abs(w[2]) and abs(w[1]) < 0.2 * abs(w[2])
 
 

@@ -14,6 +14,8 @@ from sim import robot_model as rm
 from sim.robot import HOME_JOINTS, HOME_TCP, SimRobot
 from sim.world import SimWorld
 
+from .conftest import add_box
+
 # UR5 Denavit-Hartenberg parameters (Universal Robots' published values), m and rad.
 DH_D = (0.089159, 0.0, 0.0, 0.10915, 0.09465, 0.0823)
 DH_A = (0.0, -0.425, -0.39225, 0.0, 0.0, 0.0)
@@ -137,3 +139,11 @@ def test_urdf_file_is_cached_by_content(tmp_path) -> None:
     first = rm.write_urdf(tmp_path)
     assert rm.write_urdf(tmp_path) == first
     assert first.read_text() == rm.urdf_text()
+
+
+def test_the_base_does_not_touch_a_floor_at_its_mounting_plane(world: SimWorld) -> None:
+    add_box(world, [0.5, 0.5, 0.05], [0.0, 0.0, -0.05], mass=0.0)
+    robot = SimRobot(world)
+    for _ in range(5):
+        world.step()
+    assert world.p.getContactPoints(bodyA=robot.body_id) == ()
