@@ -426,7 +426,7 @@ def write_urdf(directory: Path | None = None) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"ur5_ft300_2f85_{digest}.urdf"
     if not path.exists():
-        tmp = path.with_suffix(f".{id(text)}.tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
+        with tempfile.NamedTemporaryFile("w", dir=directory, suffix=".tmp", delete=False) as tmp:
+            tmp.write(text)
+        Path(tmp.name).replace(path)
     return path
