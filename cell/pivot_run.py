@@ -47,8 +47,8 @@ class TrialSetup:
     plan: PivotPlan
     frictions: Frictions = Frictions()
     perturbation: Perturbation = field(default_factory=Perturbation)
-    nominal_xy: tuple[float, float] = (0.45, 0.0)
-    nominal_yaw: float = 0.5 * math.pi
+    nominal_xy: tuple[float, float] = (0.52, 0.0)
+    nominal_yaw: float = 0.0  # open end away from the robot: the gripper swings back over G
     max_time: float = 40.0  # s of simulated time for the whole maneuver
     params: dict[str, float] = field(default_factory=dict)  # PivotParams overrides
 
@@ -141,10 +141,7 @@ def run_trial(
             world.step()
             if on_frame is not None and world.steps % frame_every == 0:
                 on_frame(world, robot)
-        tips = {}
-        for name in ("finger_a", "finger_b"):
-            pose = robot.link_pose(name)
-            tips[name] = pose.transform([0.0, 0.0, 0.5 * 0.055])
+        tips = {name: robot.fingertip(name) for name in ("finger_a", "finger_b")}
         verdict = judge(
             world,
             body,

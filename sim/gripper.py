@@ -67,6 +67,13 @@ class SimGripper:
         self._stall_width = 0.0  # opening (m) where the fingers stalled
         self._locking = False  # the ratchet is engaged (a close command runs, self-locking)
         self._limits = [FINGER_TRAVEL, FINGER_TRAVEL]  # each finger's upper joint limit now (m)
+        # The 2F-85's linkage moves both fingers together, symmetric about the tool axis; a
+        # gear constraint couples the two prismatic joints the same way (q_b = q_a).
+        self._gear = self._p.createConstraint(
+            body_id, self._joints[0], body_id, self._joints[1], self._p.JOINT_GEAR,
+            [1, 0, 0], [0, 0, 0], [0, 0, 0],
+        )
+        self._p.changeConstraint(self._gear, gearRatio=-1, maxForce=10 * FINGER_EFFORT, erp=0.2)
         world.after_step(self._after_step)
 
     # --- setup helpers (not part of the interface) ---------------------------------------

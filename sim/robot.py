@@ -15,7 +15,13 @@ from drivers.pose import Pose
 from sim.arm import SimArm, solve_ik
 from sim.ft_sensor import SimForceTorqueSensor
 from sim.gripper import FINGER_NAMES, SimGripper
-from sim.robot_model import ARM_JOINTS, forward_kinematics, write_urdf
+from sim.robot_model import (
+    ARM_JOINTS,
+    FINGER_LENGTH,
+    FINGER_THICKNESS,
+    forward_kinematics,
+    write_urdf,
+)
 from sim.world import SimWorld
 
 #: Home TCP pose in the base frame: 0.5 m in front, 0.3 m up, tool pointing down.
@@ -80,6 +86,13 @@ class SimRobot:
             self.body_id, self.link_index[link], computeForwardKinematics=True
         )
         return Pose.from_quaternion(state[4], state[5])
+
+    def fingertip(self, name: str) -> NDArray[np.float64]:
+        """World position (m) of the centre of a finger's tip, 2 mm inside its end: the point the
+        judge tests against the part's hole (a pad face alone can touch the rim from outside)."""
+        outward = 1.0 if name == "finger_a" else -1.0
+        local = [outward * 0.5 * FINGER_THICKNESS, 0.0, FINGER_LENGTH - 0.002]
+        return self.link_pose(name).transform(local)
 
     def tcp_world(self) -> Pose:
         """The TCP pose in the world frame, from the model (same as ``link_pose("tcp")``)."""

@@ -25,7 +25,7 @@ from skills.status import RUNNING, Status, StepResult
 class Guard:
     """Limits for one motion: force (N) and torque (N*m) magnitudes in the tool frame, time (s)."""
 
-    max_force: float = 60.0
+    max_force: float = 100.0
     max_torque: float = 6.0
     timeout: float = 10.0
 
@@ -189,3 +189,21 @@ class Devices:
         return gripper_motion(
             name, self.gripper, self.arm, self.ft, self.clock, guard, command, settle
         )
+
+
+def wait(name: str, dev: Devices, guard: Guard, seconds: float) -> GuardedMotion:
+    """Hold still for ``seconds`` under the guard (let a part settle)."""
+    state: dict[str, float] = {}
+
+    def start() -> None:
+        state["t0"] = dev.clock.now()
+
+    return GuardedMotion(
+        name,
+        start,
+        lambda: dev.clock.now() - state["t0"] >= seconds,
+        dev.arm,
+        dev.ft,
+        dev.clock,
+        guard,
+    )

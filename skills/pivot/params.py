@@ -12,15 +12,19 @@ from skills.motion import Guard
 class PivotParams:
     l_a: float
     alpha: float  #: rad
-    grip_force: float = 15.0  #: N per finger while pinching
-    press_depth: float = 0.003  #: m the arm presses S down after closing (holds S against sliding)
+    grip_force: float = 3.0  #: N per finger while pinching
+    press_depth: float = 0.0  #: m the arm presses S down after closing (holds S against sliding)
     approach_clearance: float = 0.010  #: m of extra jaw opening during the approach
     approach_distance: float = 0.06  #: m back along the fingers before the final approach
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
     approach_speed: float = 0.05  #: m/s
-    tilt_speed: float = 0.03  #: m/s of the TCP along the arc (quasi-static, Sec. II-B)
+    tilt_speed: float = 0.01  #: m/s of the TCP along the arc (quasi-static, Sec. II-B)
     acceleration: float = 0.3  #: m/s^2
-    tilt_angle: float = math.radians(90.0)  #: theta of Fig. 10
+    #: theta of Fig. 10. The paper uses 90 deg and less when S slides; the default stops 15 deg
+    #: past the tip-over angle atan(a/b), after which gravity stands the part up (Sec. III-B).
+    tilt_angle: float = math.radians(80.0)
+    slide_stop: float = 0.020  #: m of S sliding (jaw closing) that ends the arc
+    settle: float = 1.0  #: s to let the part come to rest after the arc
     lift_height: float = 0.05  #: m, the lift after Align
     release: float = 0.004  #: m the jaws open to let go of the pinch before Align
     wall_depth: float = 0.015  #: m the fingertips reach below the rim for the hole grasp
