@@ -41,16 +41,40 @@ class Perturbation:
     mass: float = 0.10  # relative
 
 
+#: Fingertips to the back of the gripper body along the tool axis (m), for keeping clear of walls.
+GRIPPER_REACH = 0.17
+
+
 @dataclass(frozen=True)
 class TrialSetup:
     part: Part
     plan: PivotPlan
     frictions: Frictions = Frictions()
     perturbation: Perturbation = field(default_factory=Perturbation)
-    nominal_xy: tuple[float, float] = (0.52, 0.0)
+    #: Where the lying part's open end (rim centre) is expected, m in the world; the part lies
+    #: along ``nominal_yaw`` from there, its far end nearer the robot.
+    open_end_xy: tuple[float, float] | None = None  # None: see :meth:`nominal_center`
     nominal_yaw: float = 0.0  # open end away from the robot: the gripper swings back over G
     max_time: float = 40.0  # s of simulated time for the whole maneuver
     params: dict[str, float] = field(default_factory=dict)  # PivotParams overrides
+
+    layout: CellLayout = field(default_factory=CellLayout)
+
+    def nominal_center(self) -> tuple[float, float]:
+        """The part's centre (m, world) the skills are told.
+
+        By default the open end lies 0.555 m in front of the robot, or nearer when the gripper,
+        tilted by alpha over the open end, would otherwise reach over the bin's far wall.
+        """
+        if self.open_end_xy is not None:
+            xo, yo = self.open_end_xy
+        else:
+            assert self.plan.alpha is not None
+            x_max = self.layout.bin_interior()[1]
+            reach = GRIPPER_REACH * math.sin(self.plan.alpha) + 0.03
+            xo, yo = min(0.555, x_max - reach), self.layout.bin_center[1]
+        half = 0.5 * self.part.length
+        return (xo - half * math.cos(self.nominal_yaw), yo - half * math.sin(self.nominal_yaw))
 
 
 @dataclass
@@ -89,13 +113,14 @@ def run_trial(
     mu_h = jitter(setup.frictions.mu_h, pert.friction)
     mu_g = jitter(setup.frictions.mu_g, pert.friction)
     true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
-    x = setup.nominal_xy[0] + rng.uniform(-pert.position, pert.position)
-    y = setup.nominal_xy[1] + rng.uniform(-pert.position, pert.position)
+    nominal = setup.nominal_center()
+    x = nominal[0] + rng.uniform(-pert.position, pert.position)
+    y = nominal[1] + rng.uniform(-pert.position, pert.position)
     yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
 
     world = SimWorld(seed=seed)
     try:
-        cell = build_cell(world, CellLayout(), floor_friction=mu_g)
+        cell = build_cell(world, setup.layout, floor_friction=mu_g)
         robot = SimRobot(world)
         # finger_a (tool +x) is the outer finger on S; finger_b goes into the hole (H).
         robot.gripper.set_finger_friction(mu_s, mu_h)
@@ -109,7 +134,7 @@ def run_trial(
         section = setup.part.section(robot.gripper.finger_width)
         frame = PivotFrame(
             section,
-            np.array([setup.nominal_xy[0], setup.nominal_xy[1], 0.5 * setup.part.outer]),
+            np.array([nominal[0], nominal[1], 0.5 * setup.part.outer]),
             setup.nominal_yaw,
         )
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock)

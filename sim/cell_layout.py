@@ -49,8 +49,8 @@ class CellLayout:
 
     floor_size: tuple[float, float] = (2.0, 2.0)
     floor_thickness: float = 0.05
-    bin_center: tuple[float, float] = (0.45, 0.0)
-    bin_inner_size: tuple[float, float] = (0.40, 0.30)
+    bin_center: tuple[float, float] = (0.47, 0.0)
+    bin_inner_size: tuple[float, float] = (0.50, 0.32)
     bin_wall_height: float = 0.08
     bin_wall_thickness: float = 0.005
     machine_center: tuple[float, float] = (0.10, 0.45)

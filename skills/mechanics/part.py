@@ -81,17 +81,19 @@ class Gripper:
     largest jaw opening; ``clearance`` the extra opening the approach needs so the inner finger
     can drop into the hole and the outer one land on the surface without touching first.
     The default width, 20 mm, is the one at which Eq. 3 reproduces Table 3's bushing and cookie
-    can; set it to your pads.
+    can; set it to your pads. ``finger_length`` is how far the pads reach below the palm: the
+    inner finger cannot hook deeper behind the rim than that (less a margin for the palm).
     """
 
     name: str = "robotiq-2f85"
     finger_width: float = 0.020
     stroke: float = 0.085
     clearance: float = 0.010
+    finger_length: float = 0.055
 
     def __post_init__(self) -> None:
         owner = f"gripper {self.name!r}"
-        for name in ("finger_width", "stroke"):
+        for name in ("finger_width", "stroke", "finger_length"):
             _positive(owner, name, getattr(self, name))
         if not math.isfinite(self.clearance) or self.clearance < 0:
             raise ValueError(f"{owner}: clearance must be >= 0, got {self.clearance!r}")

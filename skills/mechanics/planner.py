@@ -23,6 +23,13 @@ tip to reach ``hook_depth`` behind the rim: tilted by ``alpha`` and sliding down
 free height below H (``2x`` for a round hole, Eq. 2; ``d`` for a rectangular one) the tip gets
 ``room * tan(alpha)`` in, so ``alpha >= atan(hook_depth / room)``.
 
+Nor does the model bound the finger's length. With both fingertips at the same depth and the
+outer one on the top surface, the inner tip reaches ``e_H = l sin(alpha) - delta cos(alpha)``
+past the rim contact H along the finger; the palm would hit the rim if that exceeded the
+finger's length, so the planner requires ``e_H <= finger_length - palm_margin``. This is what
+keeps long parts with a large alpha (the cookie can, the wiring duct) at a small ``l_a``, as the
+paper's Table 3 has them (0.28 and 0.53).
+
 The jaw opening at the grasp is the distance between the finger faces along the closing line,
 ``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
 """
@@ -56,6 +63,7 @@ class PlannerOptions:
     full_tilt: bool = False
     equation: str = "auto"
     hook_depth: float = 0.005  # m the inner finger's tip must reach behind the rim
+    palm_margin: float = 0.010  # m kept between the rim and the palm (finger base)
     alpha_margin: float = math.radians(2.0)  # rad kept inside the feasible set's edge
     alpha_samples: int = 179  # 0.5 degree scan, then bisection at the edge
     beta_samples: int = 181  # 0.5 degree path samples; the final plan is re-checked at 0.25
@@ -119,6 +127,12 @@ class PivotPlan:
         }
 
 
+def reach_depth(section: Section, l_a: float, alpha: np.ndarray | float) -> np.ndarray | float:
+    """``e_H``: how far the inner fingertip reaches past the rim contact H along the finger (m)."""
+    l = 2.0 * section.a * l_a
+    return l * np.sin(alpha) - section.delta * np.cos(alpha)
+
+
 def jaw_opening(section: Section, l_a: float, alpha: np.ndarray | float) -> np.ndarray | float:
     """Finger-face distance along the closing line at the grasp (m)."""
     l = 2.0 * section.a * l_a
@@ -168,6 +182,7 @@ def plan_pivot(
     beta_req = HALF_PI if options.full_tilt else min(HALF_PI, section.tip_angle)
     usable = gripper.stroke - gripper.clearance
     alpha_hook = hook_alpha(part, gripper.finger_width, options.hook_depth)
+    reach_max = gripper.finger_length - options.palm_margin
     alphas = alpha_axis(options.alpha_samples)
     n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + 1e-9)) + 1
     stable_somewhere = False
@@ -181,6 +196,7 @@ def plan_pivot(
                 section, la, al, frictions, beta_req, options.equation, options.beta_samples
             )
             fits = (jaw_opening(section, la, al) <= usable + 1e-12) & (al >= alpha_hook)
+            fits &= reach_depth(section, la, al) <= reach_max + 1e-12
             return ok & fits, ok
 
         both, ok = feasible(alphas)
@@ -216,7 +232,8 @@ def plan_pivot(
             f"stroke too short: every stable (l_a, alpha) with alpha >= "
             f"{math.degrees(alpha_hook):.1f} deg (to hook the hole) needs a jaw opening above "
             f"{usable * 1e3:.0f} mm (stroke {gripper.stroke * 1e3:.0f} mm less "
-            f"{gripper.clearance * 1e3:.0f} mm approach clearance)"
+            f"{gripper.clearance * 1e3:.0f} mm approach clearance) or a finger longer than "
+            f"{gripper.finger_length * 1e3:.0f} mm"
         )
     else:
         reason = (

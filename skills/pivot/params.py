@@ -23,8 +23,12 @@ class PivotParams:
     #: theta of Fig. 10. The paper uses 90 deg and less when S slides; the default stops 15 deg
     #: past the tip-over angle atan(a/b), after which gravity stands the part up (Sec. III-B).
     tilt_angle: float = math.radians(80.0)
+    tilt_press: float = 8.0  #: N the fingers may press on the part along the arc
+    tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
+    tilt_backoff: float = 0.006  #: m, the most the TCP gives way (the hook must stay in the hole)
     slide_stop: float = 0.020  #: m of S sliding (jaw closing) that ends the arc
     settle: float = 1.0  #: s to let the part come to rest after the arc
+    align_speed: float = 0.02  #: m/s of the TCP while the gripper turns about the rim
     lift_height: float = 0.05  #: m, the lift after Align
     release: float = 0.004  #: m the jaws open to let go of the pinch before Align
     wall_depth: float = 0.015  #: m the fingertips reach below the rim for the hole grasp
