@@ -18,6 +18,7 @@ import numpy as np
 
 from cell.stats import wilson_interval
 from drivers.pose import Pose
+from sim.camera import SimCamera
 from sim.cell_layout import CellLayout, build_cell
 from sim.judge import judge
 from sim.part_body import lying_pose, spawn_part
@@ -137,11 +138,13 @@ def run_trial(
             np.array([nominal[0], nominal[1], 0.5 * setup.part.outer]),
             setup.nominal_yaw,
         )
-        dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock)
+        camera = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()))
+        dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
+        tilt = Tilt(frame, params, dev)
         phases = [
             ("grasp", Grasp(frame, params, dev)),
-            ("tilt", Tilt(frame, params, dev)),
-            ("align", Align(frame, setup.part, params, dev)),
+            ("tilt", tilt),
+            ("align", Align(lambda: tilt.frame, setup.part, params, dev)),
         ]
         failure: str | None = None
         phase_name = "done"

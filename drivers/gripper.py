@@ -14,8 +14,10 @@ class Gripper(Protocol):
         """Start opening to ``width`` (m; full stroke if None) at ``speed`` (m/s)."""
         ...
 
-    def close(self, force: float, speed: float = 0.05) -> None:
-        """Start closing with at most ``force`` (N) per finger at ``speed`` (m/s)."""
+    def close(self, force: float, speed: float = 0.05, width: float = 0.0) -> None:
+        """Start closing towards ``width`` (m; 0 = fully) with at most ``force`` (N) per finger
+        at ``speed`` (m/s). A ``width`` just short of the part's caps how far the fingers may
+        follow a part that yields (the 2F-85's position request with its force setting)."""
         ...
 
     def width(self) -> float:

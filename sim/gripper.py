@@ -109,10 +109,12 @@ class SimGripper:
         target = self.stroke if width is None else float(np.clip(width, 0.0, self.stroke))
         self._command(target, speed, OPEN_FORCE)
 
-    def close(self, force: float, speed: float = 0.05) -> None:
-        """Start closing fully with at most ``force`` (N) per finger, each finger at ``speed``
-        (m/s). On a part the fingers stall and keep pressing with ``force``."""
-        self._command(0.0, speed, float(np.clip(force, 0.0, FINGER_EFFORT)))
+    def close(self, force: float, speed: float = 0.05, width: float = 0.0) -> None:
+        """Start closing towards ``width`` (m, 0 = fully) with at most ``force`` (N) per finger,
+        each finger at ``speed`` (m/s). On a part the fingers stall and keep pressing with
+        ``force``; they never close past ``width``."""
+        target = float(np.clip(width, 0.0, self.stroke))
+        self._command(target, speed, float(np.clip(force, 0.0, FINGER_EFFORT)))
 
     def width(self) -> float:
         """Current opening between the pads (m), from the joint states."""

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.arm import Arm, MotionState
+from drivers.camera import Camera
 from drivers.clock import Clock
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
@@ -179,6 +180,7 @@ class Devices:
     gripper: Gripper
     ft: ForceTorqueSensor
     clock: Clock
+    camera: Camera | None = None  #: the eye-in-hand RGB-D camera, where a skill needs to look
 
     def move(self, name: str, guard: Guard, command: Callable[[], None]) -> GuardedMotion:
         return arm_motion(name, self.arm, self.ft, self.clock, guard, command)

@@ -1,94 +1,174 @@
-"""Align (Fig. 2(iv)): turn the gripper about the rim into the hole grasp, one finger inside the
-hole and the other on the outer wall, then lift.
+"""Align (Fig. 2(iv)): from the part the Tilt stood up, take the hole grasp -- one finger inside
+the hole, the other on the outer wall -- and lift.
 
-When the Tilt ends the part stands (or leans) on its end with the inner finger's pad on the rim
-from inside the hole and the outer finger low on the outer wall: the wall is already pinched, but
-along a line far from horizontal. Align keeps that pinch and rotates the gripper about the inner
-finger's rim contact until the fingers point straight down, the jaws closing under force all the
-way so the outer finger slides up the outer wall; the part stays caught between the pads and the
-floor the whole time, so nothing has to be re-found. Then the jaws ease by ``wall_gap``, the
-fingers slide ``wall_depth`` below the rim, close again and lift.
+The Tilt (:mod:`skills.pivot.tilt`) ends a little past the angle where the part's centre of mass
+passes over G; gravity then stands the part up on its end (Sec. III-B), which the paper needs
+before Align. Where it comes to rest is known only roughly: it stands on the edge of its base at
+G, so its axis is about ``D/2`` from the pivot towards the robot, but it slides several
+millimetres as it lands, and the hole grasp needs the wall to a millimetre or two. So Align
+looks, as the paper's cell does with its wrist camera:
 
-The rim contact is computed from the tool's *measured* pose when Align starts: where the inner
-pad's face plane crosses the rim height (floor plus the part's length, since the part stands on
-its end).
+1. let go and draw the fingers back along their axis;
+2. move the wrist camera ``view_height`` above the predicted rim, find the rim's ring in the
+   depth image (:func:`skills.perception.locate_upright_part`); fail if no standing part is seen;
+3. fingers straight down over the wall nearest the robot, the jaws open by ``wall_gap`` on each
+   side of the span a hole grasp pinches (for a round hole the inner pad touches at the chord of
+   Eq. 2); go down ``wall_depth`` below the rim -- a pad landing on the rim stops the arm under a
+   low force limit and fails the skill -- close and lift.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from drivers.pose import Pose
 from skills.mechanics.part import Part
-from skills.motion import Devices, Sequence
-from skills.pivot.frame import PivotFrame, rotate_about_point
+from skills.motion import Devices, GuardedMotion, Sequence
+from skills.perception import UprightPart, locate_upright_part
+from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult
 
 
+def pinched_span(part: Part, finger_width: float) -> tuple[float, float]:
+    """``(outer, inner)`` distances (m) from the part's axis, along the grasp line, of the outer
+    wall and of where a pad of width ``w`` inside the hole touches (the chord of Eq. 2)."""
+    outer = 0.5 * part.outer
+    if part.hole_shape == "circle":
+        return outer, 0.5 * math.sqrt(max(0.0, part.hole**2 - finger_width**2))
+    return outer, 0.5 * part.hole
+
+
+def hole_grasp_rotation(x_horizontal: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Fingers straight down (tool z = -up), closing line along ``x_horizontal``."""
+    z = np.array([0.0, 0.0, -1.0])
+    x = np.array([x_horizontal[0], x_horizontal[1], 0.0])
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 class Align:
-    def __init__(self, frame: PivotFrame, part: Part, params: PivotParams, dev: Devices) -> None:
-        arm, gripper = dev.arm, dev.gripper
-        self.frame, self.part, self.params, self.dev = frame, part, params, dev
+    def __init__(
+        self,
+        frame: PivotFrame | Callable[[], PivotFrame],
+        part: Part,
+        params: PivotParams,
+        dev: Devices,
+    ) -> None:
+        """``frame`` may be a callable, read when Align starts (the Tilt's located frame)."""
+        arm, gripper, camera = dev.arm, dev.gripper, dev.camera
+        self.part, self.params, self.dev = part, params, dev
+        self._frame_source = frame if callable(frame) else (lambda: frame)
         p, g = params, params.guard
-        rim_z = frame.floor_z + part.length
-        self.contact: np.ndarray | None = None
-        self.path: list[Pose] = []
+        outer, inner = pinched_span(part, gripper.finger_width)
+        self.predicted_axis: NDArray[np.float64] | None = None  #: from the pivot (m, x y)
+        self.seen: UprightPart | None = None  #: what the camera found
+        st: dict[str, PivotFrame] = {}
 
-        def rotate() -> None:
+        def frame_now() -> PivotFrame:
+            if "frame" not in st:
+                st["frame"] = self._frame_source()
+            return st["frame"]
+
+        def rotation() -> NDArray[np.float64]:
+            return hole_grasp_rotation(-frame_now().u)  # outer finger on the robot's side
+
+        def rim_z() -> float:
+            return frame_now().floor_z + part.length
+
+        def release() -> None:
+            frame = frame_now()
+            self.predicted_axis = (frame.pivot - 0.5 * part.outer * frame.u)[:2].copy()
+            gripper.open(gripper.width() + p.release)
+
+        def withdraw() -> None:
             tool = arm.tool_pose()
-            x, z = tool.rotation[:, 0], tool.rotation[:, 2]
-            # The inner (-x) pad's face plane where it crosses the rim height: the rim contact.
-            face = tool.position - 0.5 * gripper.width() * x
-            if abs(z[2]) > 1e-3:
-                face = face + ((rim_z - face[2]) / z[2]) * z
-            self.contact = face
-            down = np.array([0.0, 0.0, -1.0])
-            axis = np.cross(z, down)
-            angle = math.asin(min(1.0, float(np.linalg.norm(axis))))
-            if float(np.dot(z, down)) < 0.0:
-                angle = math.pi - angle
-            if np.linalg.norm(axis) < 1e-9:
-                self.path = [tool]
-            else:
-                axis = axis / np.linalg.norm(axis)
-                n = max(2, int(math.ceil(angle / math.radians(3.0))))
-                self.path = [
-                    rotate_about_point(tool, face, axis, angle * k / n) for k in range(1, n + 1)
-                ]
-            gripper.close(p.grip_force)
-            arm.move_path(self.path, p.align_speed, p.acceleration)
+            back = tool.position - p.approach_distance * tool.rotation[:, 2]
+            arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
 
-        def ease() -> None:
-            gripper.open(gripper.width() + 2 * p.wall_gap)
+        def view() -> None:
+            if camera is None:
+                return
+            assert self.predicted_axis is not None
+            rot = rotation()
+            cam = camera.tool_T_camera().position
+            # Optical centre straight above the predicted axis, view_height above the rim.
+            target = np.array([*self.predicted_axis, rim_z() + p.view_height]) - rot @ cam
+            arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
 
-        def down() -> None:
-            tool = arm.tool_pose()
-            target = np.array([tool.position[0], tool.position[1], rim_z - p.wall_depth])
-            target[2] += p.tip_offset
-            if target[2] < tool.position[2]:
-                arm.move_to(Pose(target, tool.rotation), 0.5 * p.approach_speed, p.acceleration)
-            else:
-                arm.move_to(tool, 0.5 * p.approach_speed, p.acceleration)
+        def look() -> None:
+            if camera is None:
+                return
+            assert self.predicted_axis is not None
+            frame = camera.capture()
+            world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
+            self.seen = locate_upright_part(
+                frame,
+                camera.intrinsics(),
+                world_T_camera,
+                part,
+                self.predicted_axis,
+                frame_now().floor_z,
+                search=p.view_search,
+            )
+
+        def not_seen() -> str | None:
+            if camera is None:
+                return "no wrist camera to find the standing part"
+            if self.seen is None:
+                return "no standing part seen near where the Tilt left it"
+            return None
+
+        def wall_xy() -> NDArray[np.float64]:
+            assert self.seen is not None
+            toward_robot = -frame_now().u[:2]
+            return self.seen.center + 0.5 * (outer + inner) * toward_robot
+
+        def over_wall() -> None:
+            target = np.array([*wall_xy(), rim_z() + p.clear_height + p.tip_offset])
+            arm.move_to(Pose(target, rotation()), 2 * p.approach_speed, p.acceleration)
+
+        def narrow() -> None:
+            gripper.open(outer - inner + 2.0 * p.wall_gap)
+
+        def into_hole() -> None:
+            depth = min(p.wall_depth, part.length - p.floor_clearance)
+            target = np.array([*wall_xy(), rim_z() - depth + p.tip_offset])
+            arm.move_to(Pose(target, rotation()), 0.5 * p.approach_speed, p.acceleration)
 
         def lift() -> None:
             tool = arm.tool_pose()
-            up = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
-            arm.move_to(up, p.approach_speed, p.acceleration)
+            up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
+            arm.move_to(up_pose, p.approach_speed, p.acceleration)
 
         self.sequence = Sequence(
             "align",
             [
-                dev.move("turn about the rim", g, rotate),
-                dev.grip("ease the jaws", g, ease),
-                dev.move("slide below the rim", g, down),
-                dev.grip("pinch the wall", g, lambda: gripper.close(p.grip_force), settle=0.2),
+                dev.grip("let go", g, release),
+                dev.move("draw the fingers back", g, withdraw),
+                dev.move("camera over the part", g, view),
+                GuardedMotion(
+                    "find the standing part",
+                    look,
+                    lambda: True,
+                    arm,
+                    dev.ft,
+                    dev.clock,
+                    g,
+                    not_seen,
+                ),
+                dev.move("over the wall", g, over_wall),
+                dev.grip("open over the wall", g, narrow),
+                dev.move("into the hole", p.descent_guard, into_hole),
+                dev.grip("pinch the wall", g, lambda: gripper.close(p.grip_force), settle=0.3),
                 dev.move("lift", g, lift),
             ],
         )
-        self._pinch_step = 4  # index after "pinch the wall" succeeded
+        self._pinch_step = 8  # index after "pinch the wall" succeeded
         self._checked = False
 
     def tick(self) -> StepResult:

@@ -18,7 +18,7 @@ rim contact H (negative would mean it misses the lip).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -87,6 +87,24 @@ class PivotFrame:
         s_point = self.point(a - l, 2.0 * b)
         tcp = s_point - 0.5 * self.opening(l_a, alpha) * rot[:, 0] - tip_offset * rot[:, 2]
         return Pose(tcp, rot)
+
+    def located(self, tool: Pose, jaw_width: float) -> PivotFrame:
+        """This frame slid along ``u`` so that H lies where the closed grasp puts it.
+
+        After closing, the inner finger's pad face passes through the rim contact H at height
+        ``2b - delta``: that fixes the part's real position along its axis and with it the
+        pivot of the Tilt. An arc about a pivot a few millimetres off squeezes the part between
+        S and the floor as theta grows (a 3 mm error gives about 1.3 mm of interference at S by
+        60 deg), which rigid fingers cannot absorb.
+        """
+        x, z = tool.rotation[:, 0], tool.rotation[:, 2]
+        if abs(z[2]) < 1e-6:
+            return self
+        face = tool.position - 0.5 * jaw_width * x
+        h_contact = self.floor_z + 2.0 * self.section.b - self.section.delta
+        face = face + ((h_contact - face[2]) / z[2]) * z
+        shift = float(np.dot(face - self.point(0.0, 0.0), self.u)) - self.section.a
+        return replace(self, center=np.asarray(self.center, float) + shift * self.u)
 
     def tilt_pose(self, grasp: Pose, theta: float) -> Pose:
         """The grasp carried along the arc about ``P_c`` by ``theta`` (rad): the open end rises."""

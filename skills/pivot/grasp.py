@@ -4,19 +4,28 @@ that one finger drops into the hole and the other lands on the top surface at l,
 from __future__ import annotations
 
 from drivers.pose import Pose
-from skills.motion import Devices, Sequence
+from skills.motion import Devices, GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult
 
 
 class Grasp:
-    """Open, approach along the fingers, close gently, press S down; fail if nothing is held."""
+    """Open, approach along the fingers, close onto H while S stays put; fail if nothing is held.
+
+    The outer finger's tip is set on the top surface at S (the edge of its pad face is the
+    finger's lowest point), pressed ``press_depth`` into it. The jaws then close while the arm
+    moves the TCP towards the outer finger by half the closing, so the outer finger stays at S
+    and the inner one travels alone to the rim at H. A plain close would not do: the 2F-85's
+    fingers are coupled, so either S is held by friction and the inner finger stalls short of H,
+    or S slides and the part is shoved along the floor; both shrink ``l`` away from the plan.
+    """
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
         self.frame, self.params, self.dev = frame, params, dev
         p, arm, gripper = params, dev.arm, dev.gripper
-        self.target: Pose = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
+        target = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
+        self.target: Pose = Pose(target.position - p.press_depth * frame.up, target.rotation)
         opening = frame.opening(p.l_a, p.alpha)
         if opening + p.approach_clearance > gripper.stroke:
             raise ValueError(
@@ -25,14 +34,38 @@ class Grasp:
             )
         z = self.target.rotation[:, 2]
         pre = Pose(self.target.position - p.approach_distance * z, self.target.rotation)
-        # The arm, not the jaw, must hold S on the part: the closing line is only alpha off the
-        # top surface, so the squeeze alone would slide S towards the open end.
-        self.pressed = Pose(self.target.position - p.press_depth * frame.up, self.target.rotation)
+        # The approach opening keeps the outer pad's face at S: only the inner finger has the
+        # clearance, so it starts short of H.
+        start_width = opening + p.approach_clearance
+        shift = 0.5 * p.approach_clearance * self.target.rotation[:, 0]
+        self.target = Pose(self.target.position - shift, self.target.rotation)
+        pre = Pose(pre.position - shift, pre.rotation)
         g = p.guard
+        state: dict[str, float] = {}
+
+        def close() -> None:
+            state["w0"] = gripper.width()
+            state["t"] = dev.clock.now()
+            gripper.close(p.grip_force, p.close_speed)
+
+        def closed() -> bool:
+            # Keep the outer (+x) finger where it is: closing moves it by half the closing
+            # towards the TCP, so the TCP follows it that far along +x -- and leads by
+            # ``close_lead``, since a finger held on S by friction only closes when the palm
+            # moves. When the inner finger stops at H the lead is all S is dragged.
+            closing = state["w0"] - gripper.width()
+            x = self.target.rotation[:, 0]
+            shift = 0.5 * closing + p.close_lead
+            arm.servo(Pose(self.target.position + shift * x, self.target.rotation))
+            if gripper.moving():
+                state["t"] = dev.clock.now()
+                return False
+            return dev.clock.now() - state["t"] >= 0.2
+
         self.sequence = Sequence(
             "grasp",
             [
-                dev.grip("open", g, lambda: gripper.open(opening + p.approach_clearance)),
+                dev.grip("open", g, lambda: gripper.open(start_width)),
                 dev.move(
                     "above the open end",
                     g,
@@ -43,19 +76,16 @@ class Grasp:
                     g,
                     lambda: arm.move_to(self.target, p.approach_speed, p.acceleration),
                 ),
-                dev.grip("close", g, lambda: gripper.close(p.grip_force), settle=0.2),
-                dev.move(
-                    "press S down",
-                    g,
-                    lambda: arm.move_to(self.pressed, 0.2 * p.approach_speed, p.acceleration),
-                ),
+                GuardedMotion("close onto H", close, closed, arm, dev.ft, dev.clock, g),
             ],
         )
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
-        if result.status is Status.SUCCESS and not self.dev.gripper.object_detected():
-            return StepResult(Status.FAILURE, "grasp: missed, the fingers closed on nothing")
+        if result.status is Status.SUCCESS:
+            self.dev.arm.stop()
+            if not self.dev.gripper.object_detected():
+                return StepResult(Status.FAILURE, "grasp: missed, the fingers closed on nothing")
         return result
 
     def halt(self) -> None:

@@ -13,25 +13,37 @@ class PivotParams:
     l_a: float
     alpha: float  #: rad
     grip_force: float = 3.0  #: N per finger while pinching
-    press_depth: float = 0.0  #: m the arm presses S down after closing (holds S against sliding)
+    press_depth: float = 0.0005  #: m the outer fingertip is set into S (a light, sure contact)
+    close_lead: float = 0.001  #: m the palm leads the outer finger while the jaws close
+    close_speed: float = 0.02  #: m/s of each finger while closing onto H
     approach_clearance: float = 0.010  #: m of extra jaw opening during the approach
     approach_distance: float = 0.06  #: m back along the fingers before the final approach
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
     approach_speed: float = 0.05  #: m/s
     tilt_speed: float = 0.01  #: m/s of the TCP along the arc (quasi-static, Sec. II-B)
     acceleration: float = 0.3  #: m/s^2
-    #: theta of Fig. 10. The paper uses 90 deg and less when S slides; the default stops 15 deg
-    #: past the tip-over angle atan(a/b), after which gravity stands the part up (Sec. III-B).
-    tilt_angle: float = math.radians(80.0)
+    #: theta of Fig. 10 (rad). None: ``tilt_past_tip`` beyond the tip-over angle atan(a/b) (at
+    #: most 90 deg). Past that angle gravity stands the part up ahead of the gripper and the
+    #: finger in the hole keeps it from going over (Sec. III-B); turning further would drive the
+    #: fingers into the standing part.
+    tilt_angle: float | None = None
+    tilt_past_tip: float = math.radians(12.0)
+    locate_pivot: bool = True  #: place P_c from where the closed grasp found the rim
+    tilt_squeeze: float | None = 0.001  #: m the jaws may still close along the arc (None: free)
+    tilt_axes: tuple[bool, bool, bool] = (False, False, True)  #: tool axes that give way
     tilt_press: float = 8.0  #: N the fingers may press on the part along the arc
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
     tilt_backoff: float = 0.006  #: m, the most the TCP gives way (the hook must stay in the hole)
-    slide_stop: float = 0.020  #: m of S sliding (jaw closing) that ends the arc
     settle: float = 1.0  #: s to let the part come to rest after the arc
-    align_speed: float = 0.02  #: m/s of the TCP while the gripper turns about the rim
+    clear_height: float = 0.03  #: m above the rim for moves over the standing part
+    view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part
+    view_search: float = 0.03  #: m the standing part may be from where the Tilt predicts it
+    wall_gap: float = 0.004  #: m between each pad and the wall before the pinch
     lift_height: float = 0.05  #: m, the lift after Align
-    release: float = 0.004  #: m the jaws open to let go of the pinch before Align
-    wall_depth: float = 0.015  #: m the fingertips reach below the rim for the hole grasp
-    wall_gap: float = 0.004  #: m between each finger and the wall before the final pinch
+    release: float = 0.004  #: m the jaws ease before Align turns the gripper
+    wall_depth: float = 0.040  #: m the fingertips reach below the rim for the hole grasp
+    floor_clearance: float = 0.012  #: m kept between the fingertips and the floor
     guard: Guard = field(default_factory=Guard)  #: FT and time limits of every motion
+    #: The descent into the hole: a pad landing on the rim must stop the arm, not crush the part.
+    descent_guard: Guard = field(default_factory=lambda: Guard(max_force=25.0, timeout=10.0))
     tilt_guard: Guard = field(default_factory=lambda: Guard(max_force=80.0, timeout=20.0))

@@ -13,12 +13,13 @@ linkage would have absorbed.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
-from drivers.arm import MotionState
 from drivers.pose import Pose
-from skills.motion import Devices, GuardedMotion, Sequence, wait
+from skills.compliance import Compliance, CompliantPath
+from skills.motion import Devices, Sequence, wait
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import StepResult
@@ -28,69 +29,60 @@ class Tilt:
     """The arc as a guarded, streamed motion; the FT guard is the paper's emergency stop.
 
     The arc starts from the tool's measured pose when the Tilt starts, so ``r`` is the real
-    distance to the pivot. The paper shortens theta when S slides (Sec. IV-B); here the jaw
-    opening is watched instead: once S has slid ``slide_stop`` towards the rim, the centre of
-    mass is about to pass G and the part swings upright on the finger in the hole, so the arc
-    stops there and the part is given ``settle`` seconds to come to rest.
+    distance to the pivot, and the pivot itself is placed from where the grasp found the rim
+    (:meth:`PivotFrame.located`). The jaws hold the pinch but may close only ``tilt_squeeze``
+    further: the grasp stays the rigid one the mechanics assume, where a gripper that kept
+    closing would drag S towards the rim early. The arc ends ``tilt_past_tip`` beyond the tip-over
+    angle, and the part is given ``settle`` seconds to stand up and come to rest.
     """
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
         self.frame = frame
-        self.stopped_by_slide = False
-        self.theta = 0.0  #: rad of arc commanded so far
-        self.backoff = 0.0  #: m the TCP has given way along the fingers
-        self.peak_press = 0.0  #: N, largest press of the fingers on the part along the arc
-        p, arm, gripper, clock, ft = params, dev.arm, dev.gripper, dev.clock, dev.ft
-        state: dict[str, float | Pose] = {}
+        p, arm, gripper = params, dev.arm, dev.gripper
+        tip = frame.section.tip_angle
+        self.angle = (
+            p.tilt_angle if p.tilt_angle is not None else min(0.5 * math.pi, tip + p.tilt_past_tip)
+        )  #: theta (rad) of this Tilt
+        state: dict[str, float] = {}
 
-        def start() -> None:
+        def path() -> Callable[[float], Pose]:
             tool = arm.tool_pose()
-            state.update(grasp=tool, width=gripper.width(), t=clock.now(), omega=0.0)
-            radius = max(1e-3, float(np.linalg.norm(tool.position - frame.pivot)))
-            state["omega_max"] = p.tilt_speed / radius
-            state["alpha_max"] = p.acceleration / radius
+            state["width"] = gripper.width()
+            if p.tilt_squeeze is not None:
+                # Hold the pinch but let the jaws follow the part only this far: the mechanics
+                # of Sec. II-III take the grasp as rigid while the part turns.
+                floor = max(0.0, state["width"] - p.tilt_squeeze)
+                gripper.close(p.grip_force, p.close_speed, floor)
+            if p.locate_pivot:
+                self.frame = frame.located(tool, gripper.width())
+            return lambda s: self.frame.tilt_pose(tool, s * self.angle)
 
-        def advance() -> bool:
-            now = clock.now()
-            dt = max(0.0, now - float(state["t"]))
-            state["t"] = now
-            if float(state["width"]) - gripper.width() >= p.slide_stop:
-                self.stopped_by_slide = True
-                arm.stop()
-                return True
-            if self.theta >= p.tilt_angle:
-                arm.stop()
-                return True
-            omega = min(float(state["omega_max"]), float(state["omega"]) + state["alpha_max"] * dt)
-            state["omega"] = omega
-            self.theta = min(p.tilt_angle, self.theta + omega * dt)
-            press = max(0.0, -float(ft.wrench()[2]))
-            self.peak_press = max(self.peak_press, press)
-            self.backoff = float(
-                np.clip(self.backoff + p.tilt_compliance * (press - p.tilt_press) * dt,
-                        0.0, p.tilt_backoff)
-            )
-            target = frame.tilt_pose(state["grasp"], self.theta)  # type: ignore[arg-type]
-            z = target.rotation[:, 2]
-            arm.servo(Pose(target.position - self.backoff * z, target.rotation))
-            return False
+        def length(pose_at: Callable[[float], Pose]) -> float:
+            return float(np.linalg.norm(pose_at(0.0).position - self.frame.pivot)) * self.angle
 
-        def failed() -> str | None:
-            st = arm.status()
-            if st.state is MotionState.FAULT:
-                return f"arm fault: {st.message}"
-            return None
-
-        arc = GuardedMotion(
-            "arc about P_c", start, advance, arm, ft, clock, p.tilt_guard, failed
+        self.arc = CompliantPath(
+            "arc about P_c",
+            dev,
+            p.tilt_guard,
+            path,
+            length,
+            p.tilt_speed,
+            p.acceleration,
+            Compliance(
+                axes=p.tilt_axes,
+                deadband=p.tilt_press,
+                gain=p.tilt_compliance,
+                limit=p.tilt_backoff,
+            ),
         )
         self.sequence = Sequence(
-            "tilt", [arc, wait("let the part settle", dev, p.tilt_guard, p.settle)]
+            "tilt", [self.arc.motion(), wait("let the part settle", dev, p.tilt_guard, p.settle)]
         )
 
     @property
-    def theta_deg(self) -> float:
-        return math.degrees(self.theta)
+    def theta(self) -> float:
+        """rad of arc commanded so far."""
+        return self.arc.progress * self.angle
 
     def tick(self) -> StepResult:
         return self.sequence.tick()

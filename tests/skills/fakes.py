@@ -87,8 +87,8 @@ class FakeGripper:
         self._moving = True
         self.closed_on = None
 
-    def close(self, force: float, speed: float = 0.05) -> None:
-        self._target = self.object_width if self.object_width is not None else 0.0
+    def close(self, force: float, speed: float = 0.05, width: float = 0.0) -> None:
+        self._target = max(width, self.object_width if self.object_width is not None else 0.0)
         self._moving = True
         self.closed_on = self.object_width
 

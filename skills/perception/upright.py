@@ -1,0 +1,79 @@
+"""Find a hollow part standing on its end: the ring of its rim seen from above.
+
+Used by Align after the Tilt has stood a part up: it lands a few millimetres from where the
+mechanics put it, and the hole grasp needs its wall to a millimetre or two. From above, a
+standing hollow part shows its rim as a ring at the height of its length; nothing else in a bin
+lies at that height within a few centimetres, so the ring's points are picked by height and
+distance from the expected place and fitted: a circle (algebraic least squares, which a partial
+ring does not bias) for round parts, the smallest enclosing rectangle for square ones.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.camera import Frame, Intrinsics
+from drivers.pose import Pose
+from skills.mechanics.part import Part
+from skills.perception.cloud import back_project
+
+
+@dataclass(frozen=True)
+class UprightPart:
+    center: NDArray[np.float64]  #: x, y (m) of the part's axis, world
+    yaw: float  #: rad, for a square section the direction of one side (mod 90 deg); else 0
+    points: int  #: rim points used
+    fit_rms: float  #: m, rms distance of the points from the fitted rim
+
+
+def _circle_fit(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], float, float]:
+    """Kasa fit: centre, radius, rms residual (m)."""
+    a = np.column_stack([2.0 * xy, np.ones(len(xy))])
+    b = np.sum(xy**2, axis=1)
+    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+    center = sol[:2]
+    radius = math.sqrt(max(0.0, sol[2] + float(center @ center)))
+    rms = float(np.sqrt(np.mean((np.linalg.norm(xy - center, axis=1) - radius) ** 2)))
+    return center, radius, rms
+
+
+def locate_upright_part(
+    frame: Frame,
+    intr: Intrinsics,
+    world_T_camera: Pose,
+    part: Part,
+    expected_xy: NDArray[np.float64],
+    floor_z: float = 0.0,
+    search: float = 0.03,
+    band: float = 0.004,
+    min_points: int = 40,
+) -> UprightPart | None:
+    """The standing ``part`` near ``expected_xy`` (m), or None when no rim is seen there.
+
+    ``search``: how far (m) beyond its outer radius the part may stand from ``expected_xy``;
+    ``band``: half-height (m) of the slab around the rim height that holds the rim's points.
+    """
+    pts = back_project(frame.depth, intr, world_T_camera)
+    rim_z = floor_z + part.length
+    near_rim = np.abs(pts[:, 2] - rim_z) < band
+    pts = pts[near_rim]
+    reach = 0.5 * part.outer * (math.sqrt(2.0) if part.hole_shape == "rectangle" else 1.0)
+    d = np.linalg.norm(pts[:, :2] - np.asarray(expected_xy, float)[:2], axis=1)
+    xy = pts[d < reach + search, :2]
+    if len(xy) < min_points:
+        return None
+    if part.hole_shape == "circle":
+        center, radius, rms = _circle_fit(xy)
+        if not 0.5 * part.hole * 0.7 < radius < 0.5 * part.outer * 1.3:
+            return None
+        return UprightPart(center=center, yaw=0.0, points=len(xy), fit_rms=rms)
+    (cx, cy), (w, h), angle = cv2.minAreaRect((xy * 1e3).astype(np.float32))
+    if max(w, h) > part.outer * 1e3 * 1.3:
+        return None
+    yaw = math.radians(angle) % (0.5 * math.pi)
+    return UprightPart(center=np.array([cx, cy]) * 1e-3, yaw=yaw, points=len(xy), fit_rms=0.0)
