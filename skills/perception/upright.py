@@ -49,7 +49,7 @@ def locate_upright_part(
     part: Part,
     expected_xy: NDArray[np.float64],
     floor_z: float = 0.0,
-    search: float = 0.03,
+    search: float = 0.08,
     band: float = 0.004,
     min_points: int = 40,
 ) -> UprightPart | None:
@@ -60,20 +60,32 @@ def locate_upright_part(
     """
     pts = back_project(frame.depth, intr, world_T_camera)
     rim_z = floor_z + part.length
-    near_rim = np.abs(pts[:, 2] - rim_z) < band
-    pts = pts[near_rim]
+    pts = pts[np.abs(pts[:, 2] - rim_z) < band]
     reach = 0.5 * part.outer * (math.sqrt(2.0) if part.hole_shape == "rectangle" else 1.0)
-    d = np.linalg.norm(pts[:, :2] - np.asarray(expected_xy, float)[:2], axis=1)
-    xy = pts[d < reach + search, :2]
-    if len(xy) < min_points:
-        return None
-    if part.hole_shape == "circle":
-        center, radius, rms = _circle_fit(xy)
-        if not 0.5 * part.hole * 0.7 < radius < 0.5 * part.outer * 1.3:
+    center = np.asarray(expected_xy, float)[:2]
+    radius = reach + search
+    xy = pts[:0, :2]
+    for _ in range(3):  # select around the guess, fit, reselect tightly around the fit
+        d = np.linalg.norm(pts[:, :2] - center, axis=1)
+        xy = pts[d < radius, :2]
+        if len(xy) < min_points:
             return None
-        return UprightPart(center=center, yaw=0.0, points=len(xy), fit_rms=rms)
+        center = _center(xy, part)
+        radius = reach + 0.004
+    if part.hole_shape == "circle":
+        c, r, rms = _circle_fit(xy)
+        if not 0.35 * part.hole < r < 0.65 * part.outer:
+            return None
+        return UprightPart(center=c, yaw=0.0, points=len(xy), fit_rms=rms)
     (cx, cy), (w, h), angle = cv2.minAreaRect((xy * 1e3).astype(np.float32))
     if max(w, h) > part.outer * 1e3 * 1.3:
         return None
     yaw = math.radians(angle) % (0.5 * math.pi)
     return UprightPart(center=np.array([cx, cy]) * 1e-3, yaw=yaw, points=len(xy), fit_rms=0.0)
+
+
+def _center(xy: NDArray[np.float64], part: Part) -> NDArray[np.float64]:
+    if part.hole_shape == "circle":
+        return _circle_fit(xy)[0]
+    (cx, cy), _, _ = cv2.minAreaRect((xy * 1e3).astype(np.float32))
+    return np.array([cx, cy]) * 1e-3

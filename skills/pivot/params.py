@@ -27,17 +27,17 @@ class PivotParams:
     #: finger in the hole keeps it from going over (Sec. III-B); turning further would drive the
     #: fingers into the standing part.
     tilt_angle: float | None = None
-    tilt_past_tip: float = math.radians(12.0)
+    tilt_past_tip: float = math.radians(4.0)
     locate_pivot: bool = True  #: place P_c from where the closed grasp found the rim
-    tilt_squeeze: float | None = 0.001  #: m the jaws may still close along the arc (None: free)
+    tilt_squeeze: float | None = None  #: m the jaws may still close along the arc (None: free)
     tilt_axes: tuple[bool, bool, bool] = (False, False, True)  #: tool axes that give way
     tilt_press: float = 8.0  #: N the fingers may press on the part along the arc
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
-    tilt_backoff: float = 0.006  #: m, the most the TCP gives way (the hook must stay in the hole)
+    tilt_backoff: float = 0.0  #: m, the most the TCP gives way (0: a rigid arc)
     settle: float = 1.0  #: s to let the part come to rest after the arc
     clear_height: float = 0.03  #: m above the rim for moves over the standing part
     view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part
-    view_search: float = 0.03  #: m the standing part may be from where the Tilt predicts it
+    view_search: float = 0.08  #: m the standing part may be from where the Tilt predicts it
     wall_gap: float = 0.004  #: m between each pad and the wall before the pinch
     lift_height: float = 0.05  #: m, the lift after Align
     release: float = 0.004  #: m the jaws ease before Align turns the gripper
