@@ -8,6 +8,7 @@ Contract forms (scripts rely on them; keep them exactly):
 * ``cell analyze [--part NAME] --la 0.3 0.5 0.7 0.9 --mu-s 0.2 --mu-h 0.4 --mu-g 0.4
   --grid 91 --out DIR [--json FILE]``
 * ``cell plan --part NAME [--json FILE]``
+* ``cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE``
 """
 
 from __future__ import annotations
@@ -295,6 +296,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_physics_options(p)
     p.set_defaults(func=cmd_check_tilt)
+
+    from cell.pivot_cmd import add_parser as add_pivot
+
+    add_pivot(sub)
     return parser
 
 

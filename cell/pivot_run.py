@@ -18,12 +18,14 @@ import numpy as np
 
 from cell.stats import wilson_interval
 from drivers.pose import Pose
+from sim.arm import REACH_TOLERANCE, solve_ik
 from sim.camera import SimCamera
 from sim.cell_layout import CellLayout, build_cell
 from sim.judge import judge
 from sim.part_body import lying_pose, spawn_part
-from sim.robot import SimRobot
-from sim.world import SimWorld
+from sim.robot import HOME_JOINTS, SimRobot
+from sim.robot_model import FINGER_WIDTH
+from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
 from skills.mechanics.part import Part
 from skills.mechanics.planner import PivotPlan
@@ -60,6 +62,51 @@ class TrialSetup:
     params: dict[str, float] = field(default_factory=dict)  # PivotParams overrides
 
     layout: CellLayout = field(default_factory=CellLayout)
+    mu_ground: float | None = None  # part-floor friction, exact (None: frictions.mu_g +- 20 %)
+    physics: PhysicsSettings = field(default_factory=PhysicsSettings)
+
+    def frame(self) -> PivotFrame:
+        """The pivot frame the skills are given: the part's nominal pose."""
+        cx, cy = self.nominal_center()
+        section = self.part.section(FINGER_WIDTH)
+        return PivotFrame(section, np.array([cx, cy, 0.5 * self.part.outer]), self.nominal_yaw)
+
+    def reach_problem(self) -> str | None:
+        """Why the nominal pick cannot work in this cell, or None: the part must lie inside the
+        bin and the grasp and its approach must be inside the UR5's reach."""
+        x0, x1, y0, y1 = self.layout.bin_interior()
+        u = np.array([math.cos(self.nominal_yaw), math.sin(self.nominal_yaw)])
+        c = np.array(self.nominal_center())
+        for end in (c + 0.5 * self.part.length * u, c - 0.5 * self.part.length * u):
+            if not (x0 <= end[0] <= x1 and y0 <= end[1] <= y1):
+                return (
+                    f"the {self.part.name} would lie at ({end[0]:.3f}, {end[1]:.3f}) m, outside "
+                    f"the bin's inside x {x0:.3f}..{x1:.3f}, y {y0:.3f}..{y1:.3f} m"
+                )
+        assert self.plan.l_a is not None and self.plan.alpha is not None
+        params = PivotParams(l_a=self.plan.l_a, alpha=self.plan.alpha, **self.params)
+        frame = self.frame()
+        grasp = frame.grasp_pose(params.l_a, params.alpha, params.tip_offset)
+        z = grasp.rotation[:, 2]
+        pre = Pose(grasp.position - params.approach_distance * z, grasp.rotation)
+        for name, pose in (("grasp", grasp), ("approach", pre)):
+            _, residual = solve_ik(pose, HOME_JOINTS, iterations=200)
+            if residual > REACH_TOLERANCE:
+                p = pose.position
+                return (
+                    f"the {name} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is out of the "
+                    "UR5's reach"
+                )
+        return None
+
+    def physics_json(self) -> dict[str, float]:
+        s = self.physics
+        return {
+            "control_hz": s.control_hz,
+            "substeps": s.substeps,
+            "physics_dt_s": s.physics_dt,
+            "solver_iterations": s.solver_iterations,
+        }
 
     def nominal_center(self) -> tuple[float, float]:
         """The part's centre (m, world) the skills are told.
@@ -90,6 +137,7 @@ class TrialResult:
     wall_time: float
     true_pose: dict[str, float]
     frictions: dict[str, float]
+    mass: float
 
     def to_json(self) -> dict[str, object]:
         return dataclasses.asdict(self)
@@ -113,13 +161,15 @@ def run_trial(
     mu_s = jitter(setup.frictions.mu_s, pert.friction)
     mu_h = jitter(setup.frictions.mu_h, pert.friction)
     mu_g = jitter(setup.frictions.mu_g, pert.friction)
+    if setup.mu_ground is not None:
+        mu_g = setup.mu_ground
     true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
     nominal = setup.nominal_center()
     x = nominal[0] + rng.uniform(-pert.position, pert.position)
     y = nominal[1] + rng.uniform(-pert.position, pert.position)
     yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
 
-    world = SimWorld(seed=seed)
+    world = SimWorld(seed=seed, settings=setup.physics)
     try:
         cell = build_cell(world, setup.layout, floor_friction=mu_g)
         robot = SimRobot(world)
@@ -132,12 +182,7 @@ def run_trial(
 
         assert setup.plan.l_a is not None and setup.plan.alpha is not None
         params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
-        section = setup.part.section(robot.gripper.finger_width)
-        frame = PivotFrame(
-            section,
-            np.array([nominal[0], nominal[1], 0.5 * setup.part.outer]),
-            setup.nominal_yaw,
-        )
+        frame = setup.frame()
         camera = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()))
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
         tilt = Tilt(frame, params, dev)
@@ -190,6 +235,7 @@ def run_trial(
             wall_time=time.perf_counter() - wall0,
             true_pose={"x": x, "y": y, "yaw": yaw},
             frictions={"S": mu_s, "H": mu_h, "G": mu_g},
+            mass=true_part.mass,
         )
     finally:
         world.close()

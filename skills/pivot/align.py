@@ -164,7 +164,7 @@ class Align:
                 dev.move("over the wall", g, over_wall),
                 dev.grip("open over the wall", g, narrow),
                 dev.move("into the hole", p.descent_guard, into_hole),
-                dev.grip("pinch the wall", g, lambda: gripper.close(p.grip_force), settle=0.3),
+                dev.grip("pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3),
                 dev.move("lift", g, lift),
             ],
         )

@@ -12,7 +12,8 @@ from skills.motion import Guard
 class PivotParams:
     l_a: float
     alpha: float  #: rad
-    grip_force: float = 3.0  #: N per finger while pinching
+    grip_force: float = 2.0  #: N per finger while the grasp pivots the part (Grasp, Tilt)
+    hold_force: float = 15.0  #: N per finger of the final hole grasp that lifts the part
     press_depth: float = 0.0005  #: m the outer fingertip is set into S (a light, sure contact)
     close_lead: float = 0.001  #: m the palm leads the outer finger while the jaws close
     close_speed: float = 0.02  #: m/s of each finger while closing onto H
@@ -34,6 +35,7 @@ class PivotParams:
     tilt_press: float = 8.0  #: N the fingers may press on the part along the arc
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
     tilt_backoff: float = 0.0  #: m, the most the TCP gives way (0: a rigid arc)
+    swing_stop: float = 0.015  #: m of jaw closing along the arc that means the part swung ahead
     settle: float = 1.0  #: s to let the part come to rest after the arc
     clear_height: float = 0.03  #: m above the rim for moves over the standing part
     view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part

@@ -33,7 +33,10 @@ class Tilt:
     (:meth:`PivotFrame.located`). The jaws hold the pinch but may close only ``tilt_squeeze``
     further: the grasp stays the rigid one the mechanics assume, where a gripper that kept
     closing would drag S towards the rim early. The arc ends ``tilt_past_tip`` beyond the tip-over
-    angle, and the part is given ``settle`` seconds to stand up and come to rest.
+    angle, and the part is given ``settle`` seconds to stand up and come to rest. A part that
+    swings up ahead of the arc earlier (the jaws close by ``swing_stop`` once S has lost it) ends
+    the arc there; once the jaws have stopped (the swing is over) they let it go: turning on
+    would catch its wall and drag it back down.
     """
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
@@ -57,6 +60,10 @@ class Tilt:
                 self.frame = frame.located(tool, gripper.width())
             return lambda s: self.frame.tilt_pose(tool, s * self.angle)
 
+        def swung() -> bool:
+            # The jaws close fast once the part has turned ahead of them towards upright.
+            return state["width"] - gripper.width() >= p.swing_stop
+
         def length(pose_at: Callable[[float], Pose]) -> float:
             return float(np.linalg.norm(pose_at(0.0).position - self.frame.pivot)) * self.angle
 
@@ -74,9 +81,20 @@ class Tilt:
                 gain=p.tilt_compliance,
                 limit=p.tilt_backoff,
             ),
+            stop_when=swung,
         )
+        def let_go() -> None:
+            if self.arc.stopped_early:  # the part swung up ahead: do not drag it back down
+                gripper.open(gripper.width() + p.release)
+
         self.sequence = Sequence(
-            "tilt", [self.arc.motion(), wait("let the part settle", dev, p.tilt_guard, p.settle)]
+            "tilt",
+            [
+                self.arc.motion(),
+                dev.grip("let the swing end", p.tilt_guard, lambda: None, settle=0.3),
+                dev.grip("let a swung part go", p.tilt_guard, let_go),
+                wait("let the part settle", dev, p.tilt_guard, p.settle),
+            ],
         )
 
     @property

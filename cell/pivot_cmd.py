@@ -1,0 +1,239 @@
+"""``cell pivot``: randomized pivot trials of one part in the PyBullet twin (issue 4).
+
+Contract (scripts rely on it)::
+
+    cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE
+
+Trial ``i`` runs with seed ``S + i``; the same seed gives the same trial. Everything the user
+gives is checked before anything is simulated: an unknown part, a part the planner declines
+(hole narrower than the finger, deformable, ...), a cell YAML that fails validation or puts the
+pick out of the arm's reach all end with one line naming the file, key and reason, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import multiprocessing
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from cell.catalogue import load_catalogue
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Gripper
+from skills.mechanics.planner import PivotPlan, plan_pivot
+
+if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
+    from cell.pivot_run import TrialResult, TrialSetup
+
+
+class PivotInputError(ValueError):
+    """Bad input for ``cell pivot`` (reported in one line, exit 2)."""
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "pivot",
+        help="randomized Grasp/Tilt/Align trials of one part in the PyBullet twin",
+        description="Run N perturbed pivot trials of a catalogue part in the simulated cell "
+        "(position +-3 mm, yaw +-3 deg, frictions +-20 %, mass +-10 %), judged from the "
+        "simulated state, and write the success rate with its Wilson 95 % interval as JSON.",
+    )
+    p.add_argument("--part", required=True, help="part name from the catalogue")
+    p.add_argument("--trials", type=int, default=30, help="number of trials (30)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first trial; trial i: S+i")
+    p.add_argument(
+        "--mu-ground",
+        type=float,
+        default=None,
+        help="part-floor friction coefficient, used exactly (not perturbed); default 0.4 +-20 %%",
+    )
+    p.add_argument("--record", type=Path, default=None, help="GIF of the first trial")
+    p.add_argument("--json", type=Path, required=True, help="where to write the results")
+    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
+    p.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (1)")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="run a part the planner declines, at --la/--alpha (reported as forced)",
+    )
+    p.add_argument("--la", type=float, default=None, help="with --force: l_a to use (0.9)")
+    p.add_argument(
+        "--alpha", type=float, default=None, help="with --force: alpha in rad (0.3142, the paper's)"
+    )
+    p.set_defaults(func=cmd_pivot)
+
+
+def _progress(done: int, total: int, ok: int, wall: float) -> None:
+    width = 30
+    filled = int(round(width * done / max(1, total)))
+    rate = wall / max(1, done)
+    sys.stderr.write(
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total}  ok {ok}  {rate:.1f} s/trial"
+    )
+    sys.stderr.flush()
+
+
+def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
+    from cell.pivot_run import run_trial
+
+    setup, seed = args
+    return run_trial(setup, seed)
+
+
+def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
+    """Everything checked, nothing simulated: the trial setup, the plan, whether forced."""
+    from cell.pivot_run import TrialSetup
+    from sim.cell_layout import CellLayout
+
+    if args.trials < 1:
+        raise PivotInputError(f"--trials: must be >= 1, got {args.trials}")
+    if args.jobs < 1:
+        raise PivotInputError(f"--jobs: must be >= 1, got {args.jobs}")
+    if args.mu_ground is not None and not (math.isfinite(args.mu_ground) and args.mu_ground >= 0):
+        raise PivotInputError(f"--mu-ground: must be a finite number >= 0, got {args.mu_ground}")
+    if args.record is not None and args.record.suffix.lower() != ".gif":
+        raise PivotInputError(f"--record: {args.record}: the animation is written as a .gif")
+    catalogue = load_catalogue(args.catalogue)
+    part = catalogue.get(args.part)
+    layout = CellLayout.from_yaml(args.cell) if args.cell is not None else CellLayout()
+    frictions = Frictions()
+    gripper = Gripper()
+    plan = plan_pivot(part, gripper, frictions)
+    forced = False
+    if not plan.pivotable:
+        where = f"{catalogue.path}: parts.{part.name}"
+        if not args.force:
+            raise PivotInputError(
+                f"{where}: not pivotable: {plan.reason} (--force --la L --alpha A tries anyway)"
+            )
+        if gripper.finger_width >= part.hole:
+            raise PivotInputError(
+                f"{where}: hole_mm: {part.hole * 1e3:g} mm is narrower than the "
+                f"{gripper.finger_width * 1e3:g} mm finger: no finger can enter it, not even "
+                "with --force"
+            )
+        forced = True
+        plan = dataclasses.replace(
+            plan,
+            l_a=0.9 if args.la is None else args.la,
+            alpha=0.3142 if args.alpha is None else args.alpha,
+        )
+    elif args.la is not None or args.alpha is not None:
+        raise PivotInputError("--la/--alpha: only with --force on a part the planner declines")
+    setup = TrialSetup(part=part, plan=plan, frictions=frictions, layout=layout)
+    if args.mu_ground is not None:
+        setup = dataclasses.replace(setup, mu_ground=args.mu_ground)
+    reason = setup.reach_problem()
+    if reason is not None:
+        source = str(args.cell) if args.cell is not None else "the default cell layout"
+        raise PivotInputError(f"{source}: bin_center: {reason}")
+    return setup, plan, forced
+
+
+def cmd_pivot(args: argparse.Namespace) -> int:
+    from cell.cli import UserError, _write_json
+    from cell.pivot_run import summarize
+
+    try:
+        setup, plan, forced = build_setup(args)
+    except PivotInputError as exc:
+        raise UserError(str(exc)) from None
+    seeds = [args.seed + i for i in range(args.trials)]
+    wall0 = time.perf_counter()
+    results: list[TrialResult] = []
+    recorded: Path | None = None
+    first = 0
+    if args.record is not None:
+        results.append(_recorded_trial(setup, seeds[0], args.record))
+        recorded = args.record
+        first = 1
+        _progress(1, len(seeds), sum(r.success for r in results), time.perf_counter() - wall0)
+    rest = [(setup, s) for s in seeds[first:]]
+    if args.jobs > 1 and len(rest) > 1:
+        with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
+            for r in pool.imap(_trial, rest):
+                results.append(r)
+                _progress(
+                    len(results),
+                    len(seeds),
+                    sum(x.success for x in results),
+                    time.perf_counter() - wall0,
+                )
+    else:
+        for item in rest:
+            results.append(_trial(item))
+            _progress(
+                len(results),
+                len(seeds),
+                sum(x.success for x in results),
+                time.perf_counter() - wall0,
+            )
+    sys.stderr.write("\n")
+    wall = time.perf_counter() - wall0
+    summary = summarize(setup.part.name, results)
+    summary.update(
+        {
+            "seed": args.seed,
+            "forced": forced,
+            "mu_ground": args.mu_ground,
+            "plan": plan.to_json(),
+            "physics": setup.physics_json(),
+            "wall_time_s": wall,
+            "recorded": None if recorded is None else str(recorded),
+        }
+    )
+    _write_json(args.json, summary)
+    print(_format_summary(summary, results, wall))
+    print(f"wrote {args.json}" + (f" and {recorded}" if recorded else ""))
+    return 0
+
+
+def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
+    from cell.pivot_run import run_trial
+    from sim.recorder import Recorder
+
+    rec: dict[str, Recorder] = {}
+    cx, cy = setup.nominal_center()
+
+    def on_frame(world: Any, robot: Any) -> None:
+        if "r" not in rec:
+            yaw = setup.nominal_yaw
+            normal = (math.sin(yaw), -math.cos(yaw), 0.0)
+            target = (cx, cy, 0.5 * setup.part.length)
+            rec["r"] = Recorder(world, target, normal, distance=0.30, height=0.18)
+        rec["r"].capture()
+
+    result = run_trial(setup, seed, on_frame=on_frame, frame_every=12)
+    if "r" in rec:
+        rec["r"].save_gif(path, fps=12)
+    return result
+
+
+def _format_summary(summary: dict[str, Any], results: list[TrialResult], wall: float) -> str:
+    k, n = summary["successes"], summary["trials"]
+    lo, hi = summary["wilson95"]
+    lines = [
+        f"part        {summary['part']}"
+        + ("  (FORCED past the planner)" if summary["forced"] else ""),
+        f"success     {k}/{n}  ({100.0 * k / n:.0f} %, Wilson 95 % interval "
+        f"{100 * lo:.0f}-{100 * hi:.0f} %)",
+    ]
+    failures: dict[str, int] = {}
+    for r in results:
+        if not r.success and r.failure:
+            key = r.failure.split(":")[0] if "guard" in r.failure else r.failure
+            failures[key] = failures.get(key, 0) + 1
+    for reason, count in sorted(failures.items(), key=lambda kv: -kv[1]):
+        lines.append(f"  failed    {count} x {reason}")
+    sim = sum(r.sim_time for r in results)
+    trial_wall = sum(r.wall_time for r in results)
+    lines.append(
+        f"time        {sim:.0f} s simulated in {trial_wall:.0f} s of trials "
+        f"({sim / max(trial_wall, 1e-9):.1f}x real time), {wall:.0f} s wall"
+    )
+    return "\n".join(lines)
