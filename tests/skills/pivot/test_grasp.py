@@ -1,5 +1,6 @@
 """Tick-level tests of Grasp, Tilt and the guards against fake devices."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,7 @@ FRAME = PivotFrame(SECTION, np.array([0.5, 0.0, 0.017]), 0.0)
 PARAMS = PivotParams(l_a=0.9, alpha=math.radians(16.3))
 
 
-def devices(object_width=0.003):
+def devices(object_width=0.055):
     return {
         "arm": FakeArm(),
         "gripper": FakeGripper(object_width),
@@ -33,17 +34,25 @@ def make_grasp(d):
     return Grasp(FRAME, PARAMS, dev(d))
 
 
-def test_grasp_opens_approaches_and_closes() -> None:
+def test_grasp_opens_approaches_and_closes_keeping_s_put() -> None:
     d = devices()
-    result, ticks = run(make_grasp(d), d)
+    grasp = make_grasp(d)
+    result, ticks = run(grasp, d)
     assert result.status is Status.SUCCESS, result.message
     kinds = [c[0] for c in d["arm"].commands]
-    assert kinds == ["path", "path", "path"]  # above the open end, along the fingers, press
+    assert kinds == ["path", "path"]  # above the open end, then along the fingers
     at_grasp = d["arm"].commands[1][1][-1]
-    assert np.allclose(at_grasp.position, FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005).position)
-    pressed = d["arm"].commands[2][1][-1]
-    assert np.allclose(at_grasp.position - pressed.position, [0, 0, PARAMS.press_depth])
-    assert d["gripper"].closed_on == pytest.approx(0.003)
+    planned = FRAME.grasp_pose(0.9, PARAMS.alpha, PARAMS.tip_offset)
+    x = planned.rotation[:, 0]
+    opening = FRAME.opening(0.9, PARAMS.alpha) + PARAMS.approach_clearance
+    # the outer finger's pad (TCP + w/2 x) starts on S, pressed press_depth into it
+    outer_start = at_grasp.position + 0.5 * opening * x
+    outer_planned = planned.position + 0.5 * FRAME.opening(0.9, PARAMS.alpha) * x
+    assert np.allclose(outer_start, outer_planned - [0, 0, PARAMS.press_depth], atol=1e-9)
+    # closing: the TCP followed the outer finger, which stayed put (up to the lead)
+    outer_end = d["arm"].pose.position + 0.5 * d["gripper"].width() * x
+    assert np.linalg.norm(outer_end - outer_start) == pytest.approx(PARAMS.close_lead, abs=1e-9)
+    assert d["gripper"].closed_on == pytest.approx(0.055)
 
 
 def test_grasp_fails_when_the_fingers_close_on_nothing() -> None:
@@ -85,13 +94,38 @@ def test_grasp_refuses_an_opening_beyond_the_stroke() -> None:
         make_grasp(d)
 
 
-def test_tilt_follows_the_arc() -> None:
+def test_tilt_streams_the_arc_to_just_past_the_tip_angle() -> None:
     d = devices()
     grasp_pose = FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005)
     d["arm"].pose = grasp_pose
-    tilt = Tilt(FRAME, PARAMS, dev(d))
+    targets = []
+    servo = d["arm"].servo
+    d["arm"].servo = lambda pose: (targets.append(pose), servo(pose))
+    params = dataclasses.replace(PARAMS, locate_pivot=False)
+    tilt = Tilt(FRAME, params, dev(d))
     result, _ = run(tilt, d)
     assert result.status is Status.SUCCESS
-    path = d["arm"].commands[0][1]
-    assert len(path) == 45
-    assert np.allclose(path[-1].position, FRAME.tilt_pose(grasp_pose, math.pi / 2).position)
+    angle = SECTION.tip_angle + params.tilt_past_tip
+    assert tilt.angle == pytest.approx(angle)
+    assert len(targets) > 100  # one target per control step, not one long move
+    for pose in targets[::10]:  # every target lies on the arc about P_c
+        r = np.linalg.norm(pose.position - FRAME.pivot)
+        assert r == pytest.approx(np.linalg.norm(grasp_pose.position - FRAME.pivot), abs=1e-9)
+    assert np.allclose(targets[-1].position, FRAME.tilt_pose(grasp_pose, angle).position)
+
+
+def test_tilt_stops_and_lets_go_when_the_part_swings_ahead() -> None:
+    d = devices()
+    d["arm"].pose = FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005)
+    d["gripper"]._width = 0.055
+    params = dataclasses.replace(PARAMS, locate_pivot=False)
+    tilt = Tilt(FRAME, params, dev(d))
+
+    def swing(i: int) -> None:
+        if i == 200:  # S loses the part: the jaws close in by 20 mm
+            d["gripper"]._width = 0.035
+
+    result, _ = run(tilt, d, on_tick=swing)
+    assert result.status is Status.SUCCESS
+    assert tilt.arc.stopped_early and tilt.theta < tilt.angle
+    assert d["gripper"].width() == pytest.approx(0.035 + params.release)  # let go
