@@ -3,6 +3,8 @@ that one finger drops into the hole and the other lands on the top surface at l,
 
 from __future__ import annotations
 
+import math
+
 from drivers.pose import Pose
 from skills.motion import Devices, GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
@@ -42,6 +44,9 @@ class Grasp:
         pre = Pose(pre.position - shift, pre.rotation)
         g = p.guard
         state: dict[str, float] = {}
+        # The lead climbs by sin(alpha) along the closing line: keep that within half the press
+        # so the outer finger stays on S (the cookie can's 33 deg lifted it off at 1 mm).
+        lead = min(p.close_lead, 0.5 * p.press_depth / max(math.sin(p.alpha), 1e-6))
 
         def close() -> None:
             state["w0"] = gripper.width()
@@ -55,8 +60,8 @@ class Grasp:
             # moves. When the inner finger stops at H the lead is all S is dragged.
             closing = state["w0"] - gripper.width()
             x = self.target.rotation[:, 0]
-            shift = 0.5 * closing + p.close_lead
-            arm.servo(Pose(self.target.position + shift * x, self.target.rotation))
+            position = self.target.position + (0.5 * closing + lead) * x
+            arm.servo(Pose(position, self.target.rotation))
             if gripper.moving():
                 state["t"] = dev.clock.now()
                 return False

@@ -83,6 +83,7 @@ class Tilt:
             ),
             stop_when=swung,
         )
+
         def let_go() -> None:
             if self.arc.stopped_early:  # the part swung up ahead: do not drag it back down
                 gripper.open(gripper.width() + p.release)
