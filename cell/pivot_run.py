@@ -111,16 +111,18 @@ class TrialSetup:
     def nominal_center(self) -> tuple[float, float]:
         """The part's centre (m, world) the skills are told.
 
-        By default the open end lies 0.555 m in front of the robot, or nearer when the gripper,
-        tilted by alpha over the open end, would otherwise reach over the bin's far wall.
+        By default the open end lies 0.555 m in front of the robot (further when the bin is), or
+        nearer when the gripper, tilted by alpha over the open end, would otherwise reach over
+        the bin's far wall.
         """
         if self.open_end_xy is not None:
             xo, yo = self.open_end_xy
         else:
             assert self.plan.alpha is not None
-            x_max = self.layout.bin_interior()[1]
+            x_min, x_max = self.layout.bin_interior()[:2]
             reach = GRIPPER_REACH * math.sin(self.plan.alpha) + 0.03
-            xo, yo = min(0.555, x_max - reach), self.layout.bin_center[1]
+            xo = min(max(0.555, x_min + self.part.length + 0.04), x_max - reach)
+            yo = self.layout.bin_center[1]
         half = 0.5 * self.part.length
         return (xo - half * math.cos(self.nominal_yaw), yo - half * math.sin(self.nominal_yaw))
 

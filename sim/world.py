@@ -12,13 +12,52 @@ Physics settings and why (measured for this cell; see README):
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import ctypes
+import os
+import sys
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet
-import pybullet_data
-from pybullet_utils.bullet_client import BulletClient
+
+
+def _flush_c_stdio() -> None:
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C library to flush (not glibc-like)
+        pass
+
+
+@contextlib.contextmanager
+def _quiet(fds: tuple[int, ...] = (1, 2)) -> Iterator[None]:
+    """Silence the C library's output on the file descriptors ``fds`` for the block."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved: list[tuple[int, int]] = []
+    try:
+        with open(os.devnull, "wb") as null:
+            for fd in fds:
+                try:
+                    saved.append((fd, os.dup(fd)))
+                    os.dup2(null.fileno(), fd)
+                except OSError:  # not a real descriptor (captured output): leave it
+                    pass
+            try:
+                yield
+            finally:
+                _flush_c_stdio()  # what C buffered goes to /dev/null, not out at exit
+                for fd, copy in saved:
+                    os.dup2(copy, fd)
+    finally:
+        for _, copy in saved:
+            os.close(copy)
+
+
+with _quiet():  # its import prints its build time
+    import pybullet
+    import pybullet_data
+    from pybullet_utils.bullet_client import BulletClient
 
 
 @dataclass(frozen=True)
@@ -57,7 +96,8 @@ class SimWorld:
         self, seed: int = 0, settings: PhysicsSettings | None = None, gui: bool = False
     ) -> None:
         self.settings = settings or PhysicsSettings()
-        self.p = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        with _quiet((1,)):  # PyBullet's C code prints "argv[0]=" on every connect
+            self.p = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         self.p.setAdditionalSearchPath(pybullet_data.getDataPath())
         self.p.setGravity(0.0, 0.0, -self.settings.gravity)
         self.p.setPhysicsEngineParameter(

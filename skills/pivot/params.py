@@ -36,6 +36,7 @@ class PivotParams:
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
     tilt_backoff: float = 0.0  #: m, the most the TCP gives way (0: a rigid arc)
     swing_stop: float = 0.015  #: m of jaw closing along the arc that means the part swung ahead
+    swing_window: float = math.radians(15.0)  #: rad before the tip-over angle where swings count
     settle: float = 1.0  #: s to let the part come to rest after the arc
     clear_height: float = 0.03  #: m above the rim for moves over the standing part
     view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part

@@ -61,7 +61,12 @@ class Tilt:
             return lambda s: self.frame.tilt_pose(tool, s * self.angle)
 
         def swung() -> bool:
-            # The jaws close fast once the part has turned ahead of them towards upright.
+            # The jaws close fast once the part has turned ahead of them towards upright. Well
+            # before the tip-over angle a closing is S sliding towards the rim instead (the
+            # paper's drifting l_a): the arc goes on.
+            if self.arc.progress * self.angle < tip - p.swing_window:
+                state["width"] = min(state["width"], gripper.width())
+                return False
             return state["width"] - gripper.width() >= p.swing_stop
 
         def length(pose_at: Callable[[float], Pose]) -> float:
