@@ -181,7 +181,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.all == (args.part is not None):
         raise UserError("give exactly one of --part NAME or --all")
     names = list(catalogue.parts) if args.all else [args.part]
-    gripper = Gripper(finger_width=args.finger_width, stroke=args.stroke, clearance=args.clearance)
+    gripper = Gripper(
+        finger_width=args.finger_width,
+        stroke=args.stroke,
+        clearance=args.clearance,
+        finger_length=args.finger_length,
+    )
     options = PlannerOptions(
         la_max=args.la_max,
         full_tilt=args.full_tilt,
@@ -258,6 +263,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=Gripper.clearance,
         help="extra jaw opening for the approach, m (0.010)",
+    )
+    p.add_argument(
+        "--finger-length",
+        type=float,
+        default=Gripper.finger_length,
+        help="how far the pads reach below the palm, m (0.055): bounds the hook depth",
     )
     p.add_argument(
         "--la-max",

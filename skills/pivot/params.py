@@ -32,9 +32,9 @@ class PivotParams:
     locate_pivot: bool = True  #: place P_c from where the closed grasp found the rim
     tilt_squeeze: float | None = None  #: m the jaws may still close along the arc (None: free)
     tilt_axes: tuple[bool, bool, bool] = (False, False, True)  #: tool axes that give way
-    tilt_press: float = 8.0  #: N the fingers may press on the part along the arc
+    tilt_press: float = 30.0  #: N the fingers may press along the arc before the TCP gives way
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
-    tilt_backoff: float = 0.0  #: m, the most the TCP gives way (0: a rigid arc)
+    tilt_backoff: float = 0.004  #: m, the most the TCP gives way along the fingers (0: rigid)
     swing_stop: float = 0.015  #: m of jaw closing along the arc that means the part swung ahead
     swing_window: float = math.radians(15.0)  #: rad before the tip-over angle where swings count
     settle: float = 1.0  #: s to let the part come to rest after the arc
