@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from cell.catalogue import load_catalogue
 from skills.mechanics.contact import Frictions
 from skills.mechanics.part import Gripper
-from skills.mechanics.planner import PivotPlan, plan_pivot
+from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
     from cell.pivot_run import TrialResult, TrialSetup
@@ -61,9 +61,11 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="run a part the planner declines, at --la/--alpha (reported as forced)",
     )
-    p.add_argument("--la", type=float, default=None, help="with --force: l_a to use (0.9)")
     p.add_argument(
-        "--alpha", type=float, default=None, help="with --force: alpha in rad (0.3142, the paper's)"
+        "--la", type=float, default=None, help="with --force: l_a (largest that fits, <= 0.9)"
+    )
+    p.add_argument(
+        "--alpha", type=float, default=None, help="with --force: alpha in rad (0.3142, 18 deg)"
     )
     p.set_defaults(func=cmd_pivot)
 
@@ -118,11 +120,24 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
                 "with --force"
             )
         forced = True
-        plan = dataclasses.replace(
-            plan,
-            l_a=0.9 if args.la is None else args.la,
-            alpha=0.3142 if args.alpha is None else args.alpha,
-        )
+        alpha = 0.3142 if args.alpha is None else args.alpha
+        if not 0.0 < alpha < 0.5 * math.pi:
+            raise PivotInputError(f"--alpha: must lie in (0, pi/2) rad, got {alpha:g}")
+        section = part.section(gripper.finger_width)
+        usable = gripper.stroke - gripper.clearance
+        # By default the largest l_a (at most 0.9) whose jaw opening fits the stroke.
+        la_fit = (usable - section.delta * math.sin(alpha)) / (2 * section.a * math.cos(alpha))
+        l_a = min(0.9, la_fit) if args.la is None else args.la
+        if not 0.0 < l_a <= 1.0:
+            raise PivotInputError(f"--la: must lie in (0, 1], got {l_a:g}")
+        opening = float(jaw_opening(section, l_a, alpha))
+        if opening > usable + 1e-9:
+            raise PivotInputError(
+                f"--la/--alpha: the grasp needs a {opening * 1e3:.0f} mm jaw opening plus "
+                f"{gripper.clearance * 1e3:.0f} mm clearance, the stroke is "
+                f"{gripper.stroke * 1e3:.0f} mm"
+            )
+        plan = dataclasses.replace(plan, l_a=l_a, alpha=alpha, delta_m=section.delta)
     elif args.la is not None or args.alpha is not None:
         raise PivotInputError("--la/--alpha: only with --force on a part the planner declines")
     setup = TrialSetup(part=part, plan=plan, frictions=frictions, layout=layout)
@@ -205,7 +220,7 @@ def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
             yaw = setup.nominal_yaw
             normal = (math.sin(yaw), -math.cos(yaw), 0.0)
             target = (cx, cy, 0.5 * setup.part.length)
-            rec["r"] = Recorder(world, target, normal, distance=0.30, height=0.18)
+            rec["r"] = Recorder(world, target, normal, distance=0.24, height=0.15)
         rec["r"].capture()
 
     result = run_trial(setup, seed, on_frame=on_frame, frame_every=12)

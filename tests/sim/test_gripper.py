@@ -64,13 +64,16 @@ def test_closing_on_a_box_stalls_and_detects_it(world: SimWorld) -> None:
     assert g.width() == pytest.approx(0.085, abs=2e-3)
 
 
-def test_grip_force_is_the_commanded_force(world: SimWorld) -> None:
+@pytest.mark.parametrize("force", [2.0, 15.0])
+def test_grip_force_is_the_commanded_force(world: SimWorld, force: float) -> None:
+    """The forces the pivot uses (2 N pivoting, 15 N holding). Above about 25 N per finger the
+    coupled twin saturates (measured 25.5 N for 30, 60 and 100 N commanded; see the README)."""
     add_floor(world)
     robot = SimRobot(world)
     box = add_box(world, [0.02, 0.015, 0.03], [0.5, 0.0, 0.03], mass=0.1)
     robot.arm.move_to(Pose(np.array([0.5, 0.0, 0.04]), HOME_TCP.rotation), 0.2, 1.0)
     run_motion(world, robot)
-    robot.gripper.close(force=30.0)
+    robot.gripper.close(force=force)
     run_until(world, lambda: not robot.gripper.moving(), 2.0)
     for _ in range(10):
         world.step()
@@ -78,7 +81,7 @@ def test_grip_force_is_the_commanded_force(world: SimWorld) -> None:
         link = robot.gripper.finger_link(name)
         contacts = world.p.getContactPoints(robot.body_id, box, link)
         normal = sum(c[9] for c in contacts)
-        assert normal == pytest.approx(30.0, rel=0.05), name
+        assert normal == pytest.approx(force, rel=0.05), name
 
 
 def test_finger_friction_and_links(robot: SimRobot) -> None:
