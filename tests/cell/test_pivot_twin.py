@@ -65,8 +65,8 @@ def test_the_pivot_fails_when_the_fingers_do_not_close(bushing_setup: TrialSetup
     r = run_trial(bushing_setup, SEED, on_frame=numb_gripper, frame_every=1)
     assert not r.success
     assert r.failure is not None
-    # the part never stood up: it is still lying on the floor
-    assert r.tilt_deg > 80.0
+    # the part never stood up: it is still far from upright (it lies, or leans on the fingers)
+    assert r.tilt_deg > 45.0
 
 
 def test_sim_devices_implement_the_interfaces() -> None:
