@@ -33,7 +33,7 @@ from sim.world import SimWorld
 FINGER_NAMES = ("finger_a", "finger_b")
 STILL_SPEED = 0.002  #: m/s: a finger slower than this is still
 STALL_STEPS = 5  #: control steps a finger must stay still to count as stalled (40 ms at 125 Hz)
-ARRIVED = 0.0004  #: m: a finger within this of its target has arrived (about one 2F-85 position step)
+ARRIVED = 0.0004  #: m: a finger this near its target has arrived (about one 2F-85 step)
 OPEN_FORCE = 100.0  #: N per finger when opening
 LOST = 0.003  #: m: after a stall, the opening closing in by this much means the part is lost
 RATCHET_SLACK = 0.0002  #: m a self-locking finger may be pushed back open

@@ -92,7 +92,11 @@ def test_ft_guard_trips_when_the_arm_is_driven_into_the_floor() -> None:
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock)
         floor_target = Pose(np.array([0.45, 0.0, -0.05]), HOME_TCP.rotation)  # 5 cm into it
         motion = arm_motion(
-            "into the floor", robot.arm, robot.ft, world.clock, Guard(max_force=40.0),
+            "into the floor",
+            robot.arm,
+            robot.ft,
+            world.clock,
+            Guard(max_force=40.0),
             lambda: robot.arm.move_to(floor_target, 0.05, 0.5),
         )
         result = motion.tick()
