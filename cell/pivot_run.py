@@ -106,6 +106,7 @@ class TrialSetup:
             "substeps": s.substeps,
             "physics_dt_s": s.physics_dt,
             "solver_iterations": s.solver_iterations,
+            "solver_residual": s.solver_residual,
         }
 
     def nominal_center(self) -> tuple[float, float]:

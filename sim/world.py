@@ -65,6 +65,10 @@ class PhysicsSettings:
     control_hz: float = 125.0
     substeps: int = 2
     solver_iterations: int = 100
+    #: The solver stops iterating once its residual is below this. PyBullet's default (1e-7)
+    #: spends all 100 iterations on nearly every step; 1e-4 converges the same contacts
+    #: (pivot success unchanged) at about 1.6x the speed.
+    solver_residual: float = 1e-4
     gravity: float = 9.81
 
     @property
@@ -103,6 +107,7 @@ class SimWorld:
         self.p.setPhysicsEngineParameter(
             fixedTimeStep=self.settings.physics_dt,
             numSolverIterations=self.settings.solver_iterations,
+            solverResidualThreshold=self.settings.solver_residual,
             deterministicOverlappingPairs=1,
         )
         self.rng = np.random.default_rng(seed)

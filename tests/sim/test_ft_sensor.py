@@ -60,7 +60,7 @@ def test_torque_is_about_the_sensor_origin(world: SimWorld, robot: SimRobot) -> 
     robot.arm.reset_joints(q)
     settle(world, 60)
     pose = robot.arm.tool_pose()
-    assert abs(pose.rotation[2, 2]) < 1e-5  # tool z horizontal
+    assert abs(pose.rotation[2, 2]) < 1e-4  # tool z horizontal (to 0.1 mrad of sag)
     com_z = (
         rm.FT_MASS * rm.FT_HEIGHT / 2
         + rm.GRIPPER_BODY_MASS * (rm.FT_HEIGHT + rm.GRIPPER_BODY_SIZE[2] / 2)
@@ -87,7 +87,7 @@ def test_pressing_the_fingertips_into_a_floor_gives_negative_fz(world: SimWorld)
     run_motion(world, robot)
     assert arm.status().protective_stop
     w = ft.wrench()
-    assert w[2] < -30.0  # the floor pushes the tool back towards the flange
+    assert w[2] < -10.0  # the floor pushes the tool back towards the flange
     assert abs(w[0]) < 0.2 * abs(w[2]) and abs(w[1]) < 0.2 * abs(w[2])
 
 
