@@ -73,7 +73,8 @@ def main() -> None:
     print(f"machine      {platform.processor() or platform.machine()}, {os.cpu_count()} cores")
     print(
         f"physics      {s.control_hz:g} Hz control, {s.substeps} substeps "
-        f"({1.0 / s.physics_dt:g} Hz), {s.solver_iterations} solver iterations"
+        f"({1.0 / s.physics_dt:g} Hz), {s.solver_iterations} solver iterations, residual "
+        f"{s.solver_residual:g}"
     )
     print(f"pivot RTF    {sim_t / step_t:5.1f}x real time (stepping with the skills, camera off)")
     print(f"trial RTF    {sim_t / wall_t:5.1f}x real time (whole trial: set-up, pivot, camera)")

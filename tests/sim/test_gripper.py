@@ -81,8 +81,7 @@ def test_grip_force_is_the_commanded_force(world: SimWorld, force: float) -> Non
         link = robot.gripper.finger_link(name)
         contacts = world.p.getContactPoints(robot.body_id, box, link)
         normal = sum(c[9] for c in contacts)
-        # 5 %, or 0.2 N: the solver stops at a residual of 1e-4 (PhysicsSettings)
-        assert normal == pytest.approx(force, rel=0.05, abs=0.2), name
+        assert normal == pytest.approx(force, rel=0.05), name
 
 
 def test_finger_friction_and_links(robot: SimRobot) -> None:
