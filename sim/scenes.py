@@ -1,0 +1,128 @@
+"""Random bin scenes for perception: parts lying on the bin floor, some touching, and the wrist
+camera's view of them. Ground truth is returned for *scoring only*; nothing here reaches a skill.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.pose import Pose
+from sim.cell_layout import CellLayout
+from sim.part_body import PartBody, lying_pose, spawn_part
+from sim.world import SimWorld
+from skills.mechanics.part import Part
+
+#: Tool pointing straight down (tool z = -world z): the wrist camera then looks down too.
+DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+@dataclass(frozen=True)
+class PartTruth:
+    """Where a spawned part really is (m, rad; world = robot base frame)."""
+
+    name: str
+    center: NDArray[np.float64]  #: part centre
+    yaw: float  #: direction of the part's +x axis (towards its open end), in (-pi, pi]
+    open_end: NDArray[np.float64]  #: centre of the +x end face
+    body: int
+
+
+def _footprint(part: Part, x: float, y: float, yaw: float, margin: float) -> NDArray[np.float64]:
+    c, s = math.cos(yaw), math.sin(yaw)
+    hl, hw = 0.5 * part.length + margin, 0.5 * part.outer + margin
+    corners = np.array([[hl, hw], [hl, -hw], [-hl, -hw], [-hl, hw]])
+    return corners @ np.array([[c, s], [-s, c]]) + [x, y]
+
+
+def _overlap(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
+    """Separating-axis test of two convex quadrilaterals (corners in order)."""
+    for poly in (a, b):
+        for i in range(4):
+            edge = poly[(i + 1) % 4] - poly[i]
+            n = np.array([-edge[1], edge[0]])
+            pa, pb = a @ n, b @ n
+            if pa.max() < pb.min() or pb.max() < pa.min():
+                return False
+    return True
+
+
+def random_bin_scene(
+    world: SimWorld,
+    layout: CellLayout,
+    parts: list[Part],
+    rng: np.random.Generator,
+    n_parts: int,
+    touching: float = 0.4,
+    wall_margin: float = 0.02,
+    settle_s: float = 0.6,
+) -> list[tuple[PartBody, PartTruth]]:
+    """Spawn ``n_parts`` parts drawn from ``parts`` lying in the bin at random poses; with
+    probability ``touching`` a part is laid side by side against one already there. Lets them
+    settle, then reports where they really are."""
+    x0, x1, y0, y1 = layout.bin_interior()
+    placed: list[tuple[Part, float, float, float]] = []
+    shapes: list[NDArray[np.float64]] = []
+    for _ in range(n_parts):
+        part = parts[int(rng.integers(len(parts)))]
+        for _attempt in range(200):
+            if placed and rng.random() < touching:
+                other, ox, oy, oyaw = placed[int(rng.integers(len(placed)))]
+                side = 1.0 if rng.random() < 0.5 else -1.0
+                gap = 0.5 * (part.outer + other.outer) + 0.0005
+                n = np.array([-math.sin(oyaw), math.cos(oyaw)])
+                slide = rng.uniform(-0.3, 0.3) * other.length
+                x = ox + side * gap * n[0] + slide * math.cos(oyaw)
+                y = oy + side * gap * n[1] + slide * math.sin(oyaw)
+                yaw = oyaw + (math.pi if rng.random() < 0.5 else 0.0)
+            else:
+                x, y = rng.uniform(x0, x1), rng.uniform(y0, y1)
+                yaw = rng.uniform(-math.pi, math.pi)
+            box = _footprint(part, x, y, yaw, 0.0)
+            inside = (
+                box[:, 0].min() > x0 + wall_margin
+                and box[:, 0].max() < x1 - wall_margin
+                and box[:, 1].min() > y0 + wall_margin
+                and box[:, 1].max() < y1 - wall_margin
+            )
+            shrunk = _footprint(part, x, y, yaw, -0.0003)
+            if inside and not any(_overlap(shrunk, s) for s in shapes):
+                placed.append((part, x, y, yaw))
+                shapes.append(box)
+                break
+    bodies = [
+        spawn_part(world, part, lying_pose(part, x, y, yaw, layout.bin_floor_z))
+        for part, x, y, yaw in placed
+    ]
+    for _ in range(int(settle_s / world.settings.control_dt)):
+        world.step()
+    out = []
+    for (part, *_), body in zip(placed, bodies, strict=True):
+        axis = body.axis()
+        out.append(
+            (
+                body,
+                PartTruth(
+                    name=part.name,
+                    center=body.pose().position.copy(),
+                    yaw=math.atan2(axis[1], axis[0]),
+                    open_end=body.open_end_center(),
+                    body=body.body_id,
+                ),
+            )
+        )
+    return out
+
+
+def look_down_pose(
+    target_xy: NDArray[np.float64] | tuple[float, float],
+    height: float,
+    tool_T_camera: Pose,
+) -> Pose:
+    """Tool pose (tool pointing down) that puts the camera's optical centre ``height`` (m) above
+    ``target_xy`` on the floor."""
+    offset = DOWN @ tool_T_camera.position
+    return Pose(np.array([target_xy[0], target_xy[1], height]) - offset, DOWN)

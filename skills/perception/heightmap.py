@@ -1,0 +1,147 @@
+"""The bin seen as heights above its floor: the input every bin-picking segmenter starts from.
+
+The floor plane is found by RANSAC on the back-projected depth (it is the largest plane in view),
+so a tilted camera, a camera pose a little off or a bin that is not level do not matter; heights
+are distances above that plane, per pixel, NaN where the depth is invalid or outside the region
+of interest (the bin's inside in the base frame, shrunk by a margin so the walls drop out).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.camera import Frame, Intrinsics
+from drivers.pose import Pose
+
+
+class PerceptionInputError(ValueError):
+    """A frame, intrinsics or model that perception cannot work with (named in the message)."""
+
+
+@dataclass(frozen=True)
+class Plane:
+    normal: NDArray[np.float64]  #: unit, pointing up (towards the camera side)
+    offset: float  #: n . p = offset for points p on the plane (m)
+
+    def height(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        return points @ self.normal - self.offset
+
+
+@dataclass(frozen=True)
+class HeightMap:
+    height: NDArray[np.float32]  #: (H, W) m above the floor plane; NaN = no data / outside
+    points: NDArray[np.float32]  #: (H, W, 3) base-frame points (m); NaN where invalid
+    plane: Plane
+    pixel_size: float  #: m per pixel on the floor at the image centre (for window sizes)
+
+
+def check_frame(frame: Frame, intr: Intrinsics | None) -> None:
+    """Raise :class:`PerceptionInputError` naming what is wrong with the inputs."""
+    if intr is None:
+        raise PerceptionInputError("missing camera intrinsics")
+    depth = frame.depth
+    if not isinstance(depth, np.ndarray) or depth.ndim != 2:
+        raise PerceptionInputError(
+            f"depth must be an (H, W) array, got {getattr(depth, 'shape', type(depth).__name__)}"
+        )
+    if depth.dtype.kind != "f":
+        raise PerceptionInputError(f"depth must be floating point metres, got dtype {depth.dtype}")
+    if depth.shape != (intr.height, intr.width):
+        raise PerceptionInputError(
+            f"depth is {depth.shape[1]} x {depth.shape[0]} but the intrinsics say "
+            f"{intr.width} x {intr.height}"
+        )
+    if not np.any(depth > 0):
+        raise PerceptionInputError("the depth frame holds no valid pixel")
+
+
+def back_project_image(
+    depth: NDArray[np.floating], intr: Intrinsics, world_T_camera: Pose
+) -> NDArray[np.float32]:
+    """(H, W, 3) base-frame points; NaN where the depth is 0 (invalid)."""
+    h, w = depth.shape
+    v, u = np.mgrid[0:h, 0:w]
+    z = depth.astype(np.float64)
+    cam = np.stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z], axis=-1)
+    pts = cam.reshape(-1, 3) @ world_T_camera.rotation.T + world_T_camera.position
+    pts = pts.reshape(h, w, 3)
+    pts[z <= 0] = np.nan
+    return pts.astype(np.float32)
+
+
+def fit_floor(
+    points: NDArray[np.floating],
+    rng: np.random.Generator,
+    iterations: int = 60,
+    tolerance: float = 0.003,
+    up_hint: NDArray[np.float64] = np.array([0.0, 0.0, 1.0]),
+) -> Plane:
+    """RANSAC plane with the most inliers among planes within 25 deg of ``up_hint``, refined by
+    least squares on its inliers. ``points`` (N, 3) finite."""
+    n = len(points)
+    if n < 3:
+        raise PerceptionInputError("too few valid depth pixels to find the floor")
+    sample = points[rng.choice(n, size=min(n, 20000), replace=False)]
+    best, best_count = None, -1
+    idx = rng.integers(0, len(sample), size=(iterations, 3))
+    for i, j, k in idx:
+        a, b, c = sample[i], sample[j], sample[k]
+        nrm = np.cross(b - a, c - a)
+        norm = float(np.linalg.norm(nrm))
+        if norm < 1e-9:
+            continue
+        nrm = nrm / norm
+        if nrm @ up_hint < 0:
+            nrm = -nrm
+        if nrm @ up_hint < np.cos(np.radians(25.0)):
+            continue
+        count = int(np.count_nonzero(np.abs(sample @ nrm - nrm @ a) < tolerance))
+        if count > best_count:
+            best, best_count = (nrm, float(nrm @ a)), count
+    if best is None:
+        raise PerceptionInputError("no floor plane found in the depth frame")
+    nrm, off = best
+    inl = sample[np.abs(sample @ nrm - off) < tolerance]
+    centroid = inl.mean(axis=0)
+    _, _, vt = np.linalg.svd(inl - centroid, full_matrices=False)
+    nrm = vt[-1]
+    if nrm @ up_hint < 0:
+        nrm = -nrm
+    return Plane(normal=nrm, offset=float(nrm @ centroid))
+
+
+def height_map(
+    frame: Frame,
+    intr: Intrinsics,
+    world_T_camera: Pose,
+    roi: tuple[float, float, float, float] | None = None,
+    roi_margin: float = 0.008,
+    rng: np.random.Generator | None = None,
+) -> HeightMap:
+    """Heights above the floor for every pixel. ``roi`` = (xmin, xmax, ymin, ymax) in the base
+    frame (the bin's inside); pixels outside it, shrunk by ``roi_margin``, are NaN."""
+    check_frame(frame, intr)
+    rng = rng if rng is not None else np.random.default_rng(0)
+    pts = back_project_image(frame.depth, intr, world_T_camera)
+    valid = np.isfinite(pts[..., 0])
+    if roi is not None:
+        x0, x1, y0, y1 = roi
+        m = roi_margin
+        with np.errstate(invalid="ignore"):
+            valid &= (
+                (pts[..., 0] > x0 + m)
+                & (pts[..., 0] < x1 - m)
+                & (pts[..., 1] > y0 + m)
+                & (pts[..., 1] < y1 - m)
+            )
+    flat = pts[valid].astype(np.float64)
+    if len(flat) < 100:
+        raise PerceptionInputError("fewer than 100 valid depth pixels inside the bin")
+    plane = fit_floor(flat, rng)
+    height = np.full(valid.shape, np.nan, np.float32)
+    height[valid] = plane.height(flat).astype(np.float32)
+    z_mid = float(np.median(frame.depth[frame.depth > 0]))
+    return HeightMap(height=height, points=pts, plane=plane, pixel_size=z_mid / intr.fx)
