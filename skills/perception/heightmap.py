@@ -17,6 +17,9 @@ from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
 
 
+_UP = np.array([0.0, 0.0, 1.0])
+
+
 class PerceptionInputError(ValueError):
     """A frame, intrinsics or model that perception cannot work with (named in the message)."""
 
@@ -77,10 +80,11 @@ def fit_floor(
     rng: np.random.Generator,
     iterations: int = 60,
     tolerance: float = 0.003,
-    up_hint: NDArray[np.float64] = np.array([0.0, 0.0, 1.0]),
+    up_hint: NDArray[np.float64] | None = None,
 ) -> Plane:
     """RANSAC plane with the most inliers among planes within 25 deg of ``up_hint``, refined by
     least squares on its inliers. ``points`` (N, 3) finite."""
+    up_hint = _UP if up_hint is None else up_hint
     n = len(points)
     if n < 3:
         raise PerceptionInputError("too few valid depth pixels to find the floor")
