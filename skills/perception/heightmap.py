@@ -16,7 +16,6 @@ from numpy.typing import NDArray
 from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
 
-
 _UP = np.array([0.0, 0.0, 1.0])
 
 
