@@ -1,0 +1,315 @@
+"""Find every hollow part lying in the bin from one RGB-D frame (the classical pipeline).
+
+1. Heights above the floor (:mod:`skills.perception.heightmap`: RANSAC floor, bin ROI).
+2. Segmentation: foreground above ``min_height``; one seed per part from its gently sloped top
+   (the foreground cut at steep slopes: between touching parts, or a low part and a tall one,
+   the surfaces are steep), then a watershed on the heights grows the seeds over the flanks.
+   Two boxes touching side by side leave no valley; a segment as wide as ``n`` catalogue parts
+   of its height is cut into ``n`` strips along its axis.
+3. A fit per segment on its 3D points: the axis from the principal direction of the upper half
+   (the crest), the length from its extent, the outer size from the height (a lying part is as
+   tall as it is wide), the centre on the crest line at half height; the nearest catalogue part
+   by length and outer size names it.
+4. The end for the hole finger: a tube is open at both ends, so the end farther from the robot
+   (the gripper then swings back over the pivot, inside the bin). A cup or bottle: the end whose
+   inside is seen (floor-level points inside the part's footprint, seen through the opening);
+   when neither is seen the detection says so (``open_end_seen`` False).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.camera import Frame, Intrinsics
+from drivers.pose import Pose
+from skills.mechanics.part import Part
+from skills.perception.heightmap import HeightMap, height_map
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One part lying in the bin, in the robot base frame (m, rad)."""
+
+    center: NDArray[np.float64]  #: the part's centre (on its axis)
+    yaw: float  #: direction of the axis towards ``open_end``
+    length: float  #: estimated length
+    outer: float  #: estimated outer size (diameter or side)
+    part: str | None  #: nearest catalogue part, None when nothing is close
+    open_end: NDArray[np.float64]  #: centre of the end face the hole finger should use
+    open_end_seen: bool  #: True when the end was decided (tube, or its inside was seen)
+    confidence: float  #: 0..1, from the fit's agreement with the matched part
+    pixels: int
+
+    def pick(self) -> tuple[tuple[float, float], float]:
+        """The grasp target the pivot planner needs: (open end x, y) and the axis yaw."""
+        return (float(self.open_end[0]), float(self.open_end[1])), self.yaw
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    min_height: float = 0.0035  #: m above the floor that counts as a part (3 sigma at 0.5 m)
+    min_crest: float = 0.005  #: m, lowest crest that seeds a part (the 7.6 mm rail)
+    max_seed_slope: float = 1.0  #: seeds are flatter than this (rise over run)
+    min_seed: int = 30  #: pixels of the smallest seed
+    min_pixels: int = 150  #: smaller segments are noise
+    match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
+
+
+def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> NDArray[np.int32]:
+    """(H, W) labels: 0 background, 1..K part instances."""
+    h = np.nan_to_num(hm.height, nan=0.0).astype(np.float32)
+    fg = h > settings.min_height
+    fg = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
+    # Seeds: the gently sloped top of each part. Where parts touch, or a low part lies against
+    # a tall one, the surfaces between them are steep (a cylinder's flank, a box's wall), so
+    # cutting the foreground at steep slopes leaves one seed per part.
+    hs = cv2.GaussianBlur(h, (7, 7), 1.5)
+    gx = cv2.Sobel(hs, cv2.CV_32F, 1, 0, ksize=3) / (8.0 * hm.pixel_size)
+    gy = cv2.Sobel(hs, cv2.CV_32F, 0, 1, ksize=3) / (8.0 * hm.pixel_size)
+    gentle = np.hypot(gx, gy) < settings.max_seed_slope
+    crest = fg & gentle & (h > settings.min_crest)
+    crest = cv2.morphologyEx(crest.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(crest, connectivity=4)
+    markers = np.zeros(h.shape, np.int32)
+    markers[~fg] = 1
+    k = 2
+    for i in range(1, n):
+        if stats[i, cv2.CC_STAT_AREA] >= settings.min_seed:
+            markers[comp == i] = k
+            k += 1
+    if k == 2:
+        return np.zeros(h.shape, np.int32)
+    top = float(h.max())
+    grey = (255.0 * np.clip(1.0 - h / max(top, 1e-6), 0.0, 1.0)).astype(np.uint8)
+    labels = cv2.watershed(cv2.merge([grey, grey, grey]), markers.copy())
+    out = np.where(fg & (labels >= 2), labels - 1, 0).astype(np.int32)
+    return _merge_pieces(out, h)
+
+
+def _merge_pieces(labels: NDArray[np.int32], h: NDArray[np.float32]) -> NDArray[np.int32]:
+    """Join neighbouring segments of one part that the seeds split (a thin, noisy top): same
+    height to 2 mm, their principal axes within 10 deg and on one line."""
+    k_max = int(labels.max(initial=0))
+    if k_max < 2:
+        return labels
+    stats: dict[int, tuple[float, NDArray[np.float64], NDArray[np.float64]]] = {}
+    for k in range(1, k_max + 1):
+        v, u = np.nonzero(labels == k)
+        if len(u) < 10:
+            continue
+        xy = np.column_stack([u, v]).astype(np.float64)
+        mean = xy.mean(axis=0)
+        _, _, vt = np.linalg.svd(xy - mean, full_matrices=False)
+        stats[k] = (float(np.percentile(h[v, u], 95)), mean, vt[0])
+    pairs = set()
+    for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = labels[
+            max(0, -dv) : labels.shape[0] - max(0, dv), max(0, -du) : labels.shape[1] - max(0, du)
+        ]
+        b = labels[max(0, dv) :, max(0, du) :][: a.shape[0], : a.shape[1]]
+        m = (a > 0) & (b > 0) & (a != b)
+        pairs.update(zip(a[m].tolist(), b[m].tolist(), strict=True))
+    parent = {k: k for k in range(k_max + 1)}
+
+    def find(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for a, b in pairs:
+        if a not in stats or b not in stats:
+            continue
+        ha, ma, da = stats[a]
+        hb, mb, db = stats[b]
+        if abs(ha - hb) > 0.002 or abs(float(da @ db)) < math.cos(math.radians(10.0)):
+            continue
+        gap = mb - ma
+        off_line = abs(float(gap @ np.array([-da[1], da[0]])))
+        if off_line > 4.0:  # pixels: side by side is two parts, end to end is one
+            continue
+        parent[find(a)] = find(b)
+    remap = np.array([find(k) for k in range(k_max + 1)], np.int32)
+    return remap[labels]
+
+
+def _plane_basis(normal: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    e1 = np.cross(normal, [0.0, 1.0, 0.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(normal, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(normal, e1)
+
+
+def _match(
+    length: float, outer: float, catalogue: list[Part], tol: float
+) -> tuple[Part | None, float]:
+    best, best_err = None, math.inf
+    for part in catalogue:
+        err = math.hypot((length - part.length) / part.length, (outer - part.outer) / part.outer)
+        if err < best_err:
+            best, best_err = part, err
+    if best is None or best_err > tol:
+        return None, best_err
+    return best, best_err
+
+
+def detect_parts(
+    frame: Frame,
+    intr: Intrinsics,
+    world_T_camera: Pose,
+    catalogue: list[Part],
+    roi: tuple[float, float, float, float] | None = None,
+    robot_xy: tuple[float, float] = (0.0, 0.0),
+    settings: DetectorSettings = DetectorSettings(),
+    segmenter: object | None = None,
+) -> list[Detection]:
+    """Every part lying in view. ``segmenter``: an object with ``segment(hm, rgb)`` (the learned
+    option) used instead of the classical segmentation."""
+    hm = height_map(frame, intr, world_T_camera, roi)
+    if segmenter is not None:
+        labels = segmenter.segment(hm, frame.rgb)  # type: ignore[attr-defined]
+    else:
+        labels = segment(hm, settings)
+    return fit_segments(hm, labels, catalogue, robot_xy, settings)
+
+
+def fit_segments(
+    hm: HeightMap,
+    labels: NDArray[np.int32],
+    catalogue: list[Part],
+    robot_xy: tuple[float, float] = (0.0, 0.0),
+    settings: DetectorSettings = DetectorSettings(),
+) -> list[Detection]:
+    n = hm.plane.normal
+    e1, e2 = _plane_basis(n)
+    pts = hm.points.reshape(-1, 3).astype(np.float64)
+    hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0).astype(np.float64)
+    lab = labels.reshape(-1)
+    uv_all = np.column_stack([pts @ e1, pts @ e2])
+    out: list[Detection] = []
+    for k in range(1, int(lab.max(initial=0)) + 1):
+        idx = np.flatnonzero(lab == k)
+        if len(idx) < settings.min_pixels:
+            continue
+        for det in _fit_one(idx, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings):
+            out.append(det)
+    return out
+
+
+def _fit_one(
+    idx: NDArray[np.int64],
+    uv_all: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    hm: HeightMap,
+    e1: NDArray[np.float64],
+    e2: NDArray[np.float64],
+    catalogue: list[Part],
+    robot_xy: tuple[float, float],
+    settings: DetectorSettings,
+) -> list[Detection]:
+    h = hgt[idx]
+    # The 80th percentile of a lying cylinder's heights is within 2 % of its diameter, and it
+    # keeps the depth noise (1.25 mm at 0.5 m) from inflating thin parts like the rail.
+    top = float(np.percentile(h, 80))
+    upper = idx[h > 0.5 * top]
+    if len(upper) < 20:
+        return []
+    uv = uv_all[upper]
+    mean = uv.mean(axis=0)
+    _, _, vt = np.linalg.svd(uv - mean, full_matrices=False)
+    axis = vt[0]
+    across = np.array([-axis[1], axis[0]])
+    s = (uv - mean) @ axis
+    c = (uv - mean) @ across
+    outer = top
+    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    # Touching boxes leave no valley: a segment n parts wide is n parts side by side.
+    strips = 1
+    if width > 1.6 * outer:
+        strips = max(1, int(round(width / (outer * math.sqrt(3) / 2 + 1e-9))))
+        strips = max(1, int(round(width / max(outer, 1e-6))))
+    dets = []
+    c_edges = np.linspace(np.percentile(c, 1), np.percentile(c, 99), strips + 1)
+    for j in range(strips):
+        sel = (c >= c_edges[j]) & (c <= c_edges[j + 1]) if strips > 1 else np.ones(len(c), bool)
+        if np.count_nonzero(sel) < 20:
+            continue
+        hs = hgt[upper][sel]
+        crest = hs > 0.9 * hs.max()
+        c_mid = float(np.median(c[sel][crest])) if strips == 1 else float(c[sel].mean())
+        s_lo, s_hi = float(np.percentile(s[sel], 1)), float(np.percentile(s[sel], 99))
+        s_mid = 0.5 * (s_lo + s_hi)
+        center_uv = mean + s_mid * axis + c_mid * across
+        length = s_hi - s_lo
+        part, err = _match(length, outer, catalogue, settings.match_tolerance)
+        if part is None:  # matches nothing in the catalogue: not reported as a part
+            continue
+        center = (
+            center_uv[0] * e1
+            + center_uv[1] * e2
+            + (hm.plane.offset + 0.5 * outer) * (hm.plane.normal)
+        )
+        direction = axis[0] * e1 + axis[1] * e2
+        half = 0.5 * (part.length if part is not None else length)
+        ends = [center + half * direction, center - half * direction]
+        seen = True
+        if part is not None and part.open_ends == 1:
+            inside = [
+                _inside_seen(uv_all, hgt, center_uv, sign * axis, across, part) for sign in (1, -1)
+            ]
+            if max(inside) < 15:
+                seen = False
+            choice = 0 if inside[0] >= inside[1] else 1
+        else:  # a tube: the end farther from the robot
+            d = [math.hypot(e[0] - robot_xy[0], e[1] - robot_xy[1]) for e in ends]
+            choice = 0 if d[0] >= d[1] else 1
+        end = ends[choice]
+        toward = end - center
+        yaw = math.atan2(toward[1], toward[0])
+        conf = float(math.exp(-((err / 0.1) ** 2))) if part is not None else 0.0
+        dets.append(
+            Detection(
+                center=center,
+                yaw=yaw,
+                length=length,
+                outer=outer,
+                part=None if part is None else part.name,
+                open_end=end,
+                open_end_seen=seen,
+                confidence=conf * (1.0 if seen else 0.5),
+                pixels=int(np.count_nonzero(sel)) if strips > 1 else len(idx),
+            )
+        )
+    return dets
+
+
+def _inside_seen(
+    uv_all: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    center_uv: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    part: Part,
+) -> int:
+    """Points seen through the opening at the ``+axis`` end: low, inside the part's footprint."""
+    rel = uv_all - center_uv
+    s = rel @ axis
+    c = rel @ across
+    near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.002)
+    within = np.abs(c) < 0.4 * part.hole
+    low = (hgt > -0.002) & (hgt < 0.3 * part.outer)
+    return int(np.count_nonzero(near_end & within & low))
+
+
+def timed_detect(*args, **kwargs) -> tuple[list[Detection], float]:  # type: ignore[no-untyped-def]
+    """``detect_parts`` and the seconds it took (for the benchmark)."""
+    t0 = time.perf_counter()
+    out = detect_parts(*args, **kwargs)
+    return out, time.perf_counter() - t0

@@ -1,0 +1,60 @@
+"""Scoring detections against the twin's ground truth (used by `cell perceive` and the bench
+only; ground truth never reaches a skill)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skills.perception.bin_parts import Detection
+
+
+@dataclass(frozen=True)
+class Truth:
+    name: str
+    center: np.ndarray
+    yaw: float  #: towards the open end (+x of the part)
+    open_ends: int
+
+
+@dataclass(frozen=True)
+class Match:
+    truth: Truth
+    detection: Detection
+    pos_err: float  #: m, in the floor plane
+    yaw_err: float  #: rad, modulo the part's symmetry (pi for a tube)
+    end_right: bool | None  #: for one-open-end parts: the right end chosen; None for tubes
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def score(
+    truths: list[Truth], detections: list[Detection], gate: float = 0.03
+) -> tuple[list[Match], int, int]:
+    """Greedy nearest matching within ``gate`` (m). Returns (matches, missed, false positives)."""
+    pairs = []
+    for i, t in enumerate(truths):
+        for j, d in enumerate(detections):
+            dist = float(np.linalg.norm(t.center[:2] - d.center[:2]))
+            if dist < gate:
+                pairs.append((dist, i, j))
+    pairs.sort()
+    used_t, used_d, matches = set(), set(), []
+    for dist, i, j in pairs:
+        if i in used_t or j in used_d:
+            continue
+        used_t.add(i)
+        used_d.add(j)
+        t, d = truths[i], detections[j]
+        direct = abs(_wrap(d.yaw - t.yaw))
+        if t.open_ends == 2:
+            err, right = min(direct, math.pi - direct), None
+        else:
+            axis_err = min(direct, math.pi - direct)
+            err, right = axis_err, direct < 0.5 * math.pi
+        matches.append(Match(t, d, dist, err, right))
+    return matches, len(truths) - len(matches), len(detections) - len(matches)
