@@ -59,6 +59,8 @@ class DetectorSettings:
     min_seed: int = 30  #: pixels of the smallest seed
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
+    min_inside: int = 15  #: points seen through an opening that make an end the open one
+    min_end_view: float = 0.1  #: tan of the view angle onto an end face needed to judge it
 
 
 def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> NDArray[np.int32]:
@@ -177,7 +179,7 @@ def detect_parts(
         labels = segmenter.segment(hm, frame.rgb)  # type: ignore[attr-defined]
     else:
         labels = segment(hm, settings)
-    return fit_segments(hm, labels, catalogue, robot_xy, settings)
+    return fit_segments(hm, labels, catalogue, robot_xy, settings, world_T_camera.position)
 
 
 def fit_segments(
@@ -186,7 +188,11 @@ def fit_segments(
     catalogue: list[Part],
     robot_xy: tuple[float, float] = (0.0, 0.0),
     settings: DetectorSettings = DetectorSettings(),
+    camera_position: NDArray[np.float64] | None = None,
 ) -> list[Detection]:
+    """Fit every labelled segment; ``camera_position`` (base frame) tells which end faces the
+    camera, the one end whose face (or inside) a single view can show."""
+    cam = np.zeros(3) if camera_position is None else np.asarray(camera_position, float)
     n = hm.plane.normal
     e1, e2 = _plane_basis(n)
     pts = hm.points.reshape(-1, 3).astype(np.float64)
@@ -198,7 +204,7 @@ def fit_segments(
         idx = np.flatnonzero(lab == k)
         if len(idx) < settings.min_pixels:
             continue
-        for det in _fit_one(idx, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings):
+        for det in _fit_one(idx, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings, cam):
             out.append(det)
     return out
 
@@ -213,6 +219,8 @@ def _fit_one(
     catalogue: list[Part],
     robot_xy: tuple[float, float],
     settings: DetectorSettings,
+    cam: NDArray[np.float64],
+    split: bool = True,
 ) -> list[Detection]:
     h = hgt[idx]
     # The 80th percentile of a lying cylinder's heights is within 2 % of its diameter, and it
@@ -230,20 +238,37 @@ def _fit_one(
     c = (uv - mean) @ across
     outer = top
     width = float(np.percentile(c, 99) - np.percentile(c, 1))
-    # Touching boxes leave no valley: a segment n parts wide is n parts side by side.
-    strips = 1
-    if width > 1.6 * outer:
-        strips = max(1, int(round(width / (outer * math.sqrt(3) / 2 + 1e-9))))
-        strips = max(1, int(round(width / max(outer, 1e-6))))
+    # Touching boxes leave no valley: a segment n parts wide is n parts side by side; each
+    # strip is then fitted on its own (its own axis and length).
+    if split and width > 1.6 * outer:
+        # Side by side and offset along their axes, two parts make a blob whose principal axis
+        # is diagonal; the smallest enclosing rectangle stays aligned with them.
+        (_, _), (rw, rh), ang = cv2.minAreaRect((uv * 1e3).astype(np.float32))
+        a = math.radians(ang)
+        cand = np.array([math.cos(a), math.sin(a)])
+        if rh > rw:
+            cand = np.array([-cand[1], cand[0]])
+        axis = cand if float(cand @ axis) >= 0 else -cand
+        across = np.array([-axis[1], axis[0]])
+        c = (uv - mean) @ across
+        width = float(np.percentile(c, 99) - np.percentile(c, 1))
+        strips = max(2, int(round(width / max(outer, 1e-6))))
+        c_all = (uv_all[idx] - mean) @ across
+        edges = np.linspace(np.percentile(c, 1), np.percentile(c, 99), strips + 1)
+        edges[0], edges[-1] = -np.inf, np.inf
+        out: list[Detection] = []
+        for j in range(strips):
+            sub = idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
+            if len(sub) >= settings.min_pixels // 2:
+                out += _fit_one(
+                    sub, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings, cam, split=False
+                )
+        return out
     dets = []
-    c_edges = np.linspace(np.percentile(c, 1), np.percentile(c, 99), strips + 1)
-    for j in range(strips):
-        sel = (c >= c_edges[j]) & (c <= c_edges[j + 1]) if strips > 1 else np.ones(len(c), bool)
-        if np.count_nonzero(sel) < 20:
-            continue
+    for sel in (np.ones(len(c), bool),):
         hs = hgt[upper][sel]
         crest = hs > 0.9 * hs.max()
-        c_mid = float(np.median(c[sel][crest])) if strips == 1 else float(c[sel].mean())
+        c_mid = float(np.median(c[sel][crest]))
         s_lo, s_hi = float(np.percentile(s[sel], 1)), float(np.percentile(s[sel], 99))
         s_mid = 0.5 * (s_lo + s_hi)
         center_uv = mean + s_mid * axis + c_mid * across
@@ -260,13 +285,18 @@ def _fit_one(
         half = 0.5 * (part.length if part is not None else length)
         ends = [center + half * direction, center - half * direction]
         seen = True
-        if part is not None and part.open_ends == 1:
-            inside = [
-                _inside_seen(uv_all, hgt, center_uv, sign * axis, across, part) for sign in (1, -1)
-            ]
-            if max(inside) < 15:
-                seen = False
-            choice = 0 if inside[0] >= inside[1] else 1
+        if part.open_ends == 1:
+            # One view shows one end face: the end turned towards the camera. Its inside seen
+            # through the opening means it is the open end; its face without an inside means
+            # the closed one, so the open end is the other.
+            cam_uv = np.array([cam @ e1, cam @ e2])
+            facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
+            sign = 1.0 if facing == 0 else -1.0
+            inside = _inside_seen(uv_all, hgt, center_uv, sign * axis, across, part)
+            lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
+            height = float(cam @ hm.plane.normal - hm.plane.offset)
+            seen = lateral / max(height, 1e-6) > settings.min_end_view
+            choice = facing if inside >= settings.min_inside else 1 - facing
         else:  # a tube: the end farther from the robot
             d = [math.hypot(e[0] - robot_xy[0], e[1] - robot_xy[1]) for e in ends]
             choice = 0 if d[0] >= d[1] else 1
@@ -284,7 +314,7 @@ def _fit_one(
                 open_end=end,
                 open_end_seen=seen,
                 confidence=conf * (1.0 if seen else 0.5),
-                pixels=int(np.count_nonzero(sel)) if strips > 1 else len(idx),
+                pixels=len(idx),
             )
         )
     return dets
