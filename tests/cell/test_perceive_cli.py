@@ -1,0 +1,48 @@
+"""``cell perceive``: the contract form and its JSON keys; bad input exits 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cell.cli import main
+
+KEYS = {
+    "scenes",
+    "recall",
+    "false_positives",
+    "yaw_err_deg_median",
+    "yaw_err_deg_p95",
+    "pos_err_mm_median",
+    "pos_err_mm_p95",
+    "ms_per_frame_median",
+}
+
+
+def test_contract_form(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "p.json"
+    code = main(["perceive", "--scenes", "2", "--seed", "1", "--json", str(out)])
+    assert code == 0
+    data = json.loads(out.read_text())
+    assert KEYS <= set(data) and data["scenes"] == 2
+    assert 0.0 <= data["recall"] <= 1.0 and data["found"] >= 1
+    assert "recall" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--scenes", "0", "--seed", "1"], ["--scenes"]),
+        (["--scenes", "1", "--seed", "1", "--weights", "x.pt"], ["--weights"]),
+        (
+            ["--scenes", "1", "--seed", "1", "--pipeline", "learned", "--weights", "nope.pt"],
+            ["nope.pt"],
+        ),
+    ],
+)
+def test_bad_input_exits_2(argv, words, tmp_path: Path, capsys) -> None:
+    code = main(["perceive", *argv, "--json", str(tmp_path / "p.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and all(w in err for w in words), err

@@ -1,0 +1,88 @@
+"""The classical bin pipeline on rendered, noisy frames (ground truth only scores)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cell.catalogue import load_catalogue
+from drivers.camera import Frame
+from sim.camera import SimCamera, default_tool_T_camera
+from sim.cell_layout import CellLayout, build_cell
+from sim.scenes import look_down_pose, random_bin_scene
+from sim.world import SimWorld
+from skills.perception.bin_parts import detect_parts
+from skills.perception.heightmap import PerceptionInputError
+from skills.perception.scoring import Truth, score
+
+CATALOGUE = load_catalogue()
+PARTS = [p for p in CATALOGUE.parts.values() if p.rigid]
+LAYOUT = CellLayout()
+
+
+def render(seed: int, n_parts: int | None):
+    rng = np.random.default_rng(seed)
+    with SimWorld(seed=seed) as world:
+        build_cell(world, LAYOUT)
+        n = int(rng.integers(1, 7)) if n_parts is None else n_parts
+        scene = random_bin_scene(world, LAYOUT, PARTS, rng, n) if n else []
+        tool = look_down_pose(LAYOUT.bin_center, 0.5, default_tool_T_camera())
+        cam = SimCamera(world, lambda: tool)
+        frame = cam.capture()
+    truths = [Truth(t.name, t.center, t.yaw, CATALOGUE.get(t.name).open_ends) for _, t in scene]
+    return frame, cam.intrinsics(), tool @ cam.tool_T_camera(), truths
+
+
+@pytest.mark.parametrize("seed", [1, 3, 9])
+def test_fixed_scenes_are_found_to_tolerance(seed: int) -> None:
+    frame, intr, pose, truths = render(seed, None)
+    dets = detect_parts(frame, intr, pose, PARTS, LAYOUT.bin_interior())
+    matches, missed, false_pos = score(truths, dets)
+    assert missed == 0 and false_pos == 0
+    for m in matches:
+        assert m.pos_err < 0.003, m.truth.name
+        assert m.yaw_err < math.radians(3.0), m.truth.name
+        assert m.detection.part == m.truth.name
+
+
+def test_an_empty_bin_gives_no_detections() -> None:
+    frame, intr, pose, _ = render(5, 0)
+    assert detect_parts(frame, intr, pose, PARTS, LAYOUT.bin_interior()) == []
+
+
+def test_touching_parts_are_separated() -> None:
+    for seed in range(40):  # the first scene with two parts touching side by side
+        rng = np.random.default_rng(seed)
+        frame, intr, pose, truths = render(seed, None)
+        close = [
+            (a, b)
+            for i, a in enumerate(truths)
+            for b in truths[i + 1 :]
+            if np.linalg.norm(a.center[:2] - b.center[:2])
+            < 0.55 * (CATALOGUE.get(a.name).outer + CATALOGUE.get(b.name).outer) + 0.002
+        ]
+        if close and all(t.name != "mounting_rail" for t in truths):
+            break
+    else:
+        pytest.skip("no touching pair rendered")
+    _ = rng
+    dets = detect_parts(frame, intr, pose, PARTS, LAYOUT.bin_interior())
+    _, missed, false_pos = score(truths, dets)
+    assert missed == 0 and false_pos == 0
+
+
+def test_bad_frames_are_refused_by_name() -> None:
+    frame, intr, pose, _ = render(1, 1)
+    no_depth = Frame(rgb=frame.rgb, depth=np.zeros_like(frame.depth), stamp=0.0)
+    with pytest.raises(PerceptionInputError, match="no valid pixel"):
+        detect_parts(no_depth, intr, pose, PARTS)
+    wrong_shape = Frame(rgb=frame.rgb, depth=frame.depth[::2], stamp=0.0)
+    with pytest.raises(PerceptionInputError, match="intrinsics say"):
+        detect_parts(wrong_shape, intr, pose, PARTS)
+    wrong_type = Frame(rgb=frame.rgb, depth=(frame.depth * 1000).astype(np.uint16), stamp=0.0)
+    with pytest.raises(PerceptionInputError, match="dtype"):
+        detect_parts(wrong_type, intr, pose, PARTS)
+    with pytest.raises(PerceptionInputError, match="intrinsics"):
+        detect_parts(frame, None, pose, PARTS)  # type: ignore[arg-type]
