@@ -30,6 +30,7 @@ from skills.mechanics.contact import Frictions
 from skills.mechanics.part import Part
 from skills.mechanics.planner import PivotPlan
 from skills.motion import Devices
+from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PivotFrame, PivotParams, Tilt
 from skills.status import Status
 
@@ -63,6 +64,7 @@ class TrialSetup:
 
     layout: CellLayout = field(default_factory=CellLayout)
     mu_ground: float | None = None  # part-floor friction, exact (None: frictions.mu_g +- 20 %)
+    perceive: bool = True  # the pick starts from the wrist camera's view, not the nominal pose
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
 
     def frame(self) -> PivotFrame:
@@ -141,6 +143,7 @@ class TrialResult:
     true_pose: dict[str, float]
     frictions: dict[str, float]
     mass: float
+    perceived_pose: dict[str, float] | None = None  #: what Look reported (None: nominal used)
 
     def to_json(self) -> dict[str, object]:
         return dataclasses.asdict(self)
@@ -185,19 +188,37 @@ def run_trial(
 
         assert setup.plan.l_a is not None and setup.plan.alpha is not None
         params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
-        frame = setup.frame()
         camera = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()))
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
+        failure: str | None = None
+        phase_name = "done"
+        t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
+        seen: dict[str, float] = {}
+        frame = setup.frame()
+        if setup.perceive:
+            look = Look(
+                dev,
+                [setup.part],
+                setup.layout.bin_interior(),
+                (setup.layout.bin_center[0], setup.layout.bin_center[1]),
+                setup.nominal_center(),
+            )
+            failure = _run_skill(look, world, robot, t_end, on_frame, frame_every)
+            if failure is None and look.result is not None:
+                d = look.result
+                seen = {"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw}
+                frame = dataclasses.replace(
+                    frame,
+                    center=np.array([d.center[0], d.center[1], 0.5 * setup.part.outer]),
+                    yaw=d.yaw,
+                )
         tilt = Tilt(frame, params, dev)
         phases = [
             ("grasp", Grasp(frame, params, dev)),
             ("tilt", tilt),
             ("align", Align(lambda: tilt.frame, setup.part, params, dev)),
         ]
-        failure: str | None = None
-        phase_name = "done"
-        t_end = world.clock.now() + setup.max_time
-        for phase_name, skill in phases:
+        for phase_name, skill in phases if failure is None else []:
             result = skill.tick()
             while not result.done and world.clock.now() < t_end:
                 world.step()
@@ -239,9 +260,26 @@ def run_trial(
             true_pose={"x": x, "y": y, "yaw": yaw},
             frictions={"S": mu_s, "H": mu_h, "G": mu_g},
             mass=true_part.mass,
+            perceived_pose=seen or None,
         )
     finally:
         world.close()
+
+
+def _run_skill(  # type: ignore[no-untyped-def]
+    skill, world, robot, t_end, on_frame, frame_every
+) -> str | None:
+    """Tick ``skill`` with the world until it ends; its failure message, or None."""
+    result = skill.tick()
+    while not result.done and world.clock.now() < t_end:
+        world.step()
+        if on_frame is not None and world.steps % frame_every == 0:
+            on_frame(world, robot)
+        result = skill.tick()
+    if not result.done:
+        skill.halt()
+        return "look: out of time"
+    return result.message if result.status is Status.FAILURE else None
 
 
 def summarize(part: str, results: list[TrialResult]) -> dict[str, object]:

@@ -1,0 +1,97 @@
+"""The Look skill: bring the wrist camera over the bin, find the parts, and, for a cup or bottle
+whose open end the first view could not tell, look again from beyond one of its ends."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from drivers.pose import Pose
+from skills.mechanics.part import Part
+from skills.motion import Devices, Guard, GuardedMotion, Sequence
+from skills.perception.bin_parts import Detection, detect_parts
+from skills.status import Status, StepResult
+
+DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def camera_over(xy: tuple[float, float], height: float, dev: Devices) -> Pose:
+    """Tool pose (pointing down) with the optical centre ``height`` above ``xy`` (m)."""
+    assert dev.camera is not None
+    offset = DOWN @ dev.camera.tool_T_camera().position
+    return Pose(np.array([xy[0], xy[1], height]) - offset, DOWN)
+
+
+class Look:
+    """``result``: the detection to pick (nearest ``near_xy``), or a failure."""
+
+    def __init__(
+        self,
+        dev: Devices,
+        catalogue: list[Part],
+        roi: tuple[float, float, float, float],
+        view_xy: tuple[float, float],
+        near_xy: tuple[float, float],
+        height: float = 0.5,
+        speed: float = 0.25,
+        guard: Guard | None = None,
+    ) -> None:
+        guard = guard if guard is not None else Guard()
+        self.dev, self.catalogue, self.roi = dev, catalogue, roi
+        self.result: Detection | None = None
+        self.detections: list[Detection] = []
+        arm = dev.arm
+        st: dict[str, object] = {}
+
+        def go(xy_source) -> None:  # type: ignore[no-untyped-def]
+            xy = xy_source()
+            arm.move_to(camera_over(xy, height, dev), speed, 1.0)
+
+        def detect() -> None:
+            assert dev.camera is not None
+            frame = dev.camera.capture()
+            pose = arm.tool_pose() @ dev.camera.tool_T_camera()
+            dets = detect_parts(frame, dev.camera.intrinsics(), pose, catalogue, roi)
+            st["dets"] = dets
+            if dets:
+                best = min(dets, key=lambda d: math.dist(d.center[:2], near_xy))
+                if self.result is None or best.open_end_seen:
+                    self.result = best
+            self.detections = dets
+
+        def none_found() -> str | None:
+            return None if self.result is not None else "no part found in the bin"
+
+        def second_view_xy() -> tuple[float, float]:
+            d = self.result
+            if d is None or d.open_end_seen:  # decided: look again from where it is
+                return float(view_xy[0]), float(view_xy[1])
+            u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+            # From beyond the end the first view chose, that end face is in sight.
+            xy = d.center[:2] + (0.5 * d.length + 0.15) * u
+            return float(xy[0]), float(xy[1])
+
+        done = lambda: True  # noqa: E731
+        self.sequence = Sequence(
+            "look",
+            [
+                dev.move("camera over the bin", guard, lambda: go(lambda: view_xy)),
+                GuardedMotion(
+                    "find the parts", detect, done, arm, dev.ft, dev.clock, guard, none_found
+                ),
+                dev.move("camera beyond its end", guard, lambda: go(second_view_xy)),
+                GuardedMotion(
+                    "look at its end", detect, done, arm, dev.ft, dev.clock, guard, none_found
+                ),
+            ],
+        )
+
+    def tick(self) -> StepResult:
+        result = self.sequence.tick()
+        if result.status is Status.FAILURE:
+            return StepResult(Status.FAILURE, f"look: {result.message}")
+        return result
+
+    def halt(self) -> None:
+        self.sequence.halt()
