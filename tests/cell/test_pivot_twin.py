@@ -64,9 +64,10 @@ def test_the_pivot_fails_when_the_fingers_do_not_close(bushing_setup: TrialSetup
 
     r = run_trial(bushing_setup, SEED, on_frame=numb_gripper, frame_every=1)
     assert not r.success
-    assert r.failure is not None
-    # the part never stood up: it is still far from upright (it lies, or leans on the fingers)
-    assert r.tilt_deg > 45.0
+    # Every skill ran to its end believing the gripper held: only the judge of the simulated
+    # state saw that the part was never lifted.
+    assert r.phase == "done"
+    assert r.failure in ("on the floor after the lift", "not held", "not lifted off the floor")
 
 
 def test_sim_devices_implement_the_interfaces() -> None:
