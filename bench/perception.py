@@ -1,0 +1,68 @@
+"""Benchmark: bin perception over rendered scenes, classical and learned, against ground truth.
+
+Run by hand:  python bench/perception.py [--scenes 200] [--seed 10000] [--pipelines classical learned]
+
+Runs ``cell perceive`` for each pipeline on the same scenes and prints one table: recall, false
+positives, position and yaw errors (median, p95) and the median processing time per frame
+(rendering excluded). Targets (issue 5): recall >= 0.98, yaw p95 <= 2 deg, position p95 <= 3 mm,
+median <= 60 ms per frame for the classical pipeline, on this 2-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+from pathlib import Path
+
+from cell.cli import main as cell
+
+
+def run() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=10000)
+    ap.add_argument("--pipelines", nargs="+", default=["classical", "learned"])
+    args = ap.parse_args()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for pipeline in args.pipelines:
+            out = Path(tmp) / f"{pipeline}.json"
+            argv = ["perceive", "--scenes", str(args.scenes), "--seed", str(args.seed)]
+            code = cell([*argv, "--json", str(out), "--pipeline", pipeline])
+            if code == 0:
+                rows.append(json.loads(out.read_text()))
+    print()
+    print(
+        f"machine {platform.machine()}, {os.cpu_count()} cores; {args.scenes} scenes "
+        f"from seed {args.seed}"
+    )
+    head = (
+        "pipeline",
+        "recall",
+        "false pos",
+        "pos med mm",
+        "pos p95 mm",
+        "yaw med deg",
+        "yaw p95 deg",
+        "ms/frame",
+    )
+    print(" | ".join(head))
+    for r in rows:
+        print(
+            f"{r['pipeline']} | {r['recall']:.3f} ({r['found']}/{r['parts']}) | "
+            f"{r['false_positives']} | {r['pos_err_mm_median']:.2f} | {r['pos_err_mm_p95']:.2f} | "
+            f"{r['yaw_err_deg_median']:.2f} | {r['yaw_err_deg_p95']:.2f} | "
+            f"{r['ms_per_frame_median']:.0f}"
+        )
+        print(
+            f"   missed by part: {r['missed_by_part']}; open end decided for "
+            f"{r['open_end_decided']} of {r['open_end_one_ended_parts']} cups/bottles, right "
+            f"{r['open_end_decided_right']}"
+        )
+
+
+if __name__ == "__main__":
+    run()
