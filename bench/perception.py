@@ -1,6 +1,6 @@
 """Benchmark: bin perception over rendered scenes, classical and learned, against ground truth.
 
-Run by hand:  python bench/perception.py [--scenes 200] [--seed 10000] [--pipelines classical learned]
+Run by hand:  python bench/perception.py [--scenes 200] [--seed 10000] [--pipelines classical]
 
 Runs ``cell perceive`` for each pipeline on the same scenes and prints one table: recall, false
 positives, position and yaw errors (median, p95) and the median processing time per frame
