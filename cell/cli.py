@@ -9,6 +9,7 @@ Contract forms (scripts rely on them; keep them exactly):
   --grid 91 --out DIR [--json FILE]``
 * ``cell plan --part NAME [--json FILE]``
 * ``cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE``
+* ``cell calibrate [--cell FILE] [--views N] [--seed S] [--true-xyz X Y Z] [--true-rpy R P Y]``
 """
 
 from __future__ import annotations
@@ -311,6 +312,14 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.pivot_cmd import add_parser as add_pivot
 
     add_pivot(sub)
+
+    from cell.calibrate_cmd import add_parser as add_calibrate
+
+    add_calibrate(sub)
+
+    from cell.perceive_cmd import add_parser as add_perceive
+
+    add_perceive(sub)
     return parser
 
 

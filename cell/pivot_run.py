@@ -188,7 +188,11 @@ def run_trial(
 
         assert setup.plan.l_a is not None and setup.plan.alpha is not None
         params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
-        camera = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()))
+        camera = SimCamera(
+            world,
+            lambda: robot.world_pose(robot.arm.tool_pose()),
+            tool_T_camera=setup.layout.tool_T_camera(),  # the configured (calibrated) mount
+        )
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
         failure: str | None = None
         phase_name = "done"

@@ -22,13 +22,18 @@ from pathlib import Path
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
+from drivers.pose import Pose
 from sim.world import SimWorld
 
 #: The thinnest wall (m) the machine block may keep around its slot.
 MIN_MACHINE_WALL = 0.005
 
 _Rect = tuple[float, float, float, float]  # xmin, xmax, ymin, ymax (m)
+#: Fields besides the ``*_center`` ones that are not sizes: no ``> 0`` check (the camera mount
+#: may be anywhere; the clearance and keep-out radius have their own checks).
+_NOT_SIZES = ("slot_clearance", "robot_keepout_radius", "camera_xyz", "camera_rpy")
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,12 @@ class CellLayout:
     ``tray_wall_thickness``, ``tray_floor_thickness``: the open box parts are packed into
     (3 x 2 bushings standing upright at 50 mm pitch by default).
     ``robot_keepout_radius``: no fixture may come closer than this to the base axis.
+    ``camera_xyz`` (m) and ``camera_rpy`` (rad): the eye-in-hand camera's mount, the pose of its
+    optical frame (``z`` forward, ``x`` right, ``y`` down) in the tool frame: position, and
+    roll-pitch-yaw as fixed-axis (extrinsic) rotations about the tool's ``x``, then ``y``, then
+    ``z``, i.e. ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (scipy ``Rotation.from_euler("xyz", rpy)``).
+    The defaults are :func:`sim.camera.default_tool_T_camera`; ``cell calibrate`` writes measured
+    values. Any finite numbers are accepted (they are not sizes).
     """
 
     floor_size: tuple[float, float] = (2.0, 2.0)
@@ -64,6 +75,8 @@ class CellLayout:
     tray_wall_thickness: float = 0.005
     tray_floor_thickness: float = 0.005
     robot_keepout_radius: float = 0.10
+    camera_xyz: tuple[float, float, float] = (0.0, -0.08, -0.05)
+    camera_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     # ----------------------------------------------------------------- derived geometry (m)
     @property
@@ -95,6 +108,13 @@ class CellLayout:
     def tray_floor_z(self) -> float:
         """Height of the tray's inner bottom (m)."""
         return self.tray_floor_thickness
+
+    def tool_T_camera(self) -> Pose:
+        """The camera mount (:attr:`camera_xyz`, :attr:`camera_rpy`) as a pose in the tool frame."""
+        return Pose(
+            np.array(self.camera_xyz, float),
+            Rotation.from_euler("xyz", self.camera_rpy).as_matrix(),
+        )
 
     def bin_interior(self) -> _Rect:
         """``(xmin, xmax, ymin, ymax)`` of the bin's free inside (m)."""
@@ -137,7 +157,7 @@ class CellLayout:
             values = value if isinstance(value, tuple) else (value,)
             if not all(math.isfinite(v) for v in values):
                 raise ValueError(f"{f.name}: must be finite, got {value!r}")
-            if f.name.endswith("_center") or f.name in ("slot_clearance", "robot_keepout_radius"):
+            if f.name.endswith("_center") or f.name in _NOT_SIZES:
                 continue
             if any(v <= 0 for v in values):
                 raise ValueError(f"{f.name}: sizes must be > 0 m, got {value!r}")
@@ -199,7 +219,8 @@ class CellLayout:
             if isinstance(default, tuple):
                 if not isinstance(raw, list | tuple) or len(raw) != len(default):
                     raise ValueError(
-                        f"{source}: {key}: expected a list of {len(default)} numbers (m), "
+                        f"{source}: {key}: expected a list of {len(default)} numbers "
+                        f"({_unit(key)}), "
                         f"got {raw!r}"
                     )
                 values[key] = tuple(_number(source, key, v) for v in raw)
@@ -224,9 +245,13 @@ class CellLayout:
         return cls.from_dict(data if data is not None else {}, source=str(p))
 
 
+def _unit(key: str) -> str:
+    return "rad" if key == "camera_rpy" else "m"
+
+
 def _number(source: str, key: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ValueError(f"{source}: {key}: expected a finite number (m), got {value!r}")
+        raise ValueError(f"{source}: {key}: expected a finite number ({_unit(key)}), got {value!r}")
     return float(value)
 
 

@@ -71,7 +71,7 @@ def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> N
     # Seeds: the gently sloped top of each part. Where parts touch, or a low part lies against
     # a tall one, the surfaces between them are steep (a cylinder's flank, a box's wall), so
     # cutting the foreground at steep slopes leaves one seed per part.
-    hs = cv2.GaussianBlur(h, (7, 7), 1.5)
+    hs = cv2.medianBlur(h, 5)  # edge-preserving: a thin part beside a tall one keeps its top
     gx = cv2.Sobel(hs, cv2.CV_32F, 1, 0, ksize=3) / (8.0 * hm.pixel_size)
     gy = cv2.Sobel(hs, cv2.CV_32F, 0, 1, ksize=3) / (8.0 * hm.pixel_size)
     gentle = np.hypot(gx, gy) < settings.max_seed_slope

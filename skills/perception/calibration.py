@@ -1,0 +1,609 @@
+"""Hand-eye calibration of the eye-in-hand camera with an AprilTag board.
+
+Backend-agnostic: frames, intrinsics and poses only (OpenCV and numpy do the work), so the same
+code calibrates the twin's rendered camera and the real D435 on the UR5.
+
+**The board** (:class:`TagBoard`) is a grid of AprilTag 36h11 markers printed on a flat plate
+(see :func:`render_board` for a printable image). Its frame: origin at the centre of the marker
+grid, ``x`` to the right and ``y`` up as the image is seen (marker ``first_id`` is at the top
+left, ids run along rows), ``z`` out of the printed face. A board lying face up on a table has its
+``z`` up.
+
+**One view** (:func:`board_pose_from_frame`): the markers are found by
+``cv2.aruco.ArucoDetector``; the pose of the board in the optical frame (``camera_T_board``) is
+started from one marker by ``SOLVEPNP_IPPE_SQUARE`` (both of its solutions are tried against all
+corners seen) and refined by Levenberg-Marquardt over every corner of every marker seen.
+
+**The calibration** (:func:`calibrate_hand_eye`) solves ``A X = X B`` with
+``cv2.calibrateHandEye`` for ``X = tool_T_camera`` from pairs ``(base_T_tool, camera_T_board)``
+taken with the board fixed and the tool in several poses; the rotations between the poses must
+turn about at least two different axes. :func:`hand_eye_residuals` says how well the views agree
+(the board's pose in the base seen from each view), the figure to check on hardware, where no
+true mount is known.
+
+**The routine** (:class:`HandEyeRoutine`) drives the arm through a list of tool poses (see
+:func:`calibration_views`), one non-blocking ``tick()`` per control step: move, settle, capture,
+detect; then calibrates.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from drivers.arm import Arm, MotionState
+from drivers.camera import Camera, Intrinsics
+from drivers.clock import Clock
+from drivers.pose import Pose
+from skills.status import Status, StepResult
+
+#: The tag family of every board: AprilTag 36h11 (8 x 8 cells with the black border).
+TAG_DICTIONARY = cv2.aruco.DICT_APRILTAG_36h11
+_TAG_CELLS = 8  # 6 x 6 data bits + a one-cell black border on each side
+#: Fewest views :func:`calibrate_hand_eye` accepts (two relative motions).
+MIN_VIEWS = 3
+
+
+def tag_dictionary() -> cv2.aruco.Dictionary:
+    return cv2.aruco.getPredefinedDictionary(TAG_DICTIONARY)
+
+
+# ----------------------------------------------------------------------------------- the board
+@dataclass(frozen=True)
+class TagBoard:
+    """A ``columns`` x ``rows`` grid of AprilTag 36h11 markers (sizes in m).
+
+    ``marker_size``: side of a marker's black square (the outer edge of its border);
+    ``marker_gap``: white space between neighbouring markers; ``margin``: white space around the
+    grid to the plate's edge (a detector needs some white outside the outer markers).
+    ``first_id``: id of the top-left marker; the marker in row ``r`` (from the top) and column
+    ``c`` has id ``first_id + r * columns + c``.
+    """
+
+    columns: int = 4
+    rows: int = 3
+    marker_size: float = 0.04
+    marker_gap: float = 0.01
+    margin: float = 0.01
+    first_id: int = 0
+
+    def __post_init__(self) -> None:
+        if self.columns < 1 or self.rows < 1:
+            raise ValueError(
+                f"board: needs at least 1 x 1 markers, got {self.columns} x {self.rows}"
+            )
+        for name in ("marker_size", "marker_gap", "margin"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0 or (name == "marker_size" and value == 0):
+                raise ValueError(f"board: {name}: must be a finite size in m, got {value!r}")
+        count = tag_dictionary().bytesList.shape[0]
+        if self.first_id < 0 or self.first_id + self.columns * self.rows > count:
+            raise ValueError(
+                f"board: first_id: ids {self.first_id}..{self.first_id + self.count - 1} are not "
+                f"all in AprilTag 36h11 (0..{count - 1})"
+            )
+
+    @property
+    def count(self) -> int:
+        """Number of markers."""
+        return self.columns * self.rows
+
+    @property
+    def ids(self) -> NDArray[np.int_]:
+        """Marker ids, row by row from the top left."""
+        return np.arange(self.first_id, self.first_id + self.count)
+
+    @property
+    def grid_size(self) -> tuple[float, float]:
+        """Width and height (m) of the marker grid."""
+        pitch = self.marker_size + self.marker_gap
+        return (
+            self.columns * pitch - self.marker_gap,
+            self.rows * pitch - self.marker_gap,
+        )
+
+    @property
+    def size(self) -> tuple[float, float]:
+        """Width (along ``x``) and height (along ``y``) of the whole plate (m), margins included."""
+        w, h = self.grid_size
+        return (w + 2 * self.margin, h + 2 * self.margin)
+
+    def marker_corners(self) -> NDArray[np.float64]:
+        """``(count, 4, 3)``: each marker's corners in the board frame (m), in :attr:`ids` order.
+
+        Corner order is OpenCV's: top-left, top-right, bottom-right, bottom-left as the printed
+        board is seen (clockwise in the image), ``z = 0``.
+        """
+        s, pitch = self.marker_size, self.marker_size + self.marker_gap
+        w, h = self.grid_size
+        out = np.zeros((self.count, 4, 3))
+        for r in range(self.rows):
+            for c in range(self.columns):
+                x0, y0 = -0.5 * w + c * pitch, 0.5 * h - r * pitch  # top-left corner
+                out[r * self.columns + c, :, :2] = [
+                    [x0, y0],
+                    [x0 + s, y0],
+                    [x0 + s, y0 - s],
+                    [x0, y0 - s],
+                ]
+        return out
+
+    def corners_of(self, marker_id: int) -> NDArray[np.float64]:
+        """``(4, 3)`` corners (m, board frame) of one marker; ``KeyError`` if not on the board."""
+        index = int(marker_id) - self.first_id
+        if not 0 <= index < self.count:
+            raise KeyError(f"marker {marker_id} is not on the board")
+        return self.marker_corners()[index]
+
+
+def render_board(board: TagBoard, pixels_per_metre: float = 2000.0) -> NDArray[np.uint8]:
+    """The printable board: a grey image (H, W) uint8, white plate and black markers.
+
+    Pixel ``(0, 0)`` is the plate's top-left corner; the image spans exactly :attr:`TagBoard.size`
+    at ``pixels_per_metre``. Marker edges fall on whole pixels: exactly where every size times
+    ``pixels_per_metre`` is a whole number (2000 px/m with the default board: 10 px per tag cell),
+    otherwise rounded (up to half a pixel). Each marker needs at least 2 px per tag cell.
+    """
+    ppm = float(pixels_per_metre)
+    if not (math.isfinite(ppm) and ppm > 0):
+        raise ValueError(f"pixels_per_metre: must be > 0, got {pixels_per_metre!r}")
+    side = int(round(board.marker_size * ppm))
+    if side < 2 * _TAG_CELLS:
+        raise ValueError(
+            f"pixels_per_metre: {ppm:g} gives {side} px per marker; need >= {2 * _TAG_CELLS}"
+        )
+    w, h = board.size
+    image = np.full((int(round(h * ppm)), int(round(w * ppm))), 255, np.uint8)
+    dictionary = tag_dictionary()
+    pitch = board.marker_size + board.marker_gap
+    for r in range(board.rows):
+        for c in range(board.columns):
+            marker = cv2.aruco.generateImageMarker(
+                dictionary, board.first_id + r * board.columns + c, side, borderBits=1
+            )
+            u0 = int(round((board.margin + c * pitch) * ppm))
+            v0 = int(round((board.margin + r * pitch) * ppm))
+            image[v0 : v0 + side, u0 : u0 + side] = marker
+    return image
+
+
+# ----------------------------------------------------------------------------- one view
+@dataclass(frozen=True)
+class BoardDetection:
+    """The board seen in one image."""
+
+    camera_T_board: Pose  #: board frame in the optical frame (m, rad)
+    ids: tuple[int, ...]  #: markers of the board used
+    rms_px: float  #: rms reprojection error of their corners (pixels)
+
+
+def _detector() -> cv2.aruco.ArucoDetector:
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_APRILTAG
+    return cv2.aruco.ArucoDetector(tag_dictionary(), params)
+
+
+@functools.cache
+def _corner_offset() -> float:
+    """What the detector adds to every corner coordinate (px), measured once on a synthetic tag.
+
+    OpenCV's AprilTag corner refinement (the most precise here: a few hundredths of a pixel on
+    the twin's images against about 0.25 px for ``CORNER_REFINE_SUBPIX``) keeps the AprilTag
+    library's convention of pixel centres at ``+0.5``, so its corners come out half a pixel right
+    and down of OpenCV's (pixel centres at integers, the convention of the intrinsics and of
+    ``solvePnP``). A tag whose border edge lies on the pixel boundary ``59.5`` is detected at
+    ``60.0``. Measured rather than assumed, rounded to 0.5 px, so a future OpenCV that changes
+    the convention needs no edit here.
+    """
+    dictionary = tag_dictionary()
+    image = np.full((200, 200), 255, np.uint8)
+    image[60:140, 60:140] = cv2.aruco.generateImageMarker(dictionary, 0, 80, borderBits=1)
+    corners, ids, _ = _detector().detectMarkers(image)
+    if ids is None or len(ids) != 1:
+        return 0.0
+    true = np.array([[59.5, 59.5], [139.5, 59.5], [139.5, 139.5], [59.5, 139.5]])
+    return round(2.0 * float(np.mean(corners[0].reshape(4, 2) - true))) / 2.0
+
+
+def _pose(rvec: NDArray[np.float64], tvec: NDArray[np.float64]) -> Pose:
+    return Pose(np.asarray(tvec, float).reshape(3), cv2.Rodrigues(np.asarray(rvec, float))[0])
+
+
+def detect_board(
+    rgb: NDArray[np.uint8],
+    intrinsics: Intrinsics,
+    board: TagBoard,
+    dist_coeffs: ArrayLike | None = None,
+    min_markers: int = 1,
+) -> BoardDetection | None:
+    """Find ``board`` in an RGB (H, W, 3) or grey (H, W) image; ``None`` if fewer than
+    ``min_markers`` of its markers are seen.
+
+    ``dist_coeffs``: OpenCV distortion coefficients of the image (none: a pinhole image, as the
+    twin renders and the D435 colour stream is close to).
+    """
+    image = np.asarray(rgb)
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    corners, ids, _ = _detector().detectMarkers(np.ascontiguousarray(gray, np.uint8))
+    if ids is None:
+        return None
+    on_board = [
+        (int(i), c.reshape(4, 2).astype(np.float64) - _corner_offset())
+        for i, c in zip(ids.ravel(), corners, strict=True)
+        if board.first_id <= int(i) < board.first_id + board.count
+    ]
+    if len(on_board) < max(1, min_markers):
+        return None
+    on_board.sort(key=lambda item: item[0])
+    k = intrinsics.matrix
+    dist = np.zeros(5) if dist_coeffs is None else np.asarray(dist_coeffs, float)
+    obj = np.concatenate([board.corners_of(i) for i, _ in on_board])
+    img = np.concatenate([c for _, c in on_board])
+
+    # Start from the marker seen largest: IPPE_SQUARE's two solutions, judged on every corner.
+    areas = [cv2.contourArea(c.astype(np.float32)) for _, c in on_board]
+    best_id, best_corners = on_board[int(np.argmax(areas))]
+    half = 0.5 * board.marker_size
+    square = np.array([[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]])
+    board_T_marker = Pose(board.corners_of(best_id).mean(axis=0), np.eye(3))
+    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+        square, best_corners, k, dist, flags=cv2.SOLVEPNP_IPPE_SQUARE
+    )
+    best: tuple[float, NDArray[np.float64], NDArray[np.float64]] | None = None
+    for rvec, tvec in zip(rvecs[:n], tvecs[:n], strict=True):
+        guess = _pose(rvec, tvec) @ board_T_marker.inverse()
+        r0 = cv2.Rodrigues(guess.rotation)[0]
+        err = _rms(obj, img, r0, guess.position, k, dist)
+        if best is None or err < best[0]:
+            best = (err, r0, guess.position.reshape(3, 1).copy())
+    if best is None:
+        return None
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, best[1], best[2])
+    pose = _pose(rvec, tvec)
+    if pose.position[2] <= 0:
+        return None
+    return BoardDetection(pose, tuple(i for i, _ in on_board), _rms(obj, img, rvec, tvec, k, dist))
+
+
+def _rms(
+    obj: NDArray[np.float64],
+    img: NDArray[np.float64],
+    rvec: NDArray[np.float64],
+    tvec: NDArray[np.float64],
+    k: NDArray[np.float64],
+    dist: NDArray[np.float64],
+) -> float:
+    """Rms distance (px) between ``img`` and the projections of ``obj`` at pose (rvec, tvec)."""
+    proj, _ = cv2.projectPoints(obj, np.asarray(rvec, float), np.asarray(tvec, float), k, dist)
+    return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
+
+
+def board_pose_from_frame(
+    rgb: NDArray[np.uint8],
+    intrinsics: Intrinsics,
+    board: TagBoard,
+    dist_coeffs: ArrayLike | None = None,
+) -> Pose | None:
+    """``camera_T_board`` (m, rad) from one RGB image, or ``None`` when the board is not seen."""
+    found = detect_board(rgb, intrinsics, board, dist_coeffs)
+    return None if found is None else found.camera_T_board
+
+
+# ------------------------------------------------------------------------- the calibration
+def calibrate_hand_eye(
+    base_T_tool: Sequence[Pose],
+    camera_T_board: Sequence[Pose | None],
+    method: int = cv2.CALIB_HAND_EYE_PARK,
+) -> Pose:
+    """``tool_T_camera`` (m, rad) from views of a fixed board (eye in hand).
+
+    ``base_T_tool[i]`` is the tool pose when view ``i`` was taken, ``camera_T_board[i]`` the board
+    seen in it (``None``: not seen; such views are skipped). Solved by ``cv2.calibrateHandEye``
+    (``gripper2base = base_T_tool``, ``target2cam = camera_T_board``) with ``method`` (default
+    Park and Martin's). The OpenCV 5.0.0 wheels do not export that function to Python
+    (opencv/opencv#29565, fixed after 5.0.0 by #29584); without it the same Park-Martin solution
+    is computed here (:func:`park_martin`), whatever ``method`` says.
+
+    Raises ``ValueError`` with fewer than :data:`MIN_VIEWS` usable views, or when the tool's
+    rotations between them all turn about one axis (the mount's offset along that axis is then
+    unobservable).
+    """
+    if len(base_T_tool) != len(camera_T_board):
+        raise ValueError(
+            f"hand-eye calibration: {len(base_T_tool)} tool poses but "
+            f"{len(camera_T_board)} board poses"
+        )
+    pairs = [(t, c) for t, c in zip(base_T_tool, camera_T_board, strict=True) if c is not None]
+    if len(pairs) < MIN_VIEWS:
+        raise ValueError(
+            f"hand-eye calibration: needs at least {MIN_VIEWS} views with the board seen, "
+            f"got {len(pairs)} of {len(base_T_tool)}"
+        )
+    axes = []
+    for i, (a, _) in enumerate(pairs):
+        for b, _ in pairs[i + 1 :]:
+            rel = Rotation.from_matrix(a.rotation.T @ b.rotation).as_rotvec()
+            if np.linalg.norm(rel) > math.radians(2.0):
+                axes.append(rel / np.linalg.norm(rel))
+    if len(axes) < 2 or np.linalg.svd(np.array(axes), compute_uv=False)[1] < 0.1:
+        raise ValueError(
+            "hand-eye calibration: the tool must turn about at least two different axes "
+            "between the views (tilt it about x and about y by 10 deg or more)"
+        )
+    tools = [t for t, _ in pairs]
+    boards = [c for _, c in pairs]
+    solver = getattr(cv2, "calibrateHandEye", None)
+    if solver is None:
+        return park_martin(tools, boards)
+    rot, trans = solver(
+        [t.rotation for t in tools],
+        [t.position.reshape(3, 1) for t in tools],
+        [c.rotation for c in boards],
+        [c.position.reshape(3, 1) for c in boards],
+        method=method,
+    )
+    return Pose(np.asarray(trans, float).reshape(3), np.asarray(rot, float))
+
+
+def park_martin(base_T_tool: Sequence[Pose], camera_T_board: Sequence[Pose]) -> Pose:
+    """Park and Martin's closed-form ``AX = XB`` (as ``cv2.CALIB_HAND_EYE_PARK``), all pairs.
+
+    For views ``i < j``: ``A = tool_i_T_tool_j``, ``B = camera_i_T_camera_j`` (the board is
+    fixed), ``X = tool_T_camera``. Rotation: with ``a``, ``b`` the rotation vectors of ``A``,
+    ``B`` and ``M = sum b a^T``, ``R_X = (M^T M)^(-1/2) M^T``. Translation: least squares of
+    ``(R_A - I) t_X = R_X t_B - t_A``. No checks: see :func:`calibrate_hand_eye`.
+    """
+    motions = []
+    for i in range(len(base_T_tool)):
+        for j in range(i + 1, len(base_T_tool)):
+            a = base_T_tool[i].inverse() @ base_T_tool[j]
+            b = camera_T_board[i] @ camera_T_board[j].inverse()
+            motions.append((a, b))
+    m = np.zeros((3, 3))
+    for a, b in motions:
+        m += np.outer(Rotation.from_matrix(b.rotation).as_rotvec(), a.rotvec)
+    w, v = np.linalg.eigh(m.T @ m)
+    rot = v @ np.diag(1.0 / np.sqrt(np.maximum(w, 1e-300))) @ v.T @ m.T
+    u, _, vt = np.linalg.svd(rot)  # the nearest rotation (guards round-off)
+    rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    lhs = np.concatenate([a.rotation - np.eye(3) for a, _ in motions])
+    rhs = np.concatenate([rot @ b.position - a.position for a, b in motions])
+    trans = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    return Pose(trans, rot)
+
+
+def hand_eye_residuals(
+    base_T_tool: Sequence[Pose],
+    camera_T_board: Sequence[Pose | None],
+    tool_T_camera: Pose,
+) -> tuple[float, float]:
+    """How well the views agree under ``tool_T_camera``: rms ``(m, rad)`` of the board's pose in
+    the base (``base_T_tool @ tool_T_camera @ camera_T_board``) about their mean, over the
+    views where the board was seen. A few tenths of a millimetre on a good calibration."""
+    seen = [
+        t @ tool_T_camera @ c
+        for t, c in zip(base_T_tool, camera_T_board, strict=True)
+        if c is not None
+    ]
+    if not seen:
+        raise ValueError("hand-eye residuals: no view with the board seen")
+    positions = np.array([s.position for s in seen])
+    mean_rot = Rotation.from_matrix(np.array([s.rotation for s in seen])).mean()
+    angles = Rotation.from_matrix(np.array([s.rotation for s in seen])) * mean_rot.inv()
+    pos = float(np.sqrt(np.mean(np.sum((positions - positions.mean(axis=0)) ** 2, axis=1))))
+    return pos, float(np.sqrt(np.mean(angles.magnitude() ** 2)))
+
+
+# ------------------------------------------------------------------------------ the routine
+def calibration_views(
+    target: ArrayLike,
+    tool_T_camera: Pose,
+    count: int = 8,
+    distance: tuple[float, float] = (0.28, 0.40),
+    tilt: tuple[float, float] = (math.radians(10.0), math.radians(25.0)),
+    max_yaw: float = math.radians(20.0),
+) -> list[Pose]:
+    """``count`` tool poses (base frame, m, rad) from which the camera looks at ``target``.
+
+    ``target`` (3,): the board's centre in the base frame; ``tool_T_camera``: the mount as
+    configured (it only aims the views: a few millimetres or degrees off still see the board).
+    The optical axis points at ``target`` from ``distance`` (m), tilted from the vertical by
+    ``tilt`` (rad) towards azimuths spread evenly around it, and the camera is turned about its
+    axis by up to ``max_yaw`` (rad) from "image x along base x" (the tool pointing down as at the
+    robot's home). Tilt, distance and turn vary from view to view along low-discrepancy
+    sequences, so the motions between views turn about many axes, as the calibration needs.
+    """
+    if count < 1:
+        raise ValueError(f"count: must be >= 1, got {count}")
+    centre = np.asarray(target, float).reshape(3)
+    down = np.diag([1.0, -1.0, -1.0])  # optical z along base -z, optical x along base x
+    views = []
+    for i in range(count):
+        azimuth = 2.0 * math.pi * i / count + 0.3
+        g_tilt = (0.5 + i * 0.6180339887) % 1.0
+        g_dist = (0.25 + i * 0.4142135624) % 1.0
+        g_yaw = (0.1 + i * 0.7548776662) % 1.0
+        t = tilt[0] + (tilt[1] - tilt[0]) * g_tilt
+        d = distance[0] + (distance[1] - distance[0]) * g_dist
+        yaw = max_yaw * (2.0 * g_yaw - 1.0)
+        axis = np.array([-math.sin(azimuth), math.cos(azimuth), 0.0])
+        rot = (
+            Rotation.from_rotvec(t * axis).as_matrix()
+            @ down
+            @ Rotation.from_euler("z", yaw).as_matrix()
+        )
+        camera = Pose(centre - d * rot[:, 2], rot)
+        views.append(camera @ tool_T_camera.inverse())
+    return views
+
+
+@dataclass(frozen=True)
+class CalibrationSample:
+    """One view of the routine."""
+
+    base_T_tool: Pose  #: measured tool pose at the capture (or where the arm stopped)
+    camera_T_board: Pose | None  #: ``None``: board not seen, or the view was skipped
+    markers: int = 0  #: board markers seen
+    rms_px: float = math.nan  #: reprojection rms of their corners (px)
+    note: str = ""  #: why the view has no board pose
+
+
+@dataclass
+class _ViewState:
+    index: int = 0
+    phase: str = "start"  # start -> moving -> settling -> (capture) -> start of the next view
+    since: float = 0.0
+    samples: list[CalibrationSample] = field(default_factory=list)
+
+
+class HandEyeRoutine:
+    """Move through ``views`` (tool poses, base frame), capture the board at each, calibrate.
+
+    Non-blocking: each :meth:`tick` is one control step (start a move, poll it, wait
+    ``settle`` s once it is done, capture and detect). A view the arm cannot reach (its motion
+    faults or stops), where the camera times out, sees fewer than ``min_markers`` markers, or
+    where their corners miss the fitted pose by more than ``max_rms_px`` (a misread corner) is
+    recorded with a note and skipped; a move that takes longer than ``move_timeout`` s stops the
+    arm and fails the routine. At the end :func:`calibrate_hand_eye` runs on the views that saw
+    the board: SUCCESS leaves ``tool_T_camera`` and ``residuals`` (see
+    :func:`hand_eye_residuals`); too few views or a degenerate set is a FAILURE saying so.
+    Free-space moves above the board, at ``speed`` m/s and ``acceleration`` m/s^2: clear the
+    space between the views first.
+    """
+
+    def __init__(
+        self,
+        arm: Arm,
+        camera: Camera,
+        clock: Clock,
+        board: TagBoard,
+        views: Sequence[Pose],
+        speed: float = 0.2,
+        acceleration: float = 0.5,
+        settle: float = 0.3,
+        move_timeout: float = 20.0,
+        min_markers: int = 2,
+        max_rms_px: float = 2.0,
+        dist_coeffs: ArrayLike | None = None,
+    ) -> None:
+        if not views:
+            raise ValueError("hand-eye routine: no views given")
+        self.arm, self.camera, self.clock, self.board = arm, camera, clock, board
+        self.views = list(views)
+        self.speed, self.acceleration, self.settle = speed, acceleration, settle
+        self.move_timeout, self.min_markers = move_timeout, min_markers
+        self.max_rms_px = max_rms_px
+        self.dist_coeffs = dist_coeffs
+        self._state = _ViewState()
+        self._result: StepResult | None = None
+        self.tool_T_camera: Pose | None = None
+        self.residuals: tuple[float, float] | None = None
+
+    @property
+    def samples(self) -> list[CalibrationSample]:
+        return list(self._state.samples)
+
+    def tick(self) -> StepResult:
+        if self._result is not None:
+            return self._result
+        st = self._state
+        if st.index >= len(self.views):
+            self._result = self._finish()
+            return self._result
+        now = self.clock.now()
+        label = f"hand-eye view {st.index + 1}/{len(self.views)}"
+        if st.phase == "start":
+            self.arm.move_to(self.views[st.index], self.speed, self.acceleration)
+            st.phase, st.since = "moving", now
+            return StepResult(Status.RUNNING, f"{label}: moving")
+        if st.phase == "moving":
+            state = self.arm.status()
+            if state.state is MotionState.DONE:
+                st.phase, st.since = "settling", now
+            elif state.state in (MotionState.FAULT, MotionState.STOPPED, MotionState.IDLE):
+                reason = state.message or state.state.value
+                self._skip(f"arm {state.state.value}: {reason}")
+            elif now - st.since > self.move_timeout:
+                self.arm.stop()
+                self._result = StepResult(
+                    Status.FAILURE,
+                    f"{label}: move not done after {now - st.since:.1f} s; arm stopped",
+                )
+                return self._result
+            return StepResult(Status.RUNNING, f"{label}: moving")
+        if now - st.since < self.settle:
+            return StepResult(Status.RUNNING, f"{label}: settling")
+        self._capture()
+        return StepResult(Status.RUNNING, f"{label}: captured")
+
+    def halt(self) -> None:
+        """Stop the arm (idempotent); the routine does not resume."""
+        self.arm.stop()
+        if self._result is None:
+            self._result = StepResult(Status.FAILURE, "hand-eye calibration: halted")
+
+    def _next(self, sample: CalibrationSample) -> None:
+        self._state.samples.append(sample)
+        self._state.index += 1
+        self._state.phase = "start"
+
+    def _skip(self, note: str) -> None:
+        self._next(CalibrationSample(self.arm.tool_pose(), None, note=note))
+
+    def _capture(self) -> None:
+        try:
+            frame = self.camera.capture()
+        except TimeoutError as exc:
+            self._skip(f"no camera frame: {exc}")
+            return
+        tool = self.arm.tool_pose()
+        found = detect_board(
+            frame.rgb,
+            self.camera.intrinsics(),
+            self.board,
+            self.dist_coeffs,
+            min_markers=self.min_markers,
+        )
+        if found is None:
+            self._next(
+                CalibrationSample(tool, None, note=f"fewer than {self.min_markers} markers seen")
+            )
+        elif found.rms_px > self.max_rms_px:
+            note = f"corners off their fit by more than {self.max_rms_px:g} px rms"
+            self._next(CalibrationSample(tool, None, len(found.ids), found.rms_px, note))
+        else:
+            self._next(CalibrationSample(tool, found.camera_T_board, len(found.ids), found.rms_px))
+
+    def _finish(self) -> StepResult:
+        samples = self._state.samples
+        tools = [s.base_T_tool for s in samples]
+        boards = [s.camera_T_board for s in samples]
+        seen = sum(b is not None for b in boards)
+        if seen < MIN_VIEWS:
+            missed = Counter(s.note for s in samples if s.camera_T_board is None)
+            notes = "; ".join(f"{n} x {note}" for note, n in missed.items())
+            return StepResult(
+                Status.FAILURE,
+                f"hand-eye calibration: the board was seen in {seen} of {len(samples)} views, "
+                f"needs at least {MIN_VIEWS} ({notes})",
+            )
+        try:
+            estimate = calibrate_hand_eye(tools, boards)
+        except (ValueError, cv2.error) as exc:
+            return StepResult(Status.FAILURE, str(exc))
+        self.tool_T_camera = estimate
+        self.residuals = hand_eye_residuals(tools, boards, estimate)
+        return StepResult(
+            Status.SUCCESS,
+            f"hand-eye calibration: {seen} of {len(samples)} views; the board's pose in the base "
+            f"agrees to {self.residuals[0] * 1e3:.2f} mm, "
+            f"{math.degrees(self.residuals[1]):.3f} deg rms",
+        )
