@@ -57,6 +57,11 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     p.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (1)")
     p.add_argument(
+        "--nominal",
+        action="store_true",
+        help="give the skills the part's nominal pose instead of looking with the wrist camera",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="run a part the planner declines, at --la/--alpha (reported as forced)",
@@ -143,6 +148,8 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     setup = TrialSetup(part=part, plan=plan, frictions=frictions, layout=layout)
     if args.mu_ground is not None:
         setup = dataclasses.replace(setup, mu_ground=args.mu_ground)
+    if args.nominal:
+        setup = dataclasses.replace(setup, perceive=False)
     reason = setup.reach_problem()
     if reason is not None:
         source = str(args.cell) if args.cell is not None else "the default cell layout"
@@ -195,6 +202,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
         {
             "seed": args.seed,
             "forced": forced,
+            "pose_source": "nominal" if args.nominal else "wrist camera",
             "mu_ground": args.mu_ground,
             "plan": plan.to_json(),
             "physics": setup.physics_json(),
