@@ -35,6 +35,8 @@ class Look:
         near_xy: tuple[float, float],
         height: float = 0.5,
         speed: float = 0.25,
+        second_height: float = 0.35,
+        second_offset: float = 0.10,
         guard: Guard | None = None,
     ) -> None:
         guard = guard if guard is not None else Guard()
@@ -68,8 +70,10 @@ class Look:
             if d is None or d.open_end_seen:  # decided: look again from where it is
                 return float(view_xy[0]), float(view_xy[1])
             u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-            # From beyond the end the first view chose, that end face is in sight.
-            xy = d.center[:2] + (0.5 * d.length + 0.15) * u
+            # From beyond an end, that end's face is in sight; take the end nearer the robot,
+            # where the arm reaches.
+            ends = [d.center[:2] + s * (0.5 * d.length + second_offset) * u for s in (1.0, -1.0)]
+            xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
             return float(xy[0]), float(xy[1])
 
         done = lambda: True  # noqa: E731
@@ -80,7 +84,13 @@ class Look:
                 GuardedMotion(
                     "find the parts", detect, done, arm, dev.ft, dev.clock, guard, none_found
                 ),
-                dev.move("camera beyond its end", guard, lambda: go(second_view_xy)),
+                dev.move(
+                    "camera beyond its end",
+                    guard,
+                    lambda: arm.move_to(
+                        camera_over(second_view_xy(), second_height, dev), speed, 1.0
+                    ),
+                ),
                 GuardedMotion(
                     "look at its end", detect, done, arm, dev.ft, dev.clock, guard, none_found
                 ),
