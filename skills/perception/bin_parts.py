@@ -59,7 +59,9 @@ class DetectorSettings:
     min_seed: int = 30  #: pixels of the smallest seed
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
-    min_inside: int = 15  #: points seen through an opening that make an end the open one
+    min_inside: int = 40  #: points seen through an opening that make an end the open one
+    max_closed: int = 5  #: at most this many, and the end facing the camera is the closed one
+    min_face: int = 40  #: points on a closed end's face (its middle) to call it closed
     min_end_view: float = 0.1  #: tan of the view angle onto an end face needed to judge it
 
 
@@ -295,8 +297,12 @@ def _fit_one(
             inside = _inside_seen(uv_all, hgt, center_uv, sign * axis, across, part)
             lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
             height = float(cam @ hm.plane.normal - hm.plane.offset)
-            seen = lateral / max(height, 1e-6) > settings.min_end_view
-            choice = facing if inside >= settings.min_inside else 1 - facing
+            # Between a clear view inside and none at all the view is not trusted: undecided.
+            face = _face_seen(uv_all, hgt, center_uv, sign * axis, across, part)
+            is_open = inside >= settings.min_inside
+            is_closed = inside <= settings.max_closed and face >= settings.min_face
+            seen = lateral / max(height, 1e-6) > settings.min_end_view and (is_open or is_closed)
+            choice = facing if is_open else 1 - facing
         else:  # a tube: the end farther from the robot
             d = [math.hypot(e[0] - robot_xy[0], e[1] - robot_xy[1]) for e in ends]
             choice = 0 if d[0] >= d[1] else 1
@@ -332,10 +338,30 @@ def _inside_seen(
     rel = uv_all - center_uv
     s = rel @ axis
     c = rel @ across
-    near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.002)
+    # Kept 6 mm inside the end: the lower part of a closed end's own face, blurred by the depth
+    # noise and the centre's error, must not count as a view inside.
+    near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.006)
     within = np.abs(c) < 0.4 * part.hole
     low = (hgt > -0.002) & (hgt < 0.3 * part.outer)
     return int(np.count_nonzero(near_end & within & low))
+
+
+def _face_seen(
+    uv_all: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    center_uv: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    part: Part,
+) -> int:
+    """Points on the middle of the ``+axis`` end face: a closed end shows a disc there, an open
+    end only the hole's inside (which lies further in)."""
+    rel = uv_all - center_uv
+    s = rel @ axis
+    c = rel @ across
+    at_face = np.abs(s - 0.5 * part.length) < 0.004
+    middle = (np.abs(c) < 0.4 * part.hole) & (hgt > 0.15 * part.outer) & (hgt < 0.85 * part.outer)
+    return int(np.count_nonzero(at_face & middle))
 
 
 def timed_detect(*args, **kwargs) -> tuple[list[Detection], float]:  # type: ignore[no-untyped-def]
