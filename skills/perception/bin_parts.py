@@ -197,10 +197,10 @@ def fit_segments(
     cam = np.zeros(3) if camera_position is None else np.asarray(camera_position, float)
     n = hm.plane.normal
     e1, e2 = _plane_basis(n)
-    pts = hm.points.reshape(-1, 3).astype(np.float64)
-    hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0).astype(np.float64)
+    pts = hm.points.reshape(-1, 3)  # float32: twice as fast as float64, sub-0.1 mm here
+    hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0)
     lab = labels.reshape(-1)
-    uv_all = np.column_stack([pts @ e1, pts @ e2])
+    uv_all = pts @ np.column_stack([e1, e2]).astype(np.float32)
     out: list[Detection] = []
     for k in range(1, int(lab.max(initial=0)) + 1):
         idx = np.flatnonzero(lab == k)
@@ -231,7 +231,7 @@ def _fit_one(
     upper = idx[h > 0.5 * top]
     if len(upper) < 20:
         return []
-    uv = uv_all[upper]
+    uv = uv_all[upper].astype(np.float64)
     mean = uv.mean(axis=0)
     _, _, vt = np.linalg.svd(uv - mean, full_matrices=False)
     axis = vt[0]
@@ -294,11 +294,15 @@ def _fit_one(
             cam_uv = np.array([cam @ e1, cam @ e2])
             facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
             sign = 1.0 if facing == 0 else -1.0
-            inside = _inside_seen(uv_all, hgt, center_uv, sign * axis, across, part)
+            # Only the pixels around this part matter: one pass picks them.
+            near = np.flatnonzero(
+                np.abs(uv_all - center_uv).max(axis=1) < 0.5 * part.length + part.outer
+            )
+            inside = _inside_seen(uv_all[near], hgt[near], center_uv, sign * axis, across, part)
             lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
             height = float(cam @ hm.plane.normal - hm.plane.offset)
             # Between a clear view inside and none at all the view is not trusted: undecided.
-            face = _face_seen(uv_all, hgt, center_uv, sign * axis, across, part)
+            face = _face_seen(uv_all[near], hgt[near], center_uv, sign * axis, across, part)
             is_open = inside >= settings.min_inside
             is_closed = inside <= settings.max_closed and face >= settings.min_face
             seen = lateral / max(height, 1e-6) > settings.min_end_view and (is_open or is_closed)

@@ -60,18 +60,32 @@ def check_frame(frame: Frame, intr: Intrinsics | None) -> None:
         raise PerceptionInputError("the depth frame holds no valid pixel")
 
 
+_RAYS: dict[tuple[int, int, float, float, float, float], NDArray[np.float32]] = {}
+
+
+def _rays(intr: Intrinsics, shape: tuple[int, int]) -> NDArray[np.float32]:
+    """Per-pixel ray ``((u - cx)/fx, (v - cy)/fy, 1)``, cached per camera (the 640 x 480 grid is
+    most of the back-projection's cost)."""
+    key = (shape[0], shape[1], intr.fx, intr.fy, intr.cx, intr.cy)
+    rays = _RAYS.get(key)
+    if rays is None:
+        v, u = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float32)
+        rays = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones_like(u)], -1)
+        _RAYS.clear()
+        _RAYS[key] = rays
+    return rays
+
+
 def back_project_image(
     depth: NDArray[np.floating], intr: Intrinsics, world_T_camera: Pose
 ) -> NDArray[np.float32]:
     """(H, W, 3) base-frame points; NaN where the depth is 0 (invalid)."""
-    h, w = depth.shape
-    v, u = np.mgrid[0:h, 0:w]
-    z = depth.astype(np.float64)
-    cam = np.stack([(u - intr.cx) * z / intr.fx, (v - intr.cy) * z / intr.fy, z], axis=-1)
-    pts = cam.reshape(-1, 3) @ world_T_camera.rotation.T + world_T_camera.position
-    pts = pts.reshape(h, w, 3)
+    z = depth.astype(np.float32)
+    cam = _rays(intr, depth.shape) * z[..., None]
+    rot = world_T_camera.rotation.astype(np.float32)
+    pts = cam @ rot.T + world_T_camera.position.astype(np.float32)
     pts[z <= 0] = np.nan
-    return pts.astype(np.float32)
+    return pts
 
 
 def fit_floor(
@@ -140,11 +154,11 @@ def height_map(
                 & (pts[..., 1] > y0 + m)
                 & (pts[..., 1] < y1 - m)
             )
-    flat = pts[valid].astype(np.float64)
+    flat = pts[valid]
     if len(flat) < 100:
         raise PerceptionInputError("fewer than 100 valid depth pixels inside the bin")
-    plane = fit_floor(flat, rng)
+    plane = fit_floor(flat.astype(np.float64, copy=False)[:: max(1, len(flat) // 40000)], rng)
     height = np.full(valid.shape, np.nan, np.float32)
-    height[valid] = plane.height(flat).astype(np.float32)
+    height[valid] = flat @ plane.normal.astype(np.float32) - np.float32(plane.offset)
     z_mid = float(np.median(frame.depth[frame.depth > 0]))
     return HeightMap(height=height, points=pts, plane=plane, pixel_size=z_mid / intr.fx)
