@@ -55,8 +55,10 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
         if weights is not None:
             raise ValueError("--weights: only with --pipeline learned")
         return None
-    from skills.perception.learned import LearnedSegmenter
-
+    try:
+        from skills.perception.learned import LearnedSegmenter
+    except ImportError as exc:  # the learned option is not part of this build
+        raise ValueError(f"--pipeline learned: not available: {exc}") from None
     return LearnedSegmenter(weights if weights is not None else default_weights())
 
 
