@@ -320,6 +320,10 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.perceive_cmd import add_parser as add_perceive
 
     add_perceive(sub)
+
+    from cell.train_perception_cmd import add_parser as add_train_perception
+
+    add_train_perception(sub)
     return parser
 
 
