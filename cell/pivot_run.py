@@ -207,7 +207,7 @@ def run_trial(
                 (setup.layout.bin_center[0], setup.layout.bin_center[1]),
                 setup.nominal_center(),
             )
-            failure = _run_skill(look, world, robot, t_end, on_frame, frame_every)
+            failure = _run_skill("look", look, world, robot, t_end, on_frame, frame_every)
             if failure is None and look.result is not None:
                 d = look.result
                 seen = {"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw}
@@ -223,18 +223,8 @@ def run_trial(
             ("align", Align(lambda: tilt.frame, setup.part, params, dev)),
         ]
         for phase_name, skill in phases if failure is None else []:
-            result = skill.tick()
-            while not result.done and world.clock.now() < t_end:
-                world.step()
-                if on_frame is not None and world.steps % frame_every == 0:
-                    on_frame(world, robot)
-                result = skill.tick()
-            if not result.done:
-                skill.halt()
-                failure = f"{phase_name}: out of time"
-                break
-            if result.status is Status.FAILURE:
-                failure = result.message
+            failure = _run_skill(phase_name, skill, world, robot, t_end, on_frame, frame_every)
+            if failure is not None:
                 break
         else:
             phase_name = "done"
@@ -271,7 +261,7 @@ def run_trial(
 
 
 def _run_skill(  # type: ignore[no-untyped-def]
-    skill, world, robot, t_end, on_frame, frame_every
+    name, skill, world, robot, t_end, on_frame, frame_every
 ) -> str | None:
     """Tick ``skill`` with the world until it ends; its failure message, or None."""
     result = skill.tick()
@@ -282,7 +272,7 @@ def _run_skill(  # type: ignore[no-untyped-def]
         result = skill.tick()
     if not result.done:
         skill.halt()
-        return "look: out of time"
+        return f"{name}: out of time"
     return result.message if result.status is Status.FAILURE else None
 
 

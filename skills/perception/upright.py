@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
 from skills.mechanics.part import Part
-from skills.perception.cloud import back_project
+from skills.perception.heightmap import back_project_image
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,8 @@ def locate_upright_part(
     ``search``: how far (m) beyond its outer radius the part may stand from ``expected_xy``;
     ``band``: half-height (m) of the slab around the rim height that holds the rim's points.
     """
-    pts = back_project(frame.depth, intr, world_T_camera)
+    pts = back_project_image(frame.depth, intr, world_T_camera).reshape(-1, 3)
+    pts = pts[np.isfinite(pts[:, 0])].astype(np.float64)
     rim_z = floor_z + part.length
     pts = pts[np.abs(pts[:, 2] - rim_z) < band]
     reach = 0.5 * part.outer * (math.sqrt(2.0) if part.hole_shape == "rectangle" else 1.0)
