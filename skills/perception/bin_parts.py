@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
 from skills.mechanics.part import Part
-from skills.perception.heightmap import HeightMap, height_map
+from skills.perception.heightmap import HeightMap, dot_last, height_map
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,20 @@ def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> N
     return _merge_pieces(out, h)
 
 
+def _principal(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean and major axis of 2D points, from the 2 x 2 scatter (no BLAS call: its threads
+    spin-wait, see :func:`heightmap.dot_last`)."""
+    mean = xy.mean(axis=0)
+    d = xy - mean
+    sxx, syy, sxy = (
+        float(np.sum(d[:, 0] ** 2)),
+        float(np.sum(d[:, 1] ** 2)),
+        float(np.sum(d[:, 0] * d[:, 1])),
+    )
+    axis = np.linalg.eigh(np.array([[sxx, sxy], [sxy, syy]]))[1][:, 1]
+    return mean, axis
+
+
 def _merge_pieces(labels: NDArray[np.int32], h: NDArray[np.float32]) -> NDArray[np.int32]:
     """Join neighbouring segments of one part that the seeds split (a thin, noisy top): same
     height to 2 mm, their principal axes within 10 deg and on one line."""
@@ -108,9 +122,8 @@ def _merge_pieces(labels: NDArray[np.int32], h: NDArray[np.float32]) -> NDArray[
         if len(u) < 10:
             continue
         xy = np.column_stack([u, v]).astype(np.float64)
-        mean = xy.mean(axis=0)
-        _, _, vt = np.linalg.svd(xy - mean, full_matrices=False)
-        stats[k] = (float(np.percentile(h[v, u], 95)), mean, vt[0])
+        mean, major = _principal(xy)
+        stats[k] = (float(np.percentile(h[v, u], 95)), mean, major)
     pairs = set()
     for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
         a = labels[
@@ -200,7 +213,7 @@ def fit_segments(
     pts = hm.points.reshape(-1, 3)  # float32: twice as fast as float64, sub-0.1 mm here
     hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0)
     lab = labels.reshape(-1)
-    uv_all = pts @ np.column_stack([e1, e2]).astype(np.float32)
+    uv_all = np.column_stack([dot_last(pts, e1), dot_last(pts, e2)])
     out: list[Detection] = []
     for k in range(1, int(lab.max(initial=0)) + 1):
         idx = np.flatnonzero(lab == k)
@@ -232,12 +245,10 @@ def _fit_one(
     if len(upper) < 20:
         return []
     uv = uv_all[upper].astype(np.float64)
-    mean = uv.mean(axis=0)
-    _, _, vt = np.linalg.svd(uv - mean, full_matrices=False)
-    axis = vt[0]
+    mean, axis = _principal(uv)
     across = np.array([-axis[1], axis[0]])
-    s = (uv - mean) @ axis
-    c = (uv - mean) @ across
+    s = dot_last(uv - mean, axis)
+    c = dot_last(uv - mean, across)
     outer = top
     width = float(np.percentile(c, 99) - np.percentile(c, 1))
     # Touching boxes leave no valley: a segment n parts wide is n parts side by side; each
@@ -252,10 +263,10 @@ def _fit_one(
             cand = np.array([-cand[1], cand[0]])
         axis = cand if float(cand @ axis) >= 0 else -cand
         across = np.array([-axis[1], axis[0]])
-        c = (uv - mean) @ across
+        c = dot_last(uv - mean, across)
         width = float(np.percentile(c, 99) - np.percentile(c, 1))
         strips = max(2, int(round(width / max(outer, 1e-6))))
-        c_all = (uv_all[idx] - mean) @ across
+        c_all = dot_last(uv_all[idx] - mean, across)
         edges = np.linspace(np.percentile(c, 1), np.percentile(c, 99), strips + 1)
         edges[0], edges[-1] = -np.inf, np.inf
         out: list[Detection] = []
@@ -340,8 +351,8 @@ def _inside_seen(
 ) -> int:
     """Points seen through the opening at the ``+axis`` end: low, inside the part's footprint."""
     rel = uv_all - center_uv
-    s = rel @ axis
-    c = rel @ across
+    s = dot_last(rel, axis)
+    c = dot_last(rel, across)
     # Kept 6 mm inside the end: the lower part of a closed end's own face, blurred by the depth
     # noise and the centre's error, must not count as a view inside.
     near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.006)
@@ -361,8 +372,8 @@ def _face_seen(
     """Points on the middle of the ``+axis`` end face: a closed end shows a disc there, an open
     end only the hole's inside (which lies further in)."""
     rel = uv_all - center_uv
-    s = rel @ axis
-    c = rel @ across
+    s = dot_last(rel, axis)
+    c = dot_last(rel, across)
     at_face = np.abs(s - 0.5 * part.length) < 0.004
     middle = (np.abs(c) < 0.4 * part.hole) & (hgt > 0.15 * part.outer) & (hgt < 0.85 * part.outer)
     return int(np.count_nonzero(at_face & middle))
