@@ -1,0 +1,243 @@
+"""Packing a part held in the hole grasp upright into a box, tight against walls and neighbours.
+
+The application of Sec. IV-C of the paper (Fig. 15): a hybrid force-position push. The part is
+set down a few millimetres short of its place towards ``-x, -y``, then pushed ``-z`` until the
+box floor pushes back, ``+x`` until a wall or a packed neighbour does, ``+y`` likewise, let go and
+the gripper withdrawn up. Each push is a guarded straight move that stops the moment the force
+against it rises ``contact_force`` above what it was when the push began (the held part's weight
+and friction on the floor are in that reference, so they are not taken for contact), which is how
+a position-controlled arm with a wrist sensor does force-guided placing.
+
+Why the hole grasp helps: the finger in the hole and the one on the wall hold the part from one
+side only, so no finger sits between the part and the things it is pushed against; the gripper
+is turned so the outer finger is on the *trailing* side (``-x, -y`` diagonal), where nothing has
+been packed yet, and both pushes go through it (it pushes the part's wall ahead of it).
+
+Packing order (:func:`tray_places`): the first part into the ``+x, +y`` corner, then along the
+``+y`` wall towards ``-x``, then the next row: each new part is pushed into a corner made of
+walls and parts already packed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from drivers.pose import Pose
+from skills.mechanics.part import Part
+from skills.motion import Devices, Guard, Sequence, wait
+from skills.slot import (
+    GRAVITY,
+    ContactMove,
+    SequenceSkill,
+    check,
+    grasp_offset,
+    hold_pose,
+    horizontal,
+    travel_path,
+    world_force,
+)
+
+
+@dataclass(frozen=True)
+class PackParams:
+    """Parameters of :class:`PackInBox` (SI units)."""
+
+    grip_depth: float = 0.020  #: m the fingertips reach below the rim in the hole grasp
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
+    #: Direction (x, y) of the outer finger from the part: the trailing side of both pushes.
+    trail_dir: tuple[float, float] = (-1.0, -1.0)
+    offset: float = 0.004  #: m the part is set down short of its place along -x and along -y
+    push_range: float = 0.012  #: m beyond the place a push may go before "nothing to push on"
+    clear_height: float = 0.02  #: m above the highest thing in the box while moving over it
+    travel_z: float = 0.13  #: m, the lowest the part's bottom travels at to and from the box
+    min_radius: float = 0.30  #: m from the base axis a travel path keeps
+    travel_speed: float = 0.15  #: m/s
+    approach_speed: float = 0.05  #: m/s
+    push_speed: float = 0.01  #: m/s of every push
+    acceleration: float = 0.3  #: m/s^2
+    settle: float = 0.2  #: s held still before a reference wrench is read
+    floor_gap: float = 0.005  #: m above the floor where the fast descent ends
+    contact_force: float = 4.0  #: N against a push that means contact
+    overshoot: float = 0.004  #: m the -z push aims below the floor (contact stops it)
+    lift_off: float = 0.0005  #: m back up after the floor contact, so the part slides freely
+    back_off: float = 0.0003  #: m back after the +x contact, so the +y push does not drag
+    release: float = 0.006  #: m the jaws open to let go
+    #: Fraction of the part's weight the wrench must lose after the release (0: no check).
+    weight_check: float = 0.5
+    guard: Guard = field(default_factory=Guard)
+    push_guard: Guard = field(default_factory=lambda: Guard(max_force=30.0, timeout=15.0))
+
+
+def tray_places(
+    tray_roi: tuple[float, float, float, float],
+    floor_z: float,
+    outer: float,
+    margin: float = 0.0015,
+    trailing: float = 0.012,
+) -> NDArray[np.float64]:
+    """Places (x, y, floor z; m) of upright parts of diameter ``outer`` in packing order.
+
+    ``tray_roi``: ``(xmin, xmax, ymin, ymax)`` of the box's inside. A square grid of pitch
+    ``outer + margin`` from the ``+x, +y`` corner: row by row along ``-x``, rows towards ``-y``.
+    ``margin`` covers parts a little wider than nominal (the place is where the part is set
+    down from, the pushes find where it really goes); ``trailing`` (m) is kept free along the
+    ``-x`` and ``-y`` walls for the set-down offset and the outer finger beside the last part.
+    """
+    x0, x1, y0, y1 = tray_roi
+    pitch = outer + margin
+    nx = int((x1 - x0 - trailing) // pitch)
+    ny = int((y1 - y0 - trailing) // pitch)
+    half = 0.5 * pitch
+    return np.array(
+        [[x1 - half - i * pitch, y1 - half - j * pitch, floor_z] for j in range(ny)
+         for i in range(nx)],
+        float,
+    ).reshape(-1, 3)
+
+
+class PackInBox(SequenceSkill):
+    """Put the part held in the hole grasp into its place in the box by pushing.
+
+    Before: the part hangs in the hole grasp (fingertips ``grip_depth`` below its rim), anywhere
+    the arm can travel from. After SUCCESS: the part stands on the box floor, pushed against
+    whatever is on its ``+x`` and ``+y`` sides; the jaws are open; the fingertips are
+    ``clear_height`` above its rim. ``contacts`` holds the TCP pose at each contact (``floor``,
+    ``+x``, ``+y``) and ``placed_xy`` where the part's axis ended (m, from the arm's pose).
+    """
+
+    def __init__(
+        self,
+        place: ArrayLike,
+        part: Part,
+        dev: Devices,
+        params: PackParams | None = None,
+        top_z: float | None = None,
+        **overrides: Any,
+    ) -> None:
+        """``place``: (x, y, z) of the part's bottom centre in the box (m; z the box floor), as
+        :func:`tray_places` gives. ``top_z``: height (m) of the highest thing in or around the
+        box (default: the top of a packed part). ``overrides``: fields of :class:`PackParams`."""
+        p = replace(params or PackParams(), **overrides)
+        self.part, self.dev, self.params = part, dev, p
+        target = np.asarray(place, float)
+        self.place_xy, self.floor_z = target[:2].copy(), float(target[2])
+        top = self.floor_z + part.length if top_z is None else float(top_z)
+        offset = grasp_offset(part, dev.gripper.finger_width)
+        x = horizontal((*p.trail_dir, 0.0))
+        start_xy = self.place_xy - p.offset
+        arm, g = dev.arm, p.guard
+        self.contacts: dict[str, Pose] = {}
+        self.placed_xy: NDArray[np.float64] | None = None
+
+        def pose(bottom_z: float) -> Pose:
+            return hold_pose(start_xy, bottom_z, part, x, offset, p.grip_depth, p.tip_offset)
+
+        def over_place() -> None:
+            target = pose(max(top + p.clear_height, p.travel_z))
+            arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed,
+                          p.acceleration)
+
+        self.descend = ContactMove(
+            "down into the box", dev, p.push_guard, lambda: pose(self.floor_z + p.floor_gap),
+            p.approach_speed, p.acceleration, p.contact_force,
+        )
+        self.floor = ContactMove(
+            "push -z onto the floor", dev, p.push_guard,
+            lambda: pose(self.floor_z - p.overshoot), p.push_speed, p.acceleration,
+            p.contact_force,
+        )
+
+        def shifted(dx: float, dy: float, dz: float = 0.0) -> Pose:
+            tool = arm.tool_pose()
+            return Pose(tool.position + np.array([dx, dy, dz]), tool.rotation)
+
+        reach = p.offset + p.push_range
+        self.push_x = ContactMove(
+            "push +x", dev, p.push_guard, lambda: shifted(reach, 0.0), p.push_speed,
+            p.acceleration, p.contact_force,
+        )
+        self.push_y = ContactMove(
+            "push +y", dev, p.push_guard, lambda: shifted(0.0, reach), p.push_speed,
+            p.acceleration, p.contact_force,
+        )
+
+        def clear_descent() -> str | None:
+            if self.descend.contact:
+                z = arm.tool_pose().position[2] - p.tip_offset + p.grip_depth - part.length
+                return (
+                    f"the part hit something {1e3 * (z - self.floor_z):.0f} mm above the box "
+                    f"floor ({self.descend.resisting:.1f} N) on the way down"
+                )
+            return None
+
+        def felt(move: ContactMove, what: str) -> str | None:
+            if not move.contact:
+                return f"no {what} felt within {1e3 * reach:.0f} mm"
+            self.contacts[move.motion.name.split()[-1]] = arm.tool_pose()
+            return None
+
+        def on_floor() -> str | None:
+            if not self.floor.contact:
+                return "no box floor felt below the part"
+            self.contacts["floor"] = arm.tool_pose()
+            return None
+
+        def placed() -> str | None:
+            tcp = arm.tool_pose().position[:2]
+            self.placed_xy = tcp - offset * x[:2]
+            return None
+
+        def release() -> None:
+            dev.gripper.open(dev.gripper.width() + p.release)
+
+        def withdraw() -> None:
+            arm.move_to(shifted(0.0, 0.0, p.grip_depth + p.clear_height), p.approach_speed,
+                        p.acceleration)
+
+        st: dict[str, NDArray[np.float64]] = {}
+
+        def reference() -> str | None:
+            st["held"] = world_force(dev)
+            return None
+
+        def let_go() -> str | None:
+            if p.weight_check <= 0 or "held" not in st:
+                return None
+            lost = float(world_force(dev)[2] - st["held"][2])
+            if lost < p.weight_check * part.mass * GRAVITY:
+                return (
+                    f"the part came up with the gripper: the wrench lost {lost:.2f} N of its "
+                    f"{part.mass * GRAVITY:.2f} N weight"
+                )
+            return None
+
+        self.sequence = Sequence(
+            "pack in box",
+            [
+                dev.move("over the place", g, over_place),
+                wait("hold still", dev, g, p.settle),
+                check("read the hanging part", dev, g, reference),
+                self.descend.motion,
+                check("clear way down", dev, g, clear_descent),
+                wait("hold still above the floor", dev, g, p.settle),
+                self.floor.motion,
+                check("on the floor", dev, g, on_floor),
+                dev.move("lift off the floor", g, lambda: arm.move_to(
+                    shifted(0.0, 0.0, p.lift_off), p.approach_speed, p.acceleration)),
+                self.push_x.motion,
+                check("+x contact", dev, g, lambda: felt(self.push_x, "wall or part on +x")),
+                dev.move("ease off +x", g, lambda: arm.move_to(
+                    shifted(-p.back_off, 0.0), p.approach_speed, p.acceleration)),
+                self.push_y.motion,
+                check("+y contact", dev, g, lambda: felt(self.push_y, "wall or part on +y")),
+                check("where it went", dev, g, placed),
+                dev.grip("let go", g, release),
+                dev.move("withdraw up", g, withdraw),
+                wait("settle", dev, g, p.settle),
+                check("part left in the box", dev, g, let_go),
+            ],
+        )
