@@ -48,7 +48,7 @@ class CellLayout:
     ``slot_clearance``: ``slot_width - D`` (5 mm: 2.5 mm each side); ``slot_depth``: pocket depth.
     ``tray_center`` (x, y), ``tray_inner_size`` (x, y), ``tray_wall_height``,
     ``tray_wall_thickness``, ``tray_floor_thickness``: the open box parts are packed into
-    (3 x 2 bushings standing upright at 50 mm pitch by default).
+    (by default 4 x 3 bushings standing upright, pushed together: :meth:`packing_places`).
     ``robot_keepout_radius``: no fixture may come closer than this to the base axis.
     ``camera_xyz`` (m) and ``camera_rpy`` (rad): the eye-in-hand camera's mount, the pose of its
     optical frame (``z`` forward, ``x`` right, ``y`` down) in the tool frame: position, and
@@ -70,7 +70,7 @@ class CellLayout:
     slot_clearance: float = 0.005
     slot_depth: float = 0.04
     tray_center: tuple[float, float] = (0.10, -0.45)
-    tray_inner_size: tuple[float, float] = (0.15, 0.10)
+    tray_inner_size: tuple[float, float] = (0.155, 0.12)
     tray_wall_height: float = 0.05
     tray_wall_thickness: float = 0.005
     tray_floor_thickness: float = 0.005
@@ -120,8 +120,22 @@ class CellLayout:
         """``(xmin, xmax, ymin, ymax)`` of the bin's free inside (m)."""
         return _rect(self.bin_center, self.bin_inner_size, 0.0)
 
+    def tray_interior(self) -> _Rect:
+        """``(xmin, xmax, ymin, ymax)`` of the tray's free inside (m)."""
+        return _rect(self.tray_center, self.tray_inner_size, 0.0)
+
+    def packing_places(self, part_outer: float | None = None) -> NDArray[np.float64]:
+        """Where :class:`skills.packing.PackInBox` puts parts of diameter ``part_outer`` (m;
+        default ``slot_part_outer``), in packing order: ``(n, 3)`` bottom centres on the tray
+        floor, the first in the ``+x, +y`` corner (see :func:`skills.packing.tray_places`)."""
+        from skills.packing import tray_places
+
+        outer = self.slot_part_outer if part_outer is None else part_outer
+        return tray_places(self.tray_interior(), self.tray_floor_z, outer)
+
     def tray_places(self, nx: int = 3, ny: int = 2) -> NDArray[np.float64]:
-        """Centres (m, world, on the tray floor) of an ``nx`` x ``ny`` grid filling the tray."""
+        """Centres (m, world, on the tray floor) of an ``nx`` x ``ny`` grid filling the tray
+        evenly (not a packing order; for packing see :meth:`packing_places`)."""
         (x0, x1, y0, y1) = _rect(self.tray_center, self.tray_inner_size, 0.0)
         xs = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
         ys = y0 + (np.arange(ny) + 0.5) * (y1 - y0) / ny
