@@ -9,6 +9,8 @@ Contract forms (scripts rely on them; keep them exactly):
   --grid 91 --out DIR [--json FILE]``
 * ``cell plan --part NAME [--json FILE]``
 * ``cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE``
+* ``cell sim --config FILE --cycles N --seed S [--record FILE.gif] --json FILE``
+* ``cell run --config FILE``, ``cell tree --config FILE``, ``cell replay LOG``
 * ``cell calibrate [--cell FILE] [--views N] [--seed S] [--true-xyz X Y Z] [--true-rpy R P Y]``
 """
 
@@ -324,6 +326,10 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.train_perception_cmd import add_parser as add_train_perception
 
     add_train_perception(sub)
+
+    from cell.cell_cmds import add_parser as add_cell
+
+    add_cell(sub)
     return parser
 
 

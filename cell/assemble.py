@@ -1,0 +1,229 @@
+"""From a validated configuration to a runnable cell: geometry, part, plan, tree, backend.
+
+Two stages on purpose. :func:`prepare` checks everything that needs no device -- the layout, the
+part and its plan, every fixed pose against the UR5's reach, the tree file -- and builds the tree
+against a context without devices; any problem is a :class:`ConfigError` naming file, line and
+key. Only then does :func:`open_backend` create the twin or connect to the hardware, so a
+configuration that fails validation never reaches a driver.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from py_trees.behaviour import Behaviour
+
+from cell.catalogue import load_catalogue
+from cell.config import CellConfig
+from cell.runner import Backend, CellState
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Gripper, Part
+from skills.mechanics.planner import PivotPlan, plan_pivot
+from skills.motion import Guard
+from skills.perception.look import DOWN
+from skills.pivot import PivotParams
+from trees.context import CellContext, CellGeometry, WorkflowLimits
+from trees.registry import build_root, resolve_tree_spec
+from trees.yaml_lines import ConfigError, LinedDocument
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+
+@dataclass
+class Prepared:
+    config: CellConfig
+    doc: LinedDocument
+    layout: Any  # sim.cell_layout.CellLayout: the cell's geometry description
+    part: Part
+    catalogue: list[Part]
+    plan: PivotPlan
+    params: PivotParams
+    geometry: CellGeometry
+    ctx: CellContext
+    root: Behaviour
+    state: CellState
+
+
+def _layout(config: CellConfig, doc: LinedDocument) -> Any:
+    from sim.cell_layout import CellLayout
+
+    try:
+        return CellLayout.from_dict(config.cell.layout, source="cell.layout")
+    except ValueError as exc:
+        text = str(exc).removeprefix("cell.layout: ")
+        key, _, reason = text.partition(": ")
+        path: tuple[str, ...] = (
+            ("cell", "layout", key) if key in config.cell.layout else ("cell", "layout")
+        )
+        raise doc.error(path, reason if reason else text) from None
+
+
+def geometry_from(layout: Any, home: list[float]) -> CellGeometry:
+    x0, x1, y0, y1 = layout.bin_interior()
+    tx0, tx1, ty0, ty1 = (
+        layout.tray_center[0] - 0.5 * layout.tray_inner_size[0],
+        layout.tray_center[0] + 0.5 * layout.tray_inner_size[0],
+        layout.tray_center[1] - 0.5 * layout.tray_inner_size[1],
+        layout.tray_center[1] + 0.5 * layout.tray_inner_size[1],
+    )
+    places = _packing_places(layout)
+    return CellGeometry(
+        bin_roi=(x0, x1, y0, y1),
+        bin_view_xy=(float(layout.bin_center[0]), float(layout.bin_center[1])),
+        bin_floor_z=float(layout.bin_floor_z),
+        slot_center=np.asarray(layout.slot_center, float),
+        slot_width=float(layout.slot_width),
+        machine_top_z=float(layout.machine_top_z),
+        tray_places=places,
+        tray_roi=(tx0, tx1, ty0, ty1),
+        tray_floor_z=float(layout.tray_floor_z),
+        home=np.asarray(home, float),
+    )
+
+
+def _packing_places(layout: Any) -> np.ndarray:
+    """The box's places in packing order (the layout's own order where it gives one)."""
+    fn = getattr(layout, "packing_places", None)
+    if callable(fn):
+        return np.asarray(fn(), float)
+    return np.asarray(layout.tray_places(), float)
+
+
+def _check_reach(config: CellConfig, doc: LinedDocument, geometry: CellGeometry) -> None:
+    """Every fixed pose the workflow visits must be inside the UR5's reach, tool down."""
+    from drivers.pose import Pose
+    from sim.arm import REACH_TOLERANCE, solve_ik
+    from sim.robot import HOME_JOINTS
+
+    checks: list[tuple[tuple[str, ...], str, np.ndarray]] = [
+        (("devices", "arm", "home_tcp_m"), "the home pose", geometry.home),
+        (
+            ("cell", "layout", "machine_center"),
+            "the pose over the slot",
+            geometry.slot_center
+            + np.array([0.0, 0.0, 0.15 + geometry.machine_top_z - geometry.slot_center[2]]),
+        ),
+    ]
+    for i, place in enumerate(geometry.tray_places):
+        checks.append(
+            (
+                ("cell", "layout", "tray_center"),
+                f"box place {i}",
+                place + np.array([0.0, 0.0, 0.12]),
+            )
+        )
+    x0, x1, y0, y1 = geometry.bin_roi
+    for x in (x0, x1):
+        for y in (y0, y1):
+            checks.append(
+                (
+                    ("cell", "layout", "bin_center"),
+                    "a bin corner",
+                    np.array([x, y, geometry.bin_floor_z + 0.10]),
+                )
+            )
+    for path, what, position in checks:
+        _, residual = solve_ik(Pose(position, DOWN), HOME_JOINTS, iterations=200)
+        if residual > REACH_TOLERANCE:
+            p = position
+            key = path if path[-1] in config.cell.layout or path[0] == "devices" else path[:2]
+            raise doc.error(
+                key,
+                f"{what} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is out of the UR5's reach",
+            )
+
+
+def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
+    """Everything checked and the tree built; no device touched."""
+    layout = _layout(config, doc)
+    cat_path = config.cell.catalogue
+    if cat_path is not None and not Path(cat_path).is_absolute():
+        cat_path = str(Path(doc.source).resolve().parent / cat_path)
+    try:
+        catalogue = load_catalogue(Path(cat_path) if cat_path else None)
+    except ValueError as exc:
+        raise doc.error(("cell", "catalogue"), str(exc)) from None
+    name = config.workflow.part
+    if name not in catalogue.parts:
+        raise doc.error(
+            ("workflow", "part"),
+            f"unknown part {name!r}; known parts: {', '.join(catalogue.parts)}",
+        )
+    part = catalogue.parts[name]
+    plan = plan_pivot(part, Gripper(), Frictions())
+    if not plan.pivotable:
+        raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")
+    assert plan.l_a is not None and plan.alpha is not None
+    params = PivotParams(l_a=plan.l_a, alpha=plan.alpha)
+    geometry = geometry_from(layout, config.devices.arm.home_tcp_m)
+    _check_reach(config, doc, geometry)
+    if config.workflow.cycles > len(geometry.tray_places) and config.cell.backend == "sim":
+        pass  # a full box stops the cell with a reason; allowed, the run reports it
+    state = CellState(name=config.cell.name)
+    s = config.safety
+    ctx = CellContext(
+        devices=None,  # type: ignore[arg-type]  -- set by open_backend, after validation
+        machine=None,  # type: ignore[arg-type]
+        geometry=geometry,
+        part=part,
+        plan=plan,
+        params=params,
+        events=state,
+        limits=WorkflowLimits(
+            machining_time=config.workflow.machining_time_s,
+            max_failures_per_part=config.workflow.max_failures_per_part,
+            max_failed_cycles=config.workflow.max_failed_cycles,
+            cycles=config.workflow.cycles,
+        ),
+        default_guard=Guard(s.ft_abort_force_n, s.ft_abort_torque_nm, s.default_timeout_s),
+        catalogue=[part],
+    )
+    spec, tree_doc, path = resolve_tree_spec(config.tree, doc, DATA_DIR)
+    root = build_root(
+        spec,
+        tree_doc,
+        path,
+        ctx,
+        {
+            "timeout_s": s.default_timeout_s,
+            "max_force_n": s.ft_abort_force_n,
+            "max_torque_nm": s.ft_abort_torque_nm,
+        },
+    )
+    return Prepared(config, doc, layout, part, [part], plan, params, geometry, ctx, root, state)
+
+
+def open_backend(prep: Prepared, seed: int | None = None) -> Backend:
+    """Create the twin or connect the hardware named by ``cell.backend`` and hand its devices to
+    the tree's context."""
+    config = prep.config
+    if config.cell.backend == "hw":
+        from cell.hardware import open_hardware
+
+        backend = open_hardware(prep)
+    else:
+        from sim.cell_twin import SimCellBackend, TwinOptions
+
+        sim = config.sim
+        options = TwinOptions(
+            seed=sim.seed if seed is None else seed,
+            parts_in_bin=sim.parts_in_bin,
+            yaw_spread=math.radians(sim.yaw_spread_deg),
+            mu_ground=sim.mu_ground,
+            machining_time=config.workflow.machining_time_s,
+        )
+        try:
+            backend = SimCellBackend(prep.layout, prep.part, options)
+        except ValueError as exc:
+            raise prep.doc.error(("sim", "parts_in_bin"), str(exc).split(": ", 1)[-1]) from None
+    prep.ctx.devices = backend.devices  # type: ignore[attr-defined]
+    prep.ctx.machine = backend.machine  # type: ignore[attr-defined]
+    prep.state.on_event.append(backend.judge)
+    return backend
+
+
+__all__ = ["ConfigError", "Prepared", "open_backend", "prepare"]

@@ -1,0 +1,362 @@
+"""`cell sim`, `cell run`, `cell tree`, `cell replay`, `cell schema`: the cell as a product.
+
+Contract forms (scripts rely on them; keep them exactly):
+
+* ``cell sim --config FILE --cycles N --seed S [--record FILE.gif] --json FILE``
+* ``cell run --config FILE``
+* ``cell tree --config FILE``
+* ``cell replay LOG``
+
+A configuration that fails validation exits 2 with ``file:line: key: reason`` lines and opens no
+device. Ctrl-C / SIGTERM during a run stop the arm, flush the log, save the state and exit 130 /
+143.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from trees.yaml_lines import ConfigError
+
+
+def _load(path: Path | None) -> Any:
+    from cell.assemble import prepare
+    from cell.config import load_config
+
+    config, doc = load_config(path)
+    return prepare(config, doc)
+
+
+def _fail_config(exc: ConfigError, command: str) -> int:
+    for line in str(exc).splitlines():
+        print(f"cell {command}: error: {line}", file=sys.stderr)
+    return 2
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sim",
+        help="run the cell's workflow in the PyBullet twin",
+        description="Runs the configured tree in the twin: pick each part by the pivot into a "
+        "hole grasp, feed the machine slot, wait, pick it from the slot, pack it in the box. "
+        "Every outcome is judged from the simulated state. Without --config: the shipped "
+        "bushing-machining example.",
+    )
+    p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
+    p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the bin scene (sim.seed)")
+    p.add_argument("--record", type=Path, default=None, help="write an animated GIF of the run")
+    p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
+    p.add_argument(
+        "--max-sim-time",
+        type=float,
+        default=None,
+        help="simulated seconds before the run is cut (default: 150 per cycle)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=cmd_sim)
+
+    p = sub.add_parser(
+        "run",
+        help="run the cell on the hardware backend",
+        description="Runs the configured tree on the real UR5, 2F-85, FT300 and D435. Refuses "
+        "unless the configuration says `cell.backend: hw` and the device checks pass.",
+    )
+    p.add_argument("--config", type=Path, required=True, help="cell configuration YAML")
+    p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
+    p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser(
+        "tree",
+        help="print the behaviour tree and write its picture",
+        description="Builds the configured tree (no device is opened), prints it as text and "
+        "writes DOT and PNG pictures.",
+    )
+    p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
+    p.add_argument("--out", type=Path, default=Path("out"), help="directory for tree.dot/.png")
+    p.add_argument("--types", action="store_true", help="list the behaviour types and exit")
+    p.set_defaults(func=cmd_tree)
+
+    p = sub.add_parser(
+        "replay",
+        help="print the timeline of a run from its JSONL tick log",
+        description="Reads a tick log written by `cell sim` or `cell run` and prints when each "
+        "behaviour started and ended, with its feedback, the events and the aborts.",
+    )
+    p.add_argument("log", type=Path, help="the JSONL tick log (log.tick_log in the config)")
+    p.add_argument("--all", action="store_true", help="every status change, not only leaves")
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("schema", help="print the configuration's JSON Schema (for editors)")
+    p.add_argument("--out", type=Path, default=None, help="write it to a file instead")
+    p.set_defaults(func=cmd_schema)
+
+
+# --------------------------------------------------------------------------------- sim/run
+def cmd_sim(args: argparse.Namespace) -> int:
+    from cell.cli import UserError
+
+    if args.cycles is not None and args.cycles < 1:
+        raise UserError(f"--cycles: must be >= 1, got {args.cycles}")
+    if args.seed is not None and args.seed < 0:
+        raise UserError(f"--seed: must be >= 0, got {args.seed}")
+    if args.record is not None and args.record.suffix.lower() != ".gif":
+        raise UserError(f"--record: {args.record}: the animation is written as a .gif")
+    try:
+        prep = _load(args.config)
+    except ConfigError as exc:
+        return _fail_config(exc, "sim")
+    if prep.config.cell.backend != "sim":
+        raise UserError(
+            f"{prep.doc.source}: cell.backend is {prep.config.cell.backend!r}; `cell sim` runs "
+            "the twin only (use `cell run` for the hardware)"
+        )
+    if args.cycles is not None:
+        prep.ctx.limits.cycles = args.cycles
+    return _run(prep, "sim", args, seed=args.seed)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from cell.cli import UserError
+
+    try:
+        prep = _load(args.config)
+    except ConfigError as exc:
+        return _fail_config(exc, "run")
+    if prep.config.cell.backend != "hw":
+        raise UserError(
+            f"{prep.doc.source}: cell.backend is {prep.config.cell.backend!r}; `cell run` drives "
+            "the real cell and needs `backend: hw` (use `cell sim` for the twin)"
+        )
+    if args.cycles is not None:
+        if args.cycles < 1:
+            raise UserError(f"--cycles: must be >= 1, got {args.cycles}")
+        prep.ctx.limits.cycles = args.cycles
+    args.record, args.max_sim_time, args.quiet = None, None, False
+    return _run(prep, "run", args, seed=None)
+
+
+def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) -> int:
+    from cell.assemble import open_backend
+    from cell.runner import TickLog, TickLoop
+
+    try:
+        backend = open_backend(prep, seed=seed)
+    except ConfigError as exc:
+        return _fail_config(exc, command)
+    config = prep.config
+    cycles = prep.ctx.limits.cycles
+    log = TickLog(config.log.tick_log)
+    recorder = None
+    if args.record is not None:
+        from sim.recorder import Recorder
+
+        g = prep.geometry
+        target = (0.5 * (g.bin_roi[0] + g.bin_roi[1]) - 0.15, 0.0, 0.15)
+        recorder = Recorder(
+            backend.world, target, (0.9, 0.0, 0.45), distance=1.25, height=0.5, size=(320, 240)
+        )
+    progress = _Progress(prep, cycles, quiet=args.quiet)
+
+    def on_tick(tick: int) -> None:
+        progress.update(tick)
+        if recorder is not None and tick % 25 == 0:
+            recorder.capture()
+
+    loop = TickLoop(
+        prep.root,
+        backend,
+        prep.state,
+        log,
+        config.cell.control_hz,
+        wrench=lambda: prep.ctx.devices.ft.wrench(),
+        on_tick=on_tick,
+        realtime=(command == "run") or config.sim.realtime,
+        state_file=config.log.state_file,
+    )
+    max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
+    try:
+        result = loop.run(max_time)
+    finally:
+        log.close()
+        backend.close()
+    progress.done()
+    summary = _summary(prep, result, cycles)
+    _print_summary(summary)
+    if recorder is not None and recorder.frames:
+        recorder.save_gif(args.record, fps=12)
+        print(f"wrote {args.record} ({len(recorder.frames)} frames)")
+    if args.json is not None:
+        from cell.cli import _write_json
+
+        _write_json(args.json, summary)
+        print(f"wrote {args.json}")
+    if result.status == "interrupted":
+        print(
+            f"cell {command}: interrupted: arm stopped, log flushed, state saved", file=sys.stderr
+        )
+        return 128 + int(result.signum or 2)
+    return 0 if result.status == "success" else 1
+
+
+class _Progress:
+    def __init__(self, prep: Any, cycles: int, quiet: bool) -> None:
+        self.prep, self.cycles, self.quiet = prep, cycles, quiet
+        self.seen = 0
+        self.wall0 = time.perf_counter()
+
+    def update(self, tick: int) -> None:
+        if self.quiet:
+            return
+        events = self.prep.state.events
+        while self.seen < len(events):
+            e = events[self.seen]
+            self.seen += 1
+            if e["kind"] in ("picked", "fed", "machined", "packed", "cycle_failed", "bin_empty"):
+                verdict = e.get("verdict")
+                judged = ""
+                if isinstance(verdict, dict):
+                    judged = (
+                        " [twin: ok]"
+                        if verdict.get("ok")
+                        else (f" [twin: {verdict.get('failure')}]")
+                    )
+                packed = self.prep.state.counts.get("packed", 0)
+                sys.stderr.write(
+                    f"  t={e['t']:7.1f} s  {e['kind']:<12s}{judged}  packed {packed}/"
+                    f"{self.cycles}  wall {time.perf_counter() - self.wall0:.0f} s\n"
+                )
+        for a in self.prep.state.aborts[getattr(self, "_aborts", 0) :]:
+            sys.stderr.write(f"  t={a['t']:7.1f} s  abort        {a['reason']}\n")
+        self._aborts = len(self.prep.state.aborts)
+
+    def done(self) -> None:
+        sys.stderr.flush()
+
+
+def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
+    state = prep.state
+    events = state.events
+
+    def judged(kind: str) -> list[dict[str, Any]]:
+        return [e for e in events if e["kind"] == kind]
+
+    def ok(e: dict[str, Any]) -> bool:
+        v = e.get("verdict")
+        return bool(v.get("ok")) if isinstance(v, dict) else True  # hw: no twin to judge
+
+    fed = [e for e in judged("machined") if ok(e)]
+    packed_events = judged("packed")
+    packed = [e for e in packed_events if ok(e)]
+    times = [0.0] + [e["t"] for e in packed_events]
+    tacts = [b - a for a, b in zip(times[:-1], times[1:], strict=True)]
+    gaps = []
+    for e in packed_events:
+        v = e.get("verdict")
+        if isinstance(v, dict) and "gaps_mm" in v:
+            gaps = v["gaps_mm"]
+    return {
+        "cycles": cycles,
+        "packed": len(packed),
+        "fed": len(fed),
+        "aborts": [{"reason": a["reason"], "tick": a["tick"]} for a in state.aborts],
+        "tact_time_s_mean": (sum(tacts) / len(tacts)) if tacts else None,
+        "wall_s": round(result.wall_s, 2),
+        "status": result.status,
+        "stop_reason": state.stop_reason,
+        "sim_time_s": round(result.sim_time, 3),
+        "ticks": result.ticks,
+        "picked": state.counts.get("picked", 0),
+        "packed_claimed": len(packed_events),
+        "fed_claimed": state.counts.get("fed", 0),
+        "gaps_mm": gaps,
+        "events": events,
+    }
+
+
+def _print_summary(s: dict[str, Any]) -> None:
+    tact = "-" if s["tact_time_s_mean"] is None else f"{s['tact_time_s_mean']:.1f} s"
+    rows = [
+        ("status", s["status"] + (f" ({s['stop_reason']})" if s["stop_reason"] else "")),
+        ("cycles asked", str(s["cycles"])),
+        ("picked (hole grasp)", str(s["picked"])),
+        ("fed (judged in slot)", f"{s['fed']} of {s['fed_claimed']}"),
+        ("packed (judged)", f"{s['packed']} of {s['packed_claimed']}"),
+        ("aborts", str(len(s["aborts"]))),
+        ("tact time, mean", tact),
+        ("simulated time", f"{s['sim_time_s']:.1f} s"),
+        ("wall time", f"{s['wall_s']:.1f} s"),
+    ]
+    if s["gaps_mm"]:
+        rows.append(("gaps to neighbours", ", ".join(f"{g:.1f}" for g in s["gaps_mm"]) + " mm"))
+    width = max(len(r[0]) for r in rows)
+    for k, v in rows:
+        print(f"{k:<{width}}  {v}")
+
+
+# ------------------------------------------------------------------------------ tree/replay
+def cmd_tree(args: argparse.Namespace) -> int:
+    import py_trees
+
+    from trees.registry import describe_types
+    from trees.render import write_pictures
+
+    if args.types:
+        print(describe_types())
+        return 0
+    try:
+        prep = _load(args.config)
+    except ConfigError as exc:
+        return _fail_config(exc, "tree")
+    print(py_trees.display.unicode_tree(prep.root))
+    dot, png = write_pictures(prep.root, args.out)
+    print(f"wrote {dot} and {png}")
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from cell.cli import UserError
+
+    try:
+        text = args.log.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"{args.log}: cannot read the tick log: {exc.strerror}") from None
+    lines = []
+    for n, raw in enumerate(text.splitlines(), start=1):
+        if not raw.strip():
+            continue
+        try:
+            lines.append(json.loads(raw))
+        except json.JSONDecodeError as exc:
+            raise UserError(f"{args.log}:{n}: not a JSON line: {exc.msg}") from None
+    if not lines:
+        raise UserError(f"{args.log}: empty tick log")
+    from cell.replay import timeline
+
+    for row in timeline(lines, every=args.all):
+        print(row)
+    return 0
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from cell.config import schema
+
+    text = json.dumps(schema(), indent=1)
+    if args.out is not None:
+        from cell.cli import _write_json
+
+        _write_json(args.out, schema())
+        print(f"wrote {args.out}")
+    else:
+        print(text)
+    return 0
+
+
+__all__ = ["add_parser", "math"]

@@ -1,0 +1,235 @@
+"""The cell's YAML task configuration, validated once into typed, frozen objects.
+
+Why pydantic: one declaration gives the checks (types, ranges, unknown keys), the typed object the
+code uses and the JSON Schema editors use (``cell schema``); a hand-written validator would keep
+three copies of the same facts. Numbers are SI; the unit is in every key's name (``_s``, ``_n``,
+``_m``, ``_hz``) and a string such as ``"5 mm"`` where a number is expected is refused, not parsed.
+
+Every error reads ``file:line: key: reason``. Validation ends before anything is built, so a
+configuration that fails never reaches a driver.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from trees.yaml_lines import ConfigError, LinedDocument, load_yaml, parse_yaml
+
+
+class _Section(BaseModel):
+    # strict: no "5" -> 5 or "true" -> True coercion; a wrong type is an error the user sees.
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class CellSection(_Section):
+    """What the cell is and which backend runs it."""
+
+    name: str = Field("bushing-machining", description="a name for logs and the state file")
+    backend: Literal["sim", "hw"] = Field(
+        "sim", description="sim: the PyBullet twin; hw: the real UR5, 2F-85, FT300 and D435"
+    )
+    control_hz: float = Field(125.0, ge=10.0, le=500.0, description="tick rate of the tree (Hz)")
+    catalogue: str | None = Field(
+        None, description="part catalogue YAML (relative to this file); default: the shipped one"
+    )
+    layout: dict[str, Any] = Field(
+        default_factory=dict,
+        description="cell geometry overrides (m, rad), the keys of `cell pivot --cell`; "
+        "see README 'Cell layout'",
+    )
+
+
+class SimSection(_Section):
+    """The twin: what lies in the bin and how the physics runs."""
+
+    seed: int = Field(0, ge=0, description="seed of the bin scene and the perturbations")
+    parts_in_bin: int = Field(10, ge=0, le=12, description="parts spawned lying in the bin")
+    yaw_spread_deg: float = Field(
+        10.0, ge=0.0, le=45.0, description="spawned parts' yaw spread about the bin's x axis"
+    )
+    mu_ground: float = Field(0.4, gt=0.0, le=2.0, description="part-floor friction")
+    realtime: bool = Field(False, description="pace the twin to wall time (for watching)")
+
+
+class ArmDevice(_Section):
+    host: str = Field("192.168.1.10", min_length=1, description="UR controller address")
+    rtde_frequency_hz: float = Field(125.0, ge=10.0, le=500.0)
+    home_tcp_m: list[float] = Field(
+        default_factory=lambda: [0.35, 0.0, 0.40],
+        min_length=3,
+        max_length=3,
+        description="home TCP position (m, base frame), tool pointing down",
+    )
+
+
+class GripperDevice(_Section):
+    port: str = Field("/dev/ttyUSB0", min_length=1, description="2F-85 Modbus RTU serial port")
+    slave_id: int = Field(9, ge=1, le=247)
+
+
+class FTDevice(_Section):
+    port: str = Field("/dev/ttyUSB1", min_length=1, description="FT300 serial port")
+
+
+class CameraDevice(_Section):
+    serial: str | None = Field(None, description="D435 serial number (None: the only one)")
+
+
+class DevicesSection(_Section):
+    """The real devices (read only when ``cell.backend`` is ``hw``)."""
+
+    arm: ArmDevice = Field(default_factory=ArmDevice)
+    gripper: GripperDevice = Field(default_factory=GripperDevice)
+    ft: FTDevice = Field(default_factory=FTDevice)
+    camera: CameraDevice = Field(default_factory=CameraDevice)
+
+
+class WorkflowSection(_Section):
+    """The bushing-machining workflow of the paper's Section I."""
+
+    part: str = Field("bushing", description="catalogue part the cell handles")
+    cycles: int = Field(10, ge=1, le=100000, description="stop after this many packed parts")
+    machining_time_s: float = Field(5.0, ge=0.0, le=3600.0)
+    max_failures_per_part: int = Field(
+        2, ge=1, le=10, description="a part that failed this many picks is skipped"
+    )
+    max_failed_cycles: int = Field(
+        3, ge=1, le=100, description="consecutive cycles without a pick before the cell stops"
+    )
+
+
+class SafetySection(_Section):
+    """Default force-torque abort limits of the tree's guards (per motion leaf overridable)."""
+
+    ft_abort_force_n: float = Field(80.0, gt=0.0, le=300.0)
+    ft_abort_torque_nm: float = Field(8.0, gt=0.0, le=50.0)
+    default_timeout_s: float = Field(30.0, gt=0.0, le=600.0)
+
+
+class LogSection(_Section):
+    tick_log: str | None = Field(
+        "out/cell_ticks.jsonl", description="JSONL tick log (relative to the working directory)"
+    )
+    state_file: str | None = Field(
+        "out/cell_state.json", description="the cell's state, saved after each cycle and on exit"
+    )
+
+
+class CellConfig(_Section):
+    """The whole task configuration. ``tree`` is a behaviour spec or ``{file: PATH}``."""
+
+    cell: CellSection = Field(default_factory=CellSection)
+    sim: SimSection = Field(default_factory=SimSection)
+    devices: DevicesSection = Field(default_factory=DevicesSection)
+    workflow: WorkflowSection = Field(default_factory=WorkflowSection)
+    safety: SafetySection = Field(default_factory=SafetySection)
+    log: LogSection = Field(default_factory=LogSection)
+    tree: dict[str, Any] = Field(
+        default_factory=lambda: {"file": "trees/bushing_machining.yaml"},
+        description="the behaviour tree: a node spec, or {file: PATH} relative to this file "
+        "(default: the shipped bushing-machining tree)",
+    )
+
+    @field_validator("tree")
+    @classmethod
+    def _tree_not_empty(cls, value: dict[str, Any]) -> dict[str, Any]:
+        if not value:
+            raise ValueError("must be a behaviour spec or {file: PATH}")
+        return value
+
+
+def default_config_path() -> Path:
+    """The example configuration shipped with the package (`cell sim` without --config)."""
+    return Path(__file__).resolve().parent / "data" / "bushing_cell.yaml"
+
+
+def _reason(err: dict[str, Any]) -> str:
+    kind, msg = err.get("type", ""), err.get("msg", "")
+    value = err.get("input")
+    if kind == "extra_forbidden":
+        return "unknown key"
+    if kind in ("float_type", "int_type", "float_parsing", "int_parsing") and isinstance(
+        value, str
+    ):
+        return (
+            f"expected a number, got the text {value!r}; numbers are SI and the unit is in "
+            "the key's name"
+        )
+    if kind == "missing":
+        return "missing"
+    return f"{msg}, got {value!r}" if "input" in err and not isinstance(value, dict) else msg
+
+
+def _valid_keys(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str] | None:
+    """The keys allowed where an unknown key ``loc`` was found, for the error message."""
+    current: Any = model
+    for part in loc[:-1]:
+        if not (isinstance(current, type) and issubclass(current, BaseModel)):
+            return None
+        field = current.model_fields.get(str(part))
+        if field is None:
+            return None
+        current = field.annotation
+    if isinstance(current, type) and issubclass(current, BaseModel):
+        return list(current.model_fields)
+    return None
+
+
+def validate_document(doc: LinedDocument) -> CellConfig:
+    """Typed configuration from a loaded document; :class:`ConfigError` on the first problems."""
+    data = doc.data if doc.data is not None else {}
+    if not isinstance(data, dict):
+        raise ConfigError(doc.source, 1, "", "expected a mapping of sections at the top level")
+    try:
+        config = CellConfig.model_validate(data)
+    except ValidationError as exc:
+        messages = []
+        for err in exc.errors():
+            loc = tuple(err["loc"])
+            reason = _reason(err)
+            if err.get("type") == "extra_forbidden":
+                keys = _valid_keys(CellConfig, loc)
+                if keys:
+                    reason += f"; valid keys: {', '.join(keys)}"
+            messages.append(doc.error(loc, reason))
+        first = messages[0]
+        if len(messages) > 1:
+            rest = "\n".join(str(m) for m in messages[1:])
+            raise ConfigError(
+                first.source, first.line, first.key, f"{first.reason}\n{rest}"
+            ) from None
+        raise first from None
+    for key in ("ft_abort_force_n", "ft_abort_torque_nm"):
+        if not math.isfinite(getattr(config.safety, key)):
+            raise doc.error(("safety", key), "must be finite")
+    return config
+
+
+def load_config(path: str | Path | None) -> tuple[CellConfig, LinedDocument]:
+    """Read and validate a configuration file (None: the shipped example)."""
+    doc = load_yaml(path if path is not None else default_config_path())
+    return validate_document(doc), doc
+
+
+def config_from_text(text: str, source: str = "<config>") -> tuple[CellConfig, LinedDocument]:
+    doc = parse_yaml(text, source)
+    return validate_document(doc), doc
+
+
+def schema() -> dict[str, Any]:
+    """The JSON Schema of the configuration, for editors (``cell schema``)."""
+    return CellConfig.model_json_schema()
+
+
+__all__ = [
+    "CellConfig",
+    "ConfigError",
+    "config_from_text",
+    "default_config_path",
+    "load_config",
+    "schema",
+]

@@ -1,0 +1,286 @@
+"""The tick loop, the cell's state and the JSONL tick log.
+
+One tick = one control step: the tree ticks once (every running leaf advances its motion by one
+step), then the backend advances (the twin steps its physics; on hardware the loop waits for the
+next period of the wall clock -- the only place anything waits). The clock is injected: the
+twin's simulation time or monotonic wall time, so timeouts mean the same on both.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import py_trees
+from py_trees import common
+from py_trees.behaviour import Behaviour
+
+from drivers.clock import Clock
+
+
+class Backend(Protocol):
+    name: str
+
+    @property
+    def clock(self) -> Clock: ...
+
+    def step(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    def judge(self, kind: str, data: dict[str, Any]) -> dict[str, Any] | None: ...
+
+
+@dataclass
+class CellState:
+    """What the cell has done: counts, filled box places, aborts, why it stopped.
+
+    Implements the tree's :class:`~trees.context.Events`; saved as JSON after every cycle and
+    on exit (written to a temporary file and renamed, so a crash never leaves half a file).
+    """
+
+    name: str = "cell"
+    counts: dict[str, int] = field(default_factory=dict)
+    filled: list[int] = field(default_factory=list)
+    aborts: list[dict[str, Any]] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    stop_reason: str | None = None
+    tick: int = 0
+    time: float = 0.0
+    on_event: list[Callable[[str, dict[str, Any]], dict[str, Any] | None]] = field(
+        default_factory=list, repr=False
+    )
+
+    # -- trees.context.Events ------------------------------------------------------------
+    def abort(self, reason: str) -> None:
+        self.aborts.append({"reason": reason, "tick": self.tick, "t": round(self.time, 3)})
+
+    def event(self, kind: str, **data: object) -> None:
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        record: dict[str, Any] = {"kind": kind, "tick": self.tick, "t": round(self.time, 3)}
+        record.update({k: _jsonable(v) for k, v in data.items()})
+        for fn in self.on_event:
+            verdict = fn(kind, dict(data))
+            if verdict is not None:
+                record["verdict"] = _jsonable(verdict)
+        self.events.append(record)
+
+    def stop(self, reason: str) -> None:
+        if self.stop_reason is None:
+            self.stop_reason = reason
+
+    @property
+    def stopped(self) -> str | None:
+        return self.stop_reason
+
+    # -- persistence ------------------------------------------------------------------------
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("on_event", None)
+        return d
+
+    def save(self, path: str | Path) -> None:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = p.with_suffix(p.suffix + ".tmp")
+        tmp.write_text(json.dumps(self.to_json(), indent=1) + "\n", encoding="utf-8")
+        os.replace(tmp, p)
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return [_jsonable(x) for x in v.tolist()]
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, float):
+        return round(v, 6)
+    if v is None or isinstance(v, bool | int | str):
+        return v
+    return repr(v)[:200]
+
+
+class TickLog:
+    """A JSONL line per tick where something changed: time, statuses that changed, the tip of
+    the tree and its feedback, blackboard keys that changed, the wrench."""
+
+    SKIP_KEYS = ("/ft/wrench",)
+
+    def __init__(self, path: str | Path | None) -> None:
+        self.path = Path(path) if path is not None else None
+        self._fh = None
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 -- kept for the run
+        self._status: dict[str, str] = {}
+        self._bb: dict[str, int] = {}
+        self.lines = 0
+
+    def record(
+        self, tick: int, t: float, root: Behaviour, wrench: Any, extra: dict | None = None
+    ) -> None:
+        changed = {}
+        for node in root.iterate():
+            s = node.status.value
+            if self._status.get(node.name) != s:
+                self._status[node.name] = s
+                changed[node.name] = s
+        bb_changed = {}
+        storage = py_trees.blackboard.Blackboard.storage
+        for key, value in storage.items():
+            if key in self.SKIP_KEYS:
+                continue
+            ident = id(value) if not isinstance(value, bool | int | float | str) else hash(value)
+            if self._bb.get(key) != ident:
+                self._bb[key] = ident
+                bb_changed[key] = _summary(value)
+        if not changed and not bb_changed and not extra:
+            return
+        tip = root.tip()
+        line: dict[str, Any] = {
+            "tick": tick,
+            "t": round(t, 4),
+            "changed": changed,
+            "tip": tip.name if tip is not None else None,
+            "feedback": tip.feedback_message if tip is not None else "",
+        }
+        if bb_changed:
+            line["blackboard"] = bb_changed
+        if wrench is not None:
+            line["wrench"] = [round(float(x), 3) for x in np.asarray(wrench).ravel()]
+        if extra:
+            line.update(_jsonable(extra))
+        if self._fh is not None:
+            self._fh.write(json.dumps(line) + "\n")
+            self.lines += 1
+
+    def flush(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+def _summary(value: Any) -> Any:
+    if isinstance(value, list):
+        return f"{len(value)} item(s)"
+    if isinstance(value, dict) and "detection" in value:
+        d = value["detection"]
+        return {
+            "x": round(float(d.center[0]), 4),
+            "y": round(float(d.center[1]), 4),
+            "yaw": round(float(d.yaw), 4),
+        }
+    return _jsonable(value) if isinstance(value, bool | int | float | str) else repr(value)[:120]
+
+
+class Interrupted(Exception):
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@dataclass
+class RunResult:
+    status: str  # "success" | "failure" | "interrupted" | "out of time"
+    ticks: int
+    sim_time: float
+    wall_s: float
+    signum: int | None = None
+
+
+class TickLoop:
+    """Ticks ``root`` at ``control_hz`` until it ends, a signal arrives, or ``max_time`` passes."""
+
+    def __init__(
+        self,
+        root: Behaviour,
+        backend: Backend,
+        state: CellState,
+        log: TickLog,
+        control_hz: float,
+        wrench: Callable[[], Any],
+        on_tick: Callable[[int], None] | None = None,
+        realtime: bool = False,
+        state_file: str | Path | None = None,
+    ) -> None:
+        self.root, self.backend, self.state, self.log = root, backend, state, log
+        self.period = 1.0 / control_hz
+        self.wrench, self.on_tick, self.realtime = wrench, on_tick, realtime
+        self.state_file = state_file
+        self._signal: int | None = None
+
+    def _handler(self, signum: int, _frame: Any) -> None:
+        self._signal = signum
+
+    def run(self, max_time: float) -> RunResult:
+        wall0 = time.perf_counter()
+        old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        for s in old:
+            signal.signal(s, self._handler)
+        clock = self.backend.clock
+        t_start = clock.now()
+        tick = 0
+        status = "out of time"
+        try:
+            self.root.setup_with_descendants()
+            next_wall = time.monotonic()
+            while clock.now() - t_start < max_time:
+                if self._signal is not None:
+                    status = "interrupted"
+                    break
+                tick += 1
+                self.state.tick, self.state.time = tick, clock.now() - t_start
+                n_events, n_aborts = len(self.state.events), len(self.state.aborts)
+                self.root.tick_once()
+                extra: dict[str, Any] = {}
+                if len(self.state.events) > n_events:
+                    extra["events"] = self.state.events[n_events:]
+                if len(self.state.aborts) > n_aborts:
+                    extra["aborts"] = self.state.aborts[n_aborts:]
+                self.log.record(tick, self.state.time, self.root, self.wrench(), extra)
+                if (
+                    "events" in extra
+                    and self.state_file is not None
+                    and any(e["kind"] in ("cycle_done", "cycle_failed") for e in extra["events"])
+                ):
+                    self.state.save(self.state_file)  # crash-safe: after every cycle
+                if self.on_tick is not None:
+                    self.on_tick(tick)
+                if self.root.status != common.Status.RUNNING:
+                    status = self.root.status.value
+                    break
+                self.backend.step()
+                if self.realtime:
+                    next_wall += self.period
+                    delay = next_wall - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)  # the loop paces; behaviours never wait
+        finally:
+            if self.root.status == common.Status.RUNNING:
+                # Out of time or interrupted: halt every running leaf, which stops the arm.
+                self.root.stop(common.Status.INVALID)
+            self.log.flush()
+            if self.state_file is not None:
+                self.state.save(self.state_file)
+            for s, h in old.items():
+                signal.signal(s, h)
+        return RunResult(
+            status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal
+        )
+
+
+__all__ = ["Backend", "CellState", "Interrupted", "RunResult", "TickLog", "TickLoop"]

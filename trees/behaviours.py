@@ -1,0 +1,436 @@
+"""One py_trees behaviour per skill step: thin adapters over the skills.
+
+Lifecycle, the same for all: ``initialise()`` builds the skill from the blackboard (and so starts
+it on the first tick), ``update()`` advances it by one control step and never blocks,
+``terminate()`` halts the motion it started when a parent stops it early (idempotent). Every
+behaviour says where it is in ``feedback_message``.
+
+Blackboard keys, each written by one behaviour only:
+
+* ``/ft/wrench`` -- :class:`~trees.decorators.FTSampler`
+* ``/part/detections``, ``/part/seen`` -- :class:`Perceive`
+* ``/part/target``, ``/cell/bin_empty`` -- :class:`PlanPick`
+* ``/part/pivot_frame`` -- :class:`TiltBehaviour`
+* ``/cell/cycles_done`` -- :class:`~trees.decorators.Cycles`
+* ``/cell/place`` -- :class:`PackInBoxBehaviour`
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+from py_trees import common
+from py_trees.behaviour import Behaviour
+
+from drivers.pose import Pose
+from skills.motion import Sequence
+from skills.perception.bin_parts import Detection
+from skills.perception.look import DOWN, Look
+from skills.pivot import Align, Grasp, PivotFrame, Tilt
+from skills.status import Status as SkillStatus
+from skills.status import StepResult
+from trees.context import CellContext
+
+Status = common.Status
+
+
+class Skill(Protocol):
+    def tick(self) -> StepResult: ...
+
+    def halt(self) -> None: ...
+
+
+class SetupError(Exception):
+    """The skill cannot start (nothing to pick, no frame from the previous step)."""
+
+
+class SkillBehaviour(Behaviour):
+    """Adapter: builds its skill in ``initialise()``, ticks it in ``update()``."""
+
+    #: True for leaves that move the arm or gripper: the tree builder wraps them in an FT guard
+    #: and a timeout.
+    moves = True
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.params = params
+        self.skill: Skill | None = None
+        self._setup_error: str | None = None
+        self._running = False
+        self.bb = self.attach_blackboard_client(name=name)
+        for key, access in self.keys().items():
+            self.bb.register_key(key=key, access=access)
+
+    # -- for subclasses --------------------------------------------------------------------
+    def keys(self) -> dict[str, common.Access]:
+        return {}
+
+    def make_skill(self) -> Skill:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def on_success(self) -> None:
+        """Publish what the finished skill found or did."""
+
+    # -- py_trees lifecycle ------------------------------------------------------------------
+    def initialise(self) -> None:
+        self.skill, self._setup_error = None, None
+        try:
+            self.skill = self.make_skill()
+        except SetupError as exc:
+            self._setup_error = str(exc)
+        self._running = self.skill is not None
+        self.feedback_message = "starting"
+
+    def update(self) -> Status:
+        if self.skill is None:
+            self.feedback_message = f"{self.name}: cannot start: {self._setup_error}"
+            return Status.FAILURE
+        result = self.skill.tick()
+        if result.message:
+            self.feedback_message = result.message
+        if result.status is SkillStatus.RUNNING:
+            return Status.RUNNING
+        self._running = False
+        if result.status is SkillStatus.SUCCESS:
+            self.on_success()
+            return Status.SUCCESS
+        self.ctx.events.abort(self.feedback_message)
+        return Status.FAILURE
+
+    def terminate(self, new_status: Status) -> None:
+        if self._running and self.skill is not None:
+            self._running = False  # idempotent: a second terminate() does nothing
+            self.skill.halt()
+            if new_status == Status.INVALID:
+                self.feedback_message = f"{self.name}: halted by a parent; motion stopped"
+
+
+# ---------------------------------------------------------------------------------- leaves
+class Perceive(SkillBehaviour):
+    """Look down on the bin with the wrist camera; publish what it found."""
+
+    def keys(self) -> dict[str, common.Access]:
+        return {
+            "/part/detections": common.Access.WRITE,
+            "/part/seen": common.Access.WRITE,
+        }
+
+    def make_skill(self) -> Skill:
+        g = self.ctx.geometry
+        near = self.params.get("near_xy") or _nearest_robot_corner(g.bin_roi)
+        self.look = Look(
+            self.ctx.devices,
+            self.ctx.catalogue or [self.ctx.part],
+            g.bin_roi,
+            g.bin_view_xy,
+            (float(near[0]), float(near[1])),
+            height=float(self.params.get("view_height_m", 0.5)),
+            guard=self.ctx.default_guard,
+        )
+        return _TolerantLook(self.look)
+
+    def on_success(self) -> None:
+        dets = list(self.look.detections)
+        self.bb.set("/part/detections", dets)
+        self.bb.set("/part/seen", self.look.result)
+        self.feedback_message = f"perceive: {len(dets)} part(s) in the bin"
+
+
+class _TolerantLook:
+    """An empty bin is an answer (the cycle ends), not a failed look."""
+
+    def __init__(self, look: Look) -> None:
+        self.look = look
+
+    def tick(self) -> StepResult:
+        r = self.look.tick()
+        if r.status is SkillStatus.FAILURE and "no part found" in r.message:
+            return StepResult(SkillStatus.SUCCESS, "look: no part found in the bin")
+        return r
+
+    def halt(self) -> None:
+        self.look.halt()
+
+
+def _nearest_robot_corner(roi: tuple[float, float, float, float]) -> tuple[float, float]:
+    return (roi[0], 0.5 * (roi[2] + roi[3]))
+
+
+def location_key(xy: Any) -> tuple[int, int]:
+    """A part's remembered location (1 cm cells), to count failed picks of the same part."""
+    return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
+
+
+class PlanPick(Behaviour):
+    """Choose the part to pick from the detections and the pivot frame the skills use.
+
+    Skips parts of another kind, parts outside the bin's inside, and parts that already failed
+    ``max_failures_per_part`` picks. Nothing left: writes ``/cell/bin_empty`` and fails, which
+    ends the cell's cycles.
+    """
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx, self.params = ctx, params
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/detections", access=common.Access.READ)
+        self.bb.register_key(key="/part/seen", access=common.Access.READ)
+        self.bb.register_key(key="/part/target", access=common.Access.WRITE)
+        self.bb.register_key(key="/cell/bin_empty", access=common.Access.WRITE)
+        self.bb.set("/cell/bin_empty", False)
+
+    def update(self) -> Status:
+        ctx = self.ctx
+        dets: list[Detection] = (
+            self.bb.get("/part/detections") if self.bb.exists("/part/detections") else []
+        )
+        x0, x1, y0, y1 = ctx.geometry.bin_roi
+        usable, skipped = [], 0
+        for d in dets:
+            if d.part != ctx.part.name or not d.open_end_seen:
+                continue
+            if not (x0 <= d.center[0] <= x1 and y0 <= d.center[1] <= y1):
+                continue
+            if ctx.failures.get(location_key(d.center), 0) >= ctx.limits.max_failures_per_part:
+                skipped += 1
+                continue
+            usable.append(d)
+        if not usable:
+            self.bb.set("/cell/bin_empty", True)
+            extra = f" ({skipped} skipped after failed picks)" if skipped else ""
+            self.feedback_message = f"plan pick: no {ctx.part.name} left to pick{extra}"
+            ctx.events.event("bin_empty", skipped=skipped)
+            return Status.FAILURE
+        seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
+        if seen is not None and any(d is seen for d in usable):
+            target = seen  # the one the Look looked at twice
+        else:
+            target = min(usable, key=lambda d: math.hypot(d.center[0], d.center[1]))
+        section = ctx.part.section(ctx.devices.gripper.finger_width)
+        frame = PivotFrame(
+            section,
+            np.array(
+                [
+                    target.center[0],
+                    target.center[1],
+                    ctx.geometry.bin_floor_z + 0.5 * ctx.part.outer,
+                ]
+            ),
+            target.yaw,
+            floor_z=ctx.geometry.bin_floor_z,
+        )
+        self.bb.set("/part/target", {"detection": target, "frame": frame})
+        self.feedback_message = (
+            f"plan pick: {ctx.part.name} at ({target.center[0]:.3f}, {target.center[1]:.3f}) m, "
+            f"yaw {math.degrees(target.yaw):.1f} deg, {len(usable)} pickable"
+        )
+        return Status.SUCCESS
+
+
+def _target_frame(bb: Any) -> PivotFrame:
+    if not bb.exists("/part/target"):
+        raise SetupError("no part chosen (/part/target is empty)")
+    return bb.get("/part/target")["frame"]
+
+
+class GraspBehaviour(SkillBehaviour):
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        return Grasp(_target_frame(self.bb), self.ctx.params, self.ctx.devices)
+
+
+class TiltBehaviour(SkillBehaviour):
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ, "/part/pivot_frame": common.Access.WRITE}
+
+    def make_skill(self) -> Skill:
+        self.tilt = Tilt(_target_frame(self.bb), self.ctx.params, self.ctx.devices)
+        return self.tilt
+
+    def on_success(self) -> None:
+        self.bb.set("/part/pivot_frame", self.tilt.frame)
+
+
+class AlignBehaviour(SkillBehaviour):
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/pivot_frame": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        if not self.bb.exists("/part/pivot_frame"):
+            raise SetupError("no pivot frame from a Tilt")
+        frame = self.bb.get("/part/pivot_frame")
+        return Align(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
+
+    def on_success(self) -> None:
+        self.ctx.events.event("picked")
+
+
+class PutBack(SkillBehaviour):
+    """Recovery after a failed pick: open the jaws (the part stays in the bin), rise, go home,
+    remember the failure against the part's location -- then FAIL, so a Retry above tries again
+    from a fresh look."""
+
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        ctx, dev = self.ctx, self.ctx.devices
+        if self.bb.exists("/part/target"):
+            key = location_key(self.bb.get("/part/target")["detection"].center)
+            ctx.failures[key] = ctx.failures.get(key, 0) + 1
+        guard = ctx.default_guard
+        rise = float(self.params.get("rise_m", 0.10))
+
+        def up() -> None:
+            tool = dev.arm.tool_pose()
+            dev.arm.move_to(Pose(tool.position + np.array([0, 0, rise]), tool.rotation), 0.1, 0.5)
+
+        return Sequence(
+            "put back",
+            [
+                dev.grip("open", guard, lambda: dev.gripper.open()),
+                dev.move("rise", guard, up),
+                dev.move("home", guard, lambda: _go_home(ctx)),
+            ],
+        )
+
+    def update(self) -> Status:
+        status = super().update()
+        if status == Status.SUCCESS:
+            self.feedback_message = "put back: part left in the bin, jaws open, arm home"
+            return Status.FAILURE
+        return status
+
+
+def _go_home(ctx: CellContext) -> None:
+    ctx.devices.arm.move_to(Pose(np.asarray(ctx.geometry.home, float), DOWN), 0.25, 1.0)
+
+
+class GoHome(SkillBehaviour):
+    def make_skill(self) -> Skill:
+        ctx = self.ctx
+        return Sequence(
+            "go home", [ctx.devices.move("home", ctx.default_guard, lambda: _go_home(ctx))]
+        )
+
+
+class WaitMachining(Behaviour):
+    """Start the machine on the fed part and wait for it (polls once per tick)."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx, self.params = ctx, params
+
+    def initialise(self) -> None:
+        self.ctx.machine.start()
+        self._t0 = self.ctx.devices.clock.now()
+
+    def update(self) -> Status:
+        fault = self.ctx.machine.fault()
+        if fault:
+            self.feedback_message = f"machine fault: {fault}"
+            return Status.FAILURE
+        elapsed = self.ctx.devices.clock.now() - self._t0
+        if self.ctx.machine.busy():
+            self.feedback_message = f"machining: {elapsed:.1f} s"
+            return Status.RUNNING
+        self.feedback_message = f"machined in {elapsed:.1f} s"
+        self.ctx.events.event("machined")
+        return Status.SUCCESS
+
+
+# ------------------------------------------------------------------ slot and box (skills/)
+SkillFactory = Callable[[SkillBehaviour], Skill]
+
+
+class FeedSlotBehaviour(SkillBehaviour):
+    def make_skill(self) -> Skill:
+        from skills.slot import FeedSlot
+
+        g = self.ctx.geometry
+        return FeedSlot(
+            np.asarray(g.slot_center, float),
+            self.ctx.part,
+            self.ctx.devices,
+            **_skill_kwargs(self.params),
+        )
+
+    def on_success(self) -> None:
+        self.ctx.events.event("fed")
+
+
+class PickFromSlotBehaviour(SkillBehaviour):
+    def make_skill(self) -> Skill:
+        from skills.slot import PickFromSlot
+
+        g = self.ctx.geometry
+        return PickFromSlot(
+            np.asarray(g.slot_center, float),
+            self.ctx.part,
+            self.ctx.params,
+            self.ctx.devices,
+            **_skill_kwargs(self.params),
+        )
+
+    def on_success(self) -> None:
+        self.ctx.events.event("picked_from_slot")
+
+
+class PackInBoxBehaviour(SkillBehaviour):
+    def keys(self) -> dict[str, common.Access]:
+        return {"/cell/place": common.Access.WRITE}
+
+    def make_skill(self) -> Skill:
+        from skills.packing import PackInBox
+
+        places = self.ctx.geometry.tray_places
+        free = [i for i in range(len(places)) if i not in self.ctx.filled]
+        if not free:
+            raise SetupError(f"the box is full ({len(places)} places)")
+        self.index = free[0]
+        self.bb.set("/cell/place", self.index)
+        return PackInBox(
+            np.asarray(places[self.index], float),
+            self.ctx.part,
+            self.ctx.devices,
+            **_skill_kwargs(self.params),
+        )
+
+    def on_success(self) -> None:
+        self.ctx.filled.add(self.index)
+        self.ctx.events.event("packed", place=self.index)
+
+
+def _skill_kwargs(params: dict[str, Any]) -> dict[str, Any]:
+    """Leaf parameters that belong to the skill, not to the tree's guard/timeout."""
+    return {k: v for k, v in params.items() if k not in TREE_PARAMS}
+
+
+#: Parameters of a leaf that the tree builder turns into decorators around it.
+TREE_PARAMS = ("timeout_s", "max_force_n", "max_torque_nm", "name")
+
+
+__all__ = [
+    "AlignBehaviour",
+    "FeedSlotBehaviour",
+    "GoHome",
+    "GraspBehaviour",
+    "PackInBoxBehaviour",
+    "Perceive",
+    "PickFromSlotBehaviour",
+    "PlanPick",
+    "PutBack",
+    "SkillBehaviour",
+    "TiltBehaviour",
+    "WaitMachining",
+]

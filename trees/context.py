@@ -1,0 +1,83 @@
+"""What the behaviours are handed: devices, the cell's geometry, the part, and where to report.
+
+The tree never looks anything up and never knows which backend runs: the cell builds a
+:class:`CellContext` from the configuration and passes it to the tree builder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.machine import Machine
+from skills.mechanics.part import Part
+from skills.mechanics.planner import PivotPlan
+from skills.motion import Devices, Guard
+from skills.pivot import PivotParams
+
+
+@dataclass(frozen=True)
+class CellGeometry:
+    """Where things are in the robot base frame (m, rad); the cell derives it from its layout."""
+
+    bin_roi: tuple[float, float, float, float]  #: (xmin, xmax, ymin, ymax) of the bin's inside
+    bin_view_xy: tuple[float, float]  #: where the camera looks down on the bin from
+    bin_floor_z: float
+    slot_center: NDArray[np.float64]  #: centre of the slot pocket's floor
+    slot_width: float
+    machine_top_z: float
+    tray_places: NDArray[np.float64]  #: (n, 3) packing places, in packing order
+    tray_roi: tuple[float, float, float, float]
+    tray_floor_z: float
+    home: NDArray[np.float64]  #: home TCP position (tool pointing down)
+
+
+class Events(Protocol):
+    """Where behaviours report what the cell's state and log must remember."""
+
+    def abort(self, reason: str) -> None:
+        """A guard or a timeout stopped a motion."""
+
+    def event(self, kind: str, **data: object) -> None:
+        """A step of the workflow finished (``picked``, ``fed``, ``packed`` ...)."""
+
+    def stop(self, reason: str) -> None:
+        """The cell must stop and wait for a person."""
+
+    @property
+    def stopped(self) -> str | None:
+        """Why the cell stopped, or None."""
+
+
+@dataclass
+class WorkflowLimits:
+    machining_time: float = 5.0  #: s
+    max_failures_per_part: int = 2
+    max_failed_cycles: int = 3
+    cycles: int = 10
+
+
+@dataclass
+class CellContext:
+    devices: Devices
+    machine: Machine
+    geometry: CellGeometry
+    part: Part
+    plan: PivotPlan
+    params: PivotParams
+    events: Events
+    limits: WorkflowLimits = field(default_factory=WorkflowLimits)
+    default_guard: Guard = field(default_factory=Guard)
+    #: Tray places already filled (by index); the cell restores it from its saved state.
+    filled: set[int] = field(default_factory=set)
+    #: Failed picks per remembered part location (x, y rounded to 1 cm).
+    failures: dict[tuple[int, int], int] = field(default_factory=dict)
+    #: Called once per tick by the loop before the tree ticks (sim stepping is not here).
+    on_tick: list[Callable[[], None]] = field(default_factory=list)
+    tick: int = 0
+    #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
+    catalogue: list[Part] = field(default_factory=list)

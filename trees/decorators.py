@@ -1,0 +1,258 @@
+"""Safety and recovery composed in the tree: force-torque guard, timeout, retry, cycles, stop.
+
+These wrap leaves instead of living inside them, so an integrator sees and changes them in the
+tree's YAML. The guard and the timeout check *before* the child ticks: a wrench over the limit
+stops the arm in the same tick it is read, before the child commands another step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import py_trees
+from py_trees import common
+from py_trees.behaviour import Behaviour
+from py_trees.decorators import Decorator
+
+from drivers.clock import Clock
+from trees.context import CellContext
+
+Status = common.Status
+WRENCH_KEY = "/ft/wrench"
+
+
+class _CheckFirst(Decorator):
+    """A decorator that may end its child before ticking it (guard, timeout)."""
+
+    def check(self) -> str | None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def on_trip(self, reason: str) -> None:
+        """Called once when :meth:`check` trips, after the child was stopped."""
+
+    def tick(self) -> Iterator[Behaviour]:
+        if self.status != Status.RUNNING:
+            self.initialise()
+        reason = self.check()
+        if reason is not None:
+            self.feedback_message = reason
+            self.stop(Status.FAILURE)  # stops a running child: its terminate() halts the motion
+            self.on_trip(reason)
+            yield self
+            return
+        yield from self.decorated.tick()
+        new_status = self.update()
+        if new_status != Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        yield self
+
+    def update(self) -> Status:
+        self.feedback_message = self.decorated.feedback_message
+        return self.decorated.status
+
+
+class FTGuard(_CheckFirst):
+    """Fail the child within one tick of the wrench passing ``max_force`` (N) or
+    ``max_torque`` (N*m): the child is halted, the arm stopped, and the reason recorded.
+
+    The gripper is left as it is: a part held in a hole grasp is safer held than dropped.
+    """
+
+    def __init__(
+        self, name: str, child: Behaviour, ctx: CellContext, max_force: float, max_torque: float
+    ) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx, self.max_force, self.max_torque = ctx, max_force, max_torque
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key=WRENCH_KEY, access=common.Access.READ)
+
+    def check(self) -> str | None:
+        try:
+            w = np.asarray(self.bb.get(WRENCH_KEY), float)
+        except KeyError:
+            return None
+        force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
+        if force > self.max_force or torque > self.max_torque:
+            return (
+                f"{self.decorated.name}: force-torque abort: |F| {force:.1f} N (limit "
+                f"{self.max_force:g}), |T| {torque:.2f} N*m (limit {self.max_torque:g}); "
+                "arm stopped"
+            )
+        return None
+
+    def on_trip(self, reason: str) -> None:
+        self.ctx.devices.arm.stop()  # also when the child was not running a motion
+        self.ctx.events.abort(reason)
+
+
+class Timeout(_CheckFirst):
+    """Fail the child when it runs longer than ``seconds`` of the injected clock."""
+
+    def __init__(self, name: str, child: Behaviour, ctx: CellContext, seconds: float) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx, self.seconds = ctx, seconds
+        self._t0 = 0.0
+
+    @property
+    def clock(self) -> Clock:
+        """The injected clock (read when used: the devices arrive after the tree is built)."""
+        return self.ctx.devices.clock
+
+    def initialise(self) -> None:
+        self._t0 = self.clock.now()
+
+    def check(self) -> str | None:
+        elapsed = self.clock.now() - self._t0
+        if elapsed > self.seconds:
+            return f"{self.decorated.name}: timeout after {elapsed:.1f} s (limit {self.seconds:g})"
+        return None
+
+    def on_trip(self, reason: str) -> None:
+        self.ctx.devices.arm.stop()
+        self.ctx.events.abort(reason)
+
+
+class Retry(Decorator):
+    """Run the child again after a failure, up to ``attempts`` runs in all.
+
+    A retry starts the child afresh on the next tick (its ``initialise()`` runs again), so a
+    re-perceive inside it sees the bin as it is now. It gives up early when the cell was told to
+    stop.
+    """
+
+    def __init__(self, name: str, child: Behaviour, ctx: CellContext, attempts: int) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx, self.attempts = ctx, attempts
+        self.failures = 0
+        self.last_reason = ""
+
+    def initialise(self) -> None:
+        self.failures = 0
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        if status == Status.FAILURE:
+            self.failures += 1
+            self.last_reason = _deepest_feedback(self.decorated)
+            if self.failures >= self.attempts or self.ctx.events.stopped:
+                self.feedback_message = (
+                    f"gave up after {self.failures} of {self.attempts} attempts: {self.last_reason}"
+                )
+                return Status.FAILURE
+            self.feedback_message = (
+                f"attempt {self.failures} of {self.attempts} failed ({self.last_reason}); retrying"
+            )
+            self.decorated.stop(Status.INVALID)
+            return Status.RUNNING
+        self.feedback_message = (
+            f"attempt {self.failures + 1} of {self.attempts}: {self.decorated.feedback_message}"
+        )
+        return status
+
+
+class StopOnFailure(Decorator):
+    """A failure here needs a person (a part stuck in the slot, a part dropped outside the bin):
+    tell the cell to stop, with the reason."""
+
+    def __init__(self, name: str, child: Behaviour, ctx: CellContext, reason: str) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx, self.reason = ctx, reason
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        self.feedback_message = self.decorated.feedback_message
+        if status == Status.FAILURE:
+            why = f"{self.reason}: {_deepest_feedback(self.decorated)}"
+            self.feedback_message = why
+            self.ctx.events.stop(why)
+        return status
+
+
+class Cycles(Decorator):
+    """Run the workflow's cycle again and again: SUCCESS when the count is reached or the bin is
+    empty; FAILURE when the cell was told to stop or too many cycles in a row failed."""
+
+    def __init__(self, name: str, child: Behaviour, ctx: CellContext) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx = ctx
+        self.done = 0
+        self.failed_in_a_row = 0
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/cell/cycles_done", access=common.Access.WRITE)
+        self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
+        self.bb.set("/cell/cycles_done", 0)
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        limits = self.ctx.limits
+        if status == Status.RUNNING:
+            self.feedback_message = (
+                f"cycle {self.done + 1} of {limits.cycles}: {_deepest_feedback(self.decorated)}"
+            )
+            return Status.RUNNING
+        if status == Status.SUCCESS:
+            self.done += 1
+            self.failed_in_a_row = 0
+            self.bb.set("/cell/cycles_done", self.done)
+            self.ctx.events.event("cycle_done", cycle=self.done)
+        else:
+            self.failed_in_a_row += 1
+            reason = _deepest_feedback(self.decorated)
+            self.ctx.events.event("cycle_failed", reason=reason)
+            if self.ctx.events.stopped:
+                self.feedback_message = f"cell stopped: {self.ctx.events.stopped}"
+                return Status.FAILURE
+        if self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty"):
+            self.feedback_message = f"bin empty after {self.done} cycles"
+            return Status.SUCCESS
+        if self.done >= limits.cycles:
+            self.feedback_message = f"{self.done} cycles done"
+            return Status.SUCCESS
+        if self.failed_in_a_row >= limits.max_failed_cycles:
+            why = f"{self.failed_in_a_row} cycles in a row failed; last: {reason}"
+            self.ctx.events.stop(why)
+            self.feedback_message = f"cell stopped: {why}"
+            return Status.FAILURE
+        self.decorated.stop(Status.INVALID)  # next tick starts the next cycle afresh
+        return Status.RUNNING
+
+
+class FTSampler(Behaviour):
+    """Reads the force-torque sensor once per tick for every guard (the only writer of
+    ``/ft/wrench``); never ends."""
+
+    def __init__(self, name: str, ctx: CellContext) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key=WRENCH_KEY, access=common.Access.WRITE)
+
+    def update(self) -> Status:
+        w = self.ctx.devices.ft.wrench()
+        self.bb.set(WRENCH_KEY, w)
+        self.feedback_message = f"|F| {float(np.linalg.norm(w[:3])):.1f} N"
+        return Status.RUNNING
+
+
+def _deepest_feedback(node: Behaviour) -> str:
+    """The most specific reason under ``node``: for a failure, the first node that failed in
+    depth-first order (the leaf, or the guard that stopped it); while running, the tip."""
+    wanted = Status.FAILURE if node.status == Status.FAILURE else Status.RUNNING
+    for child in node.iterate():
+        if child.status == wanted and child.feedback_message:
+            return child.feedback_message
+    return node.feedback_message
+
+
+__all__ = [
+    "Cycles",
+    "FTGuard",
+    "FTSampler",
+    "Retry",
+    "StopOnFailure",
+    "Timeout",
+    "WRENCH_KEY",
+    "py_trees",
+]

@@ -1,0 +1,96 @@
+"""Pictures of a tree: DOT (py_trees' own) and a PNG drawn with matplotlib.
+
+The PNG does not need Graphviz: cells and CI machines rarely have the ``dot`` binary, and a tree
+picture an integrator cannot produce is no help. Where ``dot`` exists, run it on the .dot file
+for the classic look.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import py_trees
+from py_trees.behaviour import Behaviour
+
+_COLOURS = {
+    "Sequence": "#ffa500",
+    "Selector": "#00ffff",
+    "Parallel": "#ffd700",
+}
+
+
+def _kind(node: Behaviour) -> str:
+    if isinstance(node, py_trees.composites.Sequence):
+        return "Sequence"
+    if isinstance(node, py_trees.composites.Selector):
+        return "Selector"
+    if isinstance(node, py_trees.composites.Parallel):
+        return "Parallel"
+    if isinstance(node, py_trees.decorators.Decorator):
+        return "Decorator"
+    return "Leaf"
+
+
+def write_pictures(root: Behaviour, out: Path) -> tuple[Path, Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    dot_path = out / "tree.dot"
+    graph = py_trees.display.dot_tree(root, collapse_decorators=False)
+    dot_path.write_text(graph.to_string(), encoding="utf-8")
+    png_path = out / "tree.png"
+    _draw_png(root, png_path)
+    return dot_path, png_path
+
+
+def _draw_png(root: Behaviour, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    # Layout: leaves get consecutive x slots; a parent sits over the middle of its children.
+    pos: dict[int, tuple[float, int]] = {}
+    slot = [0]
+
+    def place(node: Behaviour, depth: int) -> float:
+        kids = list(node.children)
+        if not kids:
+            x = float(slot[0])
+            slot[0] += 1
+        else:
+            xs = [place(c, depth + 1) for c in kids]
+            x = 0.5 * (xs[0] + xs[-1])
+        pos[id(node)] = (x, depth)
+        return x
+
+    place(root, 0)
+    depth = max(d for _, d in pos.values()) + 1
+    fig, ax = plt.subplots(figsize=(max(8, 1.5 * slot[0]), 1.1 * depth + 1))
+    for node in root.iterate():
+        x, d = pos[id(node)]
+        for c in node.children:
+            cx, cd = pos[id(c)]
+            ax.plot([x, cx], [-d, -cd], color="#888888", lw=0.8, zorder=1)
+    for node in root.iterate():
+        x, d = pos[id(node)]
+        kind = _kind(node)
+        colour = _COLOURS.get(kind, "#dddddd" if kind == "Decorator" else "#90ee90")
+        ax.text(
+            x,
+            -d,
+            node.name.replace(" ", "\n", 1) if len(node.name) > 14 else node.name,
+            ha="center",
+            va="center",
+            fontsize=7,
+            zorder=2,
+            bbox={"boxstyle": "round,pad=0.3", "fc": colour, "ec": "#333333", "lw": 0.6},
+        )
+    ax.set_xlim(-1, slot[0])
+    ax.set_ylim(-depth, 0.7)
+    ax.axis("off")
+    ax.set_title(
+        "cell behaviour tree (orange: sequence, cyan: selector, grey: decorator, green: leaf)",
+        fontsize=8,
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
