@@ -316,7 +316,11 @@ class FeedSlot(SequenceSkill):
                     f"grip_depth {1e3 * p.grip_depth:.0f} mm)"
                 )
             if above_floor < p.depth_tolerance - p.overshoot:
-                return "no slot floor felt where it should be: nothing under the part?"
+                return (
+                    f"no slot floor felt {1e3 * -above_floor:.0f} mm below where it should be: "
+                    f"the grasp is deeper than grip_depth ({1e3 * p.grip_depth:.0f} mm) or "
+                    "nothing is held"
+                )
             return None
 
         def release() -> None:
@@ -468,11 +472,14 @@ class PickFromSlot(SequenceSkill):
                 )
             return None
 
+        seeing = [
+            dev.move("camera over the slot", g, view),
+            check("find the part in the slot", dev, g, look),
+        ]
         self.sequence = Sequence(
             "pick from slot",
             [
-                dev.move("camera over the slot", g, view),
-                check("find the part in the slot", dev, g, look),
+                *(seeing if looking else []),
                 dev.move("over the wall", g, over_wall),
                 dev.grip("open over the wall", g, open_over_wall),
                 dev.move("down to the rim", g, down_to_rim),

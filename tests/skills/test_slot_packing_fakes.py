@@ -1,0 +1,237 @@
+"""Tick-level tests of FeedSlot, PickFromSlot and PackInBox against fake devices (no physics).
+
+The fakes reach each commanded pose after a few ticks and read whatever wrench the test sets, so
+these check the skills' logic: contact ends a guarded move, a force spike fails the skill with a
+reason and stops the arm, halt() stops the arm, and the sensed checks say what went wrong.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cell.catalogue import load_catalogue
+from drivers.arm import MotionState
+from skills.motion import Devices
+from skills.packing import PackInBox, tray_places
+from skills.slot import FeedSlot, PickFromSlot, travel_path
+from skills.status import Status
+from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
+
+PART = load_catalogue().get("bushing")
+SLOT = np.array([0.10, 0.45, 0.06])  # the pocket floor's centre; the machine top is 40 mm up
+PLACE = np.array([0.16, -0.41, 0.005])
+
+
+def devices(object_width: float | None = 0.007) -> dict:
+    return {
+        "arm": FakeArm(),
+        "gripper": FakeGripper(object_width),
+        "ft": FakeFT(),
+        "clock": FakeClock(),
+    }
+
+
+def dev(d: dict) -> Devices:
+    return Devices(d["arm"], d["gripper"], d["ft"], d["clock"])
+
+
+def push_back(d: dict, world_force: tuple[float, float, float]) -> None:
+    """Set the fake sensor to read ``world_force`` (N, base frame) on the tool."""
+    rot = d["arm"].pose.rotation
+    d["ft"].value = np.concatenate([rot.T @ np.asarray(world_force, float), np.zeros(3)])
+
+
+def contact_when(skill, d: dict, step: str, world_force: tuple[float, float, float]):  # type: ignore[no-untyped-def]
+    """An on_tick that, during ``step``, puts the arm at its target and the contact force on."""
+
+    def on_tick(_: int) -> None:
+        arm = d["arm"]
+        if skill.step == step and arm.state is MotionState.MOVING and arm.queue:
+            arm.pose = arm.queue[-1]
+            push_back(d, world_force)
+        elif skill.step != step:
+            d["ft"].value = np.zeros(6)
+
+    return on_tick
+
+
+# ---------------------------------------------------------------------------- FeedSlot
+def test_feed_slot_stops_on_the_floor_lets_go_and_drags_out() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d), weight_check=0.0)
+    result, _ = run(feed, d, on_tick=contact_when(feed, d, "into the slot", (0, 0, 10.0)))
+    assert result.status is Status.SUCCESS, result.message
+    assert feed.on_floor and feed.insert.contact
+    # let go: the jaws opened by `release` (from the fake's 85 mm); then straight up
+    assert d["gripper"].width() == pytest.approx(0.085 + 0.006)
+    assert d["arm"].pose.position[2] > feed.insert.contact_pose.position[2] + 0.02
+
+
+def test_feed_slot_fails_when_the_part_meets_the_machine_above_the_pocket() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d))
+
+    def on_tick(_: int) -> None:  # resistance at once, before the part went down
+        if feed.step == "into the slot" and d["arm"].state is MotionState.MOVING:
+            push_back(d, (0, 0, 10.0))
+
+    result, _ = run(feed, d, on_tick=on_tick)
+    assert result.status is Status.FAILURE
+    assert "above the slot floor" in result.message and "not in the slot" in result.message
+
+
+def test_feed_slot_force_spike_fails_with_a_reason_and_stops_the_arm() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d))
+
+    def spike(_: int) -> None:
+        if feed.step == "down to the slot":
+            d["ft"].value = np.array([0, 0, 200.0, 0, 0, 0])
+
+    result, _ = run(feed, d, on_tick=spike)
+    assert result.status is Status.FAILURE and "force-torque guard" in result.message
+    assert "down to the slot" in result.message
+    assert d["arm"].stops >= 1 and d["arm"].state is MotionState.STOPPED
+
+
+def test_feed_slot_halt_stops_the_arm_and_is_idempotent() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d))
+    assert feed.tick().status is Status.RUNNING
+    assert d["arm"].state is MotionState.MOVING
+    feed.halt()
+    feed.halt()
+    assert d["arm"].stops >= 1 and d["arm"].state is MotionState.STOPPED
+
+
+def test_feed_slot_notices_the_part_came_out_with_the_gripper() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d))
+    result, _ = run(feed, d, on_tick=contact_when(feed, d, "into the slot", (0, 0, 10.0)))
+    # the wrench never lost the part's weight
+    assert result.status is Status.FAILURE and "came out with the gripper" in result.message
+
+
+def test_feed_slot_refuses_a_grasp_too_deep_to_let_go_near_the_floor() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d), grip_depth=0.060)
+    result, _ = run(feed, d)
+    assert result.status is Status.FAILURE and "too deep" in result.message
+
+
+# ------------------------------------------------------------------------ PickFromSlot
+def test_pick_from_slot_takes_the_hole_grasp_over_the_slot() -> None:
+    d = devices()
+    pick = PickFromSlot(SLOT, PART, dev(d), weight_check=0.0)
+    result, _ = run(pick, d)
+    assert result.status is Status.SUCCESS, result.message
+    assert d["gripper"].object_detected()
+    # lifted: the part's bottom (fingertips + grip depth - length) above the machine's top
+    tips = d["arm"].pose.position[2] - 0.005
+    assert tips + 0.020 - PART.length >= SLOT[2] + 0.040 + 0.019
+
+
+def test_pick_from_slot_fails_when_the_grasp_closes_on_nothing() -> None:
+    d = devices(object_width=None)
+    result, _ = run(PickFromSlot(SLOT, PART, dev(d)), d)
+    assert result.status is Status.FAILURE and "closed on nothing" in result.message
+
+
+def test_pick_from_slot_force_spike_and_halt_stop_the_arm() -> None:
+    d = devices()
+    pick = PickFromSlot(SLOT, PART, dev(d))
+
+    def spike(_: int) -> None:
+        if pick.step == "beside the wall":
+            d["ft"].value = np.array([0, 0, -40.0, 0, 0, 0])  # a pad landed on the rim
+
+    result, _ = run(pick, d, on_tick=spike)
+    assert result.status is Status.FAILURE and "force-torque guard" in result.message
+    assert d["arm"].stops >= 1
+    d2 = devices()
+    pick2 = PickFromSlot(SLOT, PART, dev(d2))
+    pick2.tick()
+    pick2.halt()
+    pick2.halt()
+    assert d2["arm"].state is MotionState.STOPPED
+
+
+# --------------------------------------------------------------------------- PackInBox
+def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    forces = {"push -z onto the floor": (0, 0, 10.0), "push +x": (-10.0, 0, 0),
+              "push +y": (0, -10.0, 0)}
+
+    def on_tick(_: int) -> None:
+        arm = d["arm"]
+        if pack.step in forces and arm.state is MotionState.MOVING and arm.queue:
+            push_back(d, forces[pack.step])
+        elif pack.step not in forces:
+            d["ft"].value = np.zeros(6)
+
+    result, _ = run(pack, d, on_tick=on_tick)
+    assert result.status is Status.SUCCESS, result.message
+    assert set(pack.contacts) == {"floor", "+x", "+y"}
+    # the outer finger (tool x) trails on the -x, -y diagonal
+    x = pack.contacts["+x"].rotation[:, 0]
+    assert np.allclose(x, [-np.sqrt(0.5), -np.sqrt(0.5), 0.0])
+    assert pack.placed_xy is not None
+    assert d["arm"].pose.position[2] > pack.contacts["+y"].position[2] + 0.03
+
+
+def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+
+    def on_tick(_: int) -> None:
+        if pack.step == "push -z onto the floor" and d["arm"].state is MotionState.MOVING:
+            push_back(d, (0, 0, 10.0))
+        elif pack.step != "push -z onto the floor":
+            d["ft"].value = np.zeros(6)
+
+    result, _ = run(pack, d, on_tick=on_tick)
+    assert result.status is Status.FAILURE and "no wall or part on +x felt" in result.message
+
+
+def test_pack_in_box_force_spike_fails_with_a_reason_and_halt_stops_the_arm() -> None:
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+
+    def spike(_: int) -> None:
+        if pack.step == "over the place":
+            d["ft"].value = np.array([150.0, 0, 0, 0, 0, 0])
+
+    result, _ = run(pack, d, on_tick=spike)
+    assert result.status is Status.FAILURE and "force-torque guard" in result.message
+    assert d["arm"].stops >= 1
+    d2 = devices()
+    pack2 = PackInBox(PLACE, PART, dev(d2))
+    pack2.tick()
+    pack2.halt()
+    pack2.halt()
+    assert d2["arm"].stops >= 1 and d2["arm"].state is MotionState.STOPPED
+
+
+def test_tray_places_fill_from_the_plus_x_plus_y_corner() -> None:
+    places = tray_places((0.0225, 0.1775, -0.51, -0.39), 0.005, 0.034)
+    assert len(places) == 12
+    assert places[0, 0] == pytest.approx(0.1775 - 0.01775)
+    assert places[0, 1] == pytest.approx(-0.39 - 0.01775)
+    assert places[1, 0] < places[0, 0] and places[1, 1] == places[0, 1]  # along -x first
+    assert places[4, 1] < places[0, 1]  # then the next row, towards -y
+    assert np.allclose(places[:, 2], 0.005)
+
+
+def test_travel_path_goes_around_the_base() -> None:
+    from drivers.pose import Pose
+
+    start = Pose(np.array([0.1, 0.45, 0.2]), np.diag([1.0, -1.0, -1.0]))
+    end = Pose(np.array([0.1, -0.45, 0.2]), np.diag([1.0, -1.0, -1.0]))
+    path = travel_path(start, end, 0.30)
+    pts = np.array([p.position for p in [start, *path]])
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        s = np.linspace(0, 1, 50)[:, None]
+        seg = a[:2] + s * (b[:2] - a[:2])
+        assert np.min(np.linalg.norm(seg, axis=1)) > 0.25
