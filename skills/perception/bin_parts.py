@@ -57,6 +57,7 @@ class DetectorSettings:
     min_crest: float = 0.005  #: m, lowest crest that seeds a part (the 7.6 mm rail)
     max_seed_slope: float = 1.0  #: seeds are flatter than this (rise over run)
     min_seed: int = 30  #: pixels of the smallest seed
+    thin_part: float = 0.015  #: m, catalogue parts thinner than this seed from a height band
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
     min_inside: int = 40  #: points seen through an opening that make an end the open one
@@ -65,8 +66,13 @@ class DetectorSettings:
     min_end_view: float = 0.1  #: tan of the view angle onto an end face needed to judge it
 
 
-def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> NDArray[np.int32]:
-    """(H, W) labels: 0 background, 1..K part instances."""
+def segment(
+    hm: HeightMap,
+    settings: DetectorSettings = DetectorSettings(),
+    thin: tuple[float, ...] = (),
+) -> NDArray[np.int32]:
+    """(H, W) labels: 0 background, 1..K part instances. ``thin``: the outer sizes (m) of the
+    catalogue's thin parts, whose flat tops also seed (see below)."""
     h = np.nan_to_num(hm.height, nan=0.0).astype(np.float32)
     fg = h > settings.min_height
     fg = cv2.morphologyEx(fg.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
@@ -78,6 +84,14 @@ def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> N
     gy = cv2.Sobel(hs, cv2.CV_32F, 0, 1, ksize=3) / (8.0 * hm.pixel_size)
     gentle = np.hypot(gx, gy) < settings.max_seed_slope
     crest = fg & gentle & (h > settings.min_crest)
+    # A thin part (the 7.6 mm rail, 7 pixels wide) against a tall one: the filtered slope is
+    # steep over most of its width, so it may get no seed there and the tall part's watershed
+    # takes it. Its top is a band of its own height, as wide as the part; a tall part's flank
+    # crosses that band in a line one or two pixels wide, which the opening removes.
+    for size in thin:
+        band = (np.abs(hs - size) < max(0.002, 0.25 * size)) & fg
+        band = cv2.morphologyEx(band.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        crest |= band > 0
     crest = cv2.morphologyEx(crest.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     n, comp, stats, _ = cv2.connectedComponentsWithStats(crest, connectivity=4)
     markers = np.zeros(h.shape, np.int32)
@@ -93,7 +107,42 @@ def segment(hm: HeightMap, settings: DetectorSettings = DetectorSettings()) -> N
     grey = (255.0 * np.clip(1.0 - h / max(top, 1e-6), 0.0, 1.0)).astype(np.uint8)
     labels = cv2.watershed(cv2.merge([grey, grey, grey]), markers.copy())
     out = np.where(fg & (labels >= 2), labels - 1, 0).astype(np.int32)
-    return _merge_pieces(out, h)
+    _drop_climbed(out, markers - 1, hs)
+    return _merge_pieces(out, hs, hm.points[..., :2], settings.thin_part)
+
+
+def _groups(labels: NDArray[np.int32]) -> dict[int, NDArray[np.int64]]:
+    """Flat pixel indices of each label > 0 (one sort of the labelled pixels only)."""
+    flat = labels.reshape(-1)
+    idx = np.flatnonzero(flat > 0)
+    if len(idx) == 0:
+        return {}
+    lab = flat[idx]
+    order = np.argsort(lab, kind="stable")
+    idx, lab = idx[order], lab[order]
+    cuts = np.flatnonzero(np.diff(lab)) + 1
+    return {int(g[0]): i for g, i in zip(np.split(lab, cuts), np.split(idx, cuts), strict=True)}
+
+
+def _drop_climbed(
+    labels: NDArray[np.int32], seeds: NDArray[np.int32], hs: NDArray[np.float32]
+) -> None:
+    """Unlabel (in place) the pixels a segment took well above its own top.
+
+    The watershed floods each pixel at its own height, so a low part's region climbs the
+    steep flank or wall of a tall neighbour up to that neighbour's seed: a rail against a duct
+    would take the duct's side wall and read 10-20 mm tall. A part's top is its seed's height
+    (the gentle top); pixels more than 3 mm (or 10 %) above that belong to something else.
+    """
+    flat, hflat = labels.reshape(-1), hs.reshape(-1)
+    seed_groups = _groups(seeds)
+    for k, idx in _groups(labels).items():
+        seed = seed_groups.get(k)
+        if seed is None or len(seed) == 0:
+            continue
+        top = float(np.median(hflat[seed]))
+        high = idx[hflat[idx] > top + max(0.003, 0.1 * top)]
+        flat[high] = 0
 
 
 def _principal(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -110,26 +159,48 @@ def _principal(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np
     return mean, axis
 
 
-def _merge_pieces(labels: NDArray[np.int32], h: NDArray[np.float32]) -> NDArray[np.int32]:
-    """Join neighbouring segments of one part that the seeds split (a thin, noisy top): same
-    height to 2 mm, their principal axes within 10 deg and on one line."""
+def _merge_pieces(
+    labels: NDArray[np.int32],
+    h: NDArray[np.float32],
+    xy: NDArray[np.float32],
+    max_height: float,
+) -> NDArray[np.int32]:
+    """Join neighbouring segments of one part that the seeds split (a thin, noisy top: a lone
+    rail can come out in three pieces): the same height (to 2 mm or 10 %) and together no wider
+    than the wider of them, as pieces end to end are; two parts side by side make a union
+    twice as wide. ``xy``: (H, W, 2) base-frame coordinates (m), so widths are metric. Only
+    pieces lower than ``max_height`` (a thin part) are joined: two tall parts end to end or in
+    a T would pass the same tests."""
     k_max = int(labels.max(initial=0))
     if k_max < 2:
         return labels
-    stats: dict[int, tuple[float, NDArray[np.float64], NDArray[np.float64]]] = {}
+    # Moments per segment (count, sums of x, y, xx, yy, xy): a union's spread is their sum.
+    mom: dict[int, NDArray[np.float64]] = {}
+    top: dict[int, float] = {}
+    flat = labels.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    bounds = np.searchsorted(flat[order], np.arange(k_max + 2))
+    px = xy.reshape(-1, 2)
+    hh = h.reshape(-1)
     for k in range(1, k_max + 1):
-        v, u = np.nonzero(labels == k)
-        if len(u) < 10:
+        idx = order[bounds[k] : bounds[k + 1]]
+        p = px[idx].astype(np.float64)
+        ok = np.isfinite(p[:, 0])
+        p = p[ok]
+        if len(p) < 10:
             continue
-        xy = np.column_stack([u, v]).astype(np.float64)
-        mean, major = _principal(xy)
-        stats[k] = (float(np.percentile(h[v, u], 95)), mean, major)
+        x, y = p[:, 0], p[:, 1]
+        mom[k] = np.array(
+            [len(p), x.sum(), y.sum(), (x * x).sum(), (y * y).sum(), (x * y).sum()]
+        )
+        top[k] = float(np.percentile(hh[idx[ok]], 80))
+    # The watershed leaves a one-pixel line (-1) between the regions it grows, so neighbours
+    # are looked for up to two pixels apart.
     pairs = set()
-    for dv, du in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        a = labels[
-            max(0, -dv) : labels.shape[0] - max(0, dv), max(0, -du) : labels.shape[1] - max(0, du)
-        ]
-        b = labels[max(0, dv) :, max(0, du) :][: a.shape[0], : a.shape[1]]
+    rows, cols = labels.shape
+    for dv, du in ((0, 2), (2, 0), (2, 2), (2, -2), (1, 2), (2, 1), (2, -1), (1, -2)):
+        a = labels[: rows - dv, max(0, -du) : cols - max(0, du)]
+        b = labels[dv:, max(0, du) : cols - max(0, -du)]
         m = (a > 0) & (b > 0) & (a != b)
         pairs.update(zip(a[m].tolist(), b[m].tolist(), strict=True))
     parent = {k: k for k in range(k_max + 1)}
@@ -140,20 +211,34 @@ def _merge_pieces(labels: NDArray[np.int32], h: NDArray[np.float32]) -> NDArray[
             k = parent[k]
         return k
 
-    for a, b in pairs:
-        if a not in stats or b not in stats:
+    # Most alike heights first; each test is on the groups merged so far.
+    ranked = sorted(
+        (abs(top[a] - top[b]), a, b) for a, b in pairs if a < b and a in mom and b in mom
+    )
+    for _, a, b in ranked:
+        ra, rb = find(a), find(b)
+        if ra == rb:
             continue
-        ha, ma, da = stats[a]
-        hb, mb, db = stats[b]
-        if abs(ha - hb) > 0.002 or abs(float(da @ db)) < math.cos(math.radians(10.0)):
+        ha, hb = top[ra], top[rb]
+        if max(ha, hb) > max_height or abs(ha - hb) > max(0.002, 0.1 * max(ha, hb)):
             continue
-        gap = mb - ma
-        off_line = abs(float(gap @ np.array([-da[1], da[0]])))
-        if off_line > 4.0:  # pixels: side by side is two parts, end to end is one
-            continue
-        parent[find(a)] = find(b)
+        union = mom[ra] + mom[rb]
+        if _minor_std(union) > 1.25 * max(_minor_std(mom[ra]), _minor_std(mom[rb])) + 0.0005:
+            continue  # side by side: two parts
+        parent[ra] = rb
+        mom[rb] = union
+        top[rb] = (ha * mom[ra][0] + hb * (union[0] - mom[ra][0])) / union[0]
     remap = np.array([find(k) for k in range(k_max + 1)], np.int32)
     return remap[labels]
+
+
+def _minor_std(m: NDArray[np.float64]) -> float:
+    """Spread (m, one standard deviation) across the major axis, from the moments."""
+    n = m[0]
+    cx, cy = m[1] / n, m[2] / n
+    sxx, syy, sxy = m[3] / n - cx * cx, m[4] / n - cy * cy, m[5] / n - cx * cy
+    tr, det = sxx + syy, sxx * syy - sxy * sxy
+    return float(math.sqrt(max(0.5 * tr - math.sqrt(max(0.25 * tr * tr - det, 0.0)), 0.0)))
 
 
 def _plane_basis(normal: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -193,7 +278,8 @@ def detect_parts(
     if segmenter is not None:
         labels = segmenter.segment(hm, frame.rgb)  # type: ignore[attr-defined]
     else:
-        labels = segment(hm, settings)
+        thin = tuple(p.outer for p in catalogue if p.outer < settings.thin_part)
+        labels = segment(hm, settings, thin)
     return fit_segments(hm, labels, catalogue, robot_xy, settings, world_T_camera.position)
 
 
@@ -212,6 +298,9 @@ def fit_segments(
     e1, e2 = _plane_basis(n)
     pts = hm.points.reshape(-1, 3)  # float32: twice as fast as float64, sub-0.1 mm here
     hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0)
+    # Heights median-filtered (5 x 5) for the outer size: on a flat top the depth noise
+    # (1.25 mm at 0.5 m) would otherwise push the 80th percentile 1 mm up, 13 % of a rail.
+    smooth = cv2.medianBlur(np.nan_to_num(hm.height, nan=0.0).astype(np.float32), 5).reshape(-1)
     lab = labels.reshape(-1)
     uv_all = np.column_stack([dot_last(pts, e1), dot_last(pts, e2)])
     out: list[Detection] = []
@@ -219,7 +308,9 @@ def fit_segments(
         idx = np.flatnonzero(lab == k)
         if len(idx) < settings.min_pixels:
             continue
-        for det in _fit_one(idx, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings, cam):
+        for det in _fit_one(
+            idx, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam
+        ):
             out.append(det)
     return out
 
@@ -228,6 +319,7 @@ def _fit_one(
     idx: NDArray[np.int64],
     uv_all: NDArray[np.float64],
     hgt: NDArray[np.float64],
+    smooth: NDArray[np.float32],
     hm: HeightMap,
     e1: NDArray[np.float64],
     e2: NDArray[np.float64],
@@ -241,6 +333,7 @@ def _fit_one(
     # The 80th percentile of a lying cylinder's heights is within 2 % of its diameter, and it
     # keeps the depth noise (1.25 mm at 0.5 m) from inflating thin parts like the rail.
     top = float(np.percentile(h, 80))
+    outer = float(np.percentile(smooth[idx], 80))
     upper = idx[h > 0.5 * top]
     if len(upper) < 20:
         return []
@@ -249,7 +342,6 @@ def _fit_one(
     across = np.array([-axis[1], axis[0]])
     s = dot_last(uv - mean, axis)
     c = dot_last(uv - mean, across)
-    outer = top
     width = float(np.percentile(c, 99) - np.percentile(c, 1))
     # Touching boxes leave no valley: a segment n parts wide is n parts side by side; each
     # strip is then fitted on its own (its own axis and length).
@@ -274,13 +366,19 @@ def _fit_one(
             sub = idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
             if len(sub) >= settings.min_pixels // 2:
                 out += _fit_one(
-                    sub, uv_all, hgt, hm, e1, e2, catalogue, robot_xy, settings, cam, split=False
+                    sub, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam, False
                 )
         return out
     dets = []
     for sel in (np.ones(len(c), bool),):
         hs = hgt[upper][sel]
-        crest = hs > 0.9 * hs.max()
+        # The crest: heights near the part's top. Bounded above too, so that a few pixels of a
+        # taller neighbour at the segment's edge do not pull the centre towards it.
+        # Narrow (3 % of the height): seen obliquely, a cylinder's far flank is hidden, so a wide
+        # band would be lopsided towards the camera.
+        crest = (hs > 0.97 * top) & (hs < top + max(0.1 * top, 0.004))
+        if np.count_nonzero(crest) < 5:
+            crest = hs > 0.9 * top
         c_mid = float(np.median(c[sel][crest]))
         s_lo, s_hi = float(np.percentile(s[sel], 1)), float(np.percentile(s[sel], 99))
         s_mid = 0.5 * (s_lo + s_hi)
