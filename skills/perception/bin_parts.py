@@ -58,6 +58,7 @@ class DetectorSettings:
     max_seed_slope: float = 1.0  #: seeds are flatter than this (rise over run)
     min_seed: int = 30  #: pixels of the smallest seed
     thin_part: float = 0.015  #: m, catalogue parts thinner than this seed from a height band
+    min_hidden: float = 0.2  #: shortest visible fraction of a thin part running under another
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
     min_inside: int = 40  #: points seen through an opening that make an end the open one
@@ -190,9 +191,7 @@ def _merge_pieces(
         if len(p) < 10:
             continue
         x, y = p[:, 0], p[:, 1]
-        mom[k] = np.array(
-            [len(p), x.sum(), y.sum(), (x * x).sum(), (y * y).sum(), (x * y).sum()]
-        )
+        mom[k] = np.array([len(p), x.sum(), y.sum(), (x * x).sum(), (y * y).sum(), (x * y).sum()])
         top[k] = float(np.percentile(hh[idx[ok]], 80))
     # The watershed leaves a one-pixel line (-1) between the regions it grows, so neighbours
     # are looked for up to two pixels apart.
@@ -385,6 +384,27 @@ def _fit_one(
         center_uv = mean + s_mid * axis + c_mid * across
         length = s_hi - s_lo
         part, err = _match(length, outer, catalogue, settings.match_tolerance)
+        partial = False
+        if part is None:
+            # A thin part partly hidden under a taller one: see _hidden_thin_part.
+            found = _hidden_thin_part(
+                uv_all,
+                hgt,
+                mean,
+                axis,
+                across,
+                s_lo,
+                s_hi,
+                c_mid,
+                outer,
+                width,
+                catalogue,
+                settings,
+            )
+            if found is not None:
+                part, s_mid = found
+                center_uv = mean + s_mid * axis + c_mid * across
+                err, partial = settings.match_tolerance, True
         if part is None:  # matches nothing in the catalogue: not reported as a part
             continue
         center = (
@@ -423,6 +443,8 @@ def _fit_one(
         toward = end - center
         yaw = math.atan2(toward[1], toward[0])
         conf = float(math.exp(-((err / 0.1) ** 2))) if part is not None else 0.0
+        if partial:
+            conf = min(conf, 0.2)
         dets.append(
             Detection(
                 center=center,
@@ -437,6 +459,57 @@ def _fit_one(
             )
         )
     return dets
+
+
+def _hidden_thin_part(
+    uv_all: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    s_lo: float,
+    s_hi: float,
+    c_mid: float,
+    outer: float,
+    width: float,
+    catalogue: list[Part],
+    settings: DetectorSettings,
+) -> tuple[Part, float] | None:
+    """A segment too short for any part, with the cross-section of a thin catalogue part (as
+    tall and as wide as it), one end on the bare floor and the other running on under something
+    (heights above the floor beyond it): that part, mostly hidden under its neighbour (a rail
+    against a can is overhung by it from most views). The free end is a true end, so the
+    centre is half the catalogue length from it. Returns (part, centre along ``axis`` from
+    ``mean``) or None."""
+    length = s_hi - s_lo
+    for part in catalogue:
+        if part.outer >= settings.thin_part:
+            continue
+        slack = max(0.002, 0.25 * part.outer)
+        if abs(outer - part.outer) > slack or width > part.outer + 2 * slack:
+            continue
+        if not settings.min_hidden * part.length <= length < 0.9 * part.length:
+            continue
+        ends = []
+        for sign, s_end in ((1.0, s_hi), (-1.0, s_lo)):
+            # Heights just beyond this end, on the part's line.
+            rel = uv_all - (mean + c_mid * across)
+            s = dot_last(rel, axis) * sign - sign * s_end
+            c = dot_last(rel, across)
+            beyond = (s > 0.002) & (s < 0.010) & (np.abs(c) < 0.5 * part.outer)
+            h = hgt[beyond]
+            h = h[h > -0.5]  # invalid pixels read -1
+            if len(h) < 10:
+                ends.append("unknown")
+            elif float(np.median(h)) < settings.min_height:
+                ends.append("free")
+            else:  # a taller part over it, or a sliver of it seen past that part's flank
+                ends.append("hidden")
+        if ends == ["free", "hidden"]:  # the +axis end (s_hi) is the free one
+            return part, s_hi - 0.5 * part.length
+        if ends == ["hidden", "free"]:
+            return part, s_lo + 0.5 * part.length
+    return None
 
 
 def _inside_seen(
