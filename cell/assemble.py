@@ -62,7 +62,7 @@ def _layout(config: CellConfig, doc: LinedDocument) -> Any:
         raise doc.error(path, reason if reason else text) from None
 
 
-def geometry_from(layout: Any, home: list[float]) -> CellGeometry:
+def geometry_from(layout: Any, home_joints_deg: list[float], part_outer: float) -> CellGeometry:
     x0, x1, y0, y1 = layout.bin_interior()
     tx0, tx1, ty0, ty1 = (
         layout.tray_center[0] - 0.5 * layout.tray_inner_size[0],
@@ -70,7 +70,7 @@ def geometry_from(layout: Any, home: list[float]) -> CellGeometry:
         layout.tray_center[1] - 0.5 * layout.tray_inner_size[1],
         layout.tray_center[1] + 0.5 * layout.tray_inner_size[1],
     )
-    places = _packing_places(layout)
+    places = np.asarray(layout.packing_places(part_outer), float)
     return CellGeometry(
         bin_roi=(x0, x1, y0, y1),
         bin_view_xy=(float(layout.bin_center[0]), float(layout.bin_center[1])),
@@ -81,16 +81,8 @@ def geometry_from(layout: Any, home: list[float]) -> CellGeometry:
         tray_places=places,
         tray_roi=(tx0, tx1, ty0, ty1),
         tray_floor_z=float(layout.tray_floor_z),
-        home=np.asarray(home, float),
+        home_joints=np.radians(np.asarray(home_joints_deg, float)),
     )
-
-
-def _packing_places(layout: Any) -> np.ndarray:
-    """The box's places in packing order (the layout's own order where it gives one)."""
-    fn = getattr(layout, "packing_places", None)
-    if callable(fn):
-        return np.asarray(fn(), float)
-    return np.asarray(layout.tray_places(), float)
 
 
 def _check_reach(config: CellConfig, doc: LinedDocument, geometry: CellGeometry) -> None:
@@ -100,7 +92,6 @@ def _check_reach(config: CellConfig, doc: LinedDocument, geometry: CellGeometry)
     from sim.robot import HOME_JOINTS
 
     checks: list[tuple[tuple[str, ...], str, np.ndarray]] = [
-        (("devices", "arm", "home_tcp_m"), "the home pose", geometry.home),
         (
             ("cell", "layout", "machine_center"),
             "the pose over the slot",
@@ -158,11 +149,13 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     if not plan.pivotable:
         raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")
     assert plan.l_a is not None and plan.alpha is not None
-    params = PivotParams(l_a=plan.l_a, alpha=plan.alpha)
-    geometry = geometry_from(layout, config.devices.arm.home_tcp_m)
+    # The hole grasp holds the part 20 mm below its rim, so that, standing in the 40 mm slot
+    # pocket, the part is let go on the floor with the outer finger still above the machine.
+    from skills.slot import SlotParams
+
+    params = PivotParams(l_a=plan.l_a, alpha=plan.alpha, wall_depth=SlotParams().grip_depth)
+    geometry = geometry_from(layout, config.devices.arm.home_joints_deg, part.outer)
     _check_reach(config, doc, geometry)
-    if config.workflow.cycles > len(geometry.tray_places) and config.cell.backend == "sim":
-        pass  # a full box stops the cell with a reason; allowed, the run reports it
     state = CellState(name=config.cell.name)
     s = config.safety
     ctx = CellContext(

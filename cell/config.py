@@ -49,7 +49,7 @@ class SimSection(_Section):
     seed: int = Field(0, ge=0, description="seed of the bin scene and the perturbations")
     parts_in_bin: int = Field(10, ge=0, le=12, description="parts spawned lying in the bin")
     yaw_spread_deg: float = Field(
-        10.0, ge=0.0, le=45.0, description="spawned parts' yaw spread about the bin's x axis"
+        3.0, ge=0.0, le=45.0, description="spawned parts' yaw spread about the radial direction"
     )
     mu_ground: float = Field(0.4, gt=0.0, le=2.0, description="part-floor friction")
     realtime: bool = Field(False, description="pace the twin to wall time (for watching)")
@@ -58,12 +58,21 @@ class SimSection(_Section):
 class ArmDevice(_Section):
     host: str = Field("192.168.1.10", min_length=1, description="UR controller address")
     rtde_frequency_hz: float = Field(125.0, ge=10.0, le=500.0)
-    home_tcp_m: list[float] = Field(
-        default_factory=lambda: [0.35, 0.0, 0.40],
-        min_length=3,
-        max_length=3,
-        description="home TCP position (m, base frame), tool pointing down",
+    home_joints_deg: list[float] = Field(
+        default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
+        min_length=6,
+        max_length=6,
+        description="home joint angles (deg, base to wrist 3; the TCP 0.5 m in front, 0.3 m up, "
+        "tool down); reached by a joint move, which also unwinds the wrist",
     )
+
+    @field_validator("home_joints_deg")
+    @classmethod
+    def _within_limits(cls, value: list[float]) -> list[float]:
+        for i, q in enumerate(value):
+            if not (math.isfinite(q) and -360.0 <= q <= 360.0):
+                raise ValueError(f"joint {i + 1}: {q} deg is outside the UR5's +-360 deg")
+        return value
 
 
 class GripperDevice(_Section):

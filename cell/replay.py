@@ -29,7 +29,8 @@ def timeline(lines: list[dict[str, Any]], every: bool = False) -> Iterator[str]:
                 t0 = started.pop(name, None)
                 took = f" after {t - t0:.2f} s" if t0 is not None else ""
                 if every or is_leafish:
-                    why = f": {feedback}" if status == "FAILURE" and feedback else ""
+                    own = line.get("feedback_of", {}).get(name, feedback)
+                    why = f": {own}" if status == "FAILURE" and own else ""
                     yield f"{t:9.3f} s  {status.lower():7s} {name}{took}{why}"
             elif every and status == "INVALID" and name in started:
                 started.pop(name)

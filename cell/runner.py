@@ -13,7 +13,7 @@ import os
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -82,9 +82,18 @@ class CellState:
 
     # -- persistence ------------------------------------------------------------------------
     def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        d.pop("on_event", None)
-        return d
+        # Not dataclasses.asdict: it deep-copies every field, ``on_event`` included -- and a
+        # deep copy of the twin's PyBullet client disconnects the real one when it is freed.
+        return {
+            "name": self.name,
+            "counts": dict(self.counts),
+            "filled": list(self.filled),
+            "aborts": _jsonable(self.aborts),
+            "events": _jsonable(self.events),
+            "stop_reason": self.stop_reason,
+            "tick": self.tick,
+            "time": round(self.time, 4),
+        }
 
     def save(self, path: str | Path) -> None:
         p = Path(path)
@@ -129,12 +138,14 @@ class TickLog:
     def record(
         self, tick: int, t: float, root: Behaviour, wrench: Any, extra: dict | None = None
     ) -> None:
-        changed = {}
+        changed, why = {}, {}
         for node in root.iterate():
             s = node.status.value
             if self._status.get(node.name) != s:
                 self._status[node.name] = s
                 changed[node.name] = s
+                if s in ("FAILURE", "SUCCESS") and node.feedback_message:
+                    why[node.name] = node.feedback_message
         bb_changed = {}
         storage = py_trees.blackboard.Blackboard.storage
         for key, value in storage.items():
@@ -154,6 +165,8 @@ class TickLog:
             "tip": tip.name if tip is not None else None,
             "feedback": tip.feedback_message if tip is not None else "",
         }
+        if why:
+            line["feedback_of"] = why
         if bb_changed:
             line["blackboard"] = bb_changed
         if wrench is not None:

@@ -51,6 +51,14 @@ class Arm(Protocol):
         """Start a straight-line Cartesian move to ``pose`` (m/s, m/s^2)."""
         ...
 
+    def move_joints(self, q: Sequence[float], speed: float, acceleration: float) -> None:
+        """Start a joint-space move to ``q`` (rad; UR ``moveJ``), ``speed`` rad/s and
+        ``acceleration`` rad/s^2 for the joint that moves most.
+
+        For going home: unlike a Cartesian move it also unwinds the wrist, and it needs no IK.
+        """
+        ...
+
     def servo(self, target: Pose) -> None:
         """Set the TCP target for the next control step (streaming; the caller interpolates)."""
         ...

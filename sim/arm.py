@@ -307,6 +307,53 @@ class SimArm:
         self._mode = "path"
         self._start_motion()
 
+    def move_joints(self, q: Sequence[float], speed: float, acceleration: float) -> None:
+        """Start a joint-space move to ``q`` (rad): every joint on one trapezoidal profile
+        (``speed`` rad/s, ``acceleration`` rad/s^2 for the joint with the longest way)."""
+        if speed <= 0 or acceleration <= 0:
+            raise ValueError(f"speed and acceleration must be > 0, got {speed}, {acceleration}")
+        goal = np.asarray(q, float).reshape(6)
+        if np.any(np.abs(goal) > ARM_LIMIT):
+            self._fault("joint target outside the joint limits", self._q_to)
+            return
+        self._leave_force_mode()
+        start = self._q_to.copy()
+        span = float(np.max(np.abs(goal - start)))
+        # Trapezoid (or triangle) over the longest joint's way.
+        t_acc = speed / acceleration
+        if span < speed * t_acc:
+            t_acc = float(np.sqrt(span / acceleration))
+            duration = 2 * t_acc
+            speed = acceleration * t_acc
+        else:
+            duration = span / speed + t_acc
+        self._joint_move = (start, goal, span, float(speed), float(acceleration), duration)
+        self._t = 0.0
+        self._path = None
+        self._last_target = None
+        self._mode = "joints"
+        self._start_motion()
+
+    def _follow_joints(self) -> None:
+        start, goal, span, v, a, duration = self._joint_move
+        self._t += self._dt
+        t = min(self._t, duration)
+        t_acc = v / a
+        if t < t_acc:
+            d = 0.5 * a * t * t
+        elif t < duration - t_acc:
+            d = 0.5 * a * t_acc * t_acc + v * (t - t_acc)
+        else:
+            d = span - 0.5 * a * (duration - t) ** 2
+        u = 1.0 if span <= 0 else min(max(d / span, 0.0), 1.0)
+        if self._t <= duration + self._dt:
+            self._advance_to(start + u * (goal - start))
+            return
+        self._q_from = self._q_to.copy()
+        if np.max(np.abs(self.joint_positions() - goal)) < 1e-3 or self._t > duration + SETTLE_TIME:
+            self._mode = "hold"
+            self._state = MotionState.DONE
+
     def servo(self, target: Pose) -> None:
         """Set the TCP target (base frame) for the next control step.
 
@@ -429,6 +476,8 @@ class SimArm:
             self._follow_path()
         elif self._mode == "servo":
             self._follow_servo()
+        elif self._mode == "joints":
+            self._follow_joints()
         elif self._mode == "force":
             self._update_virtual()
         else:

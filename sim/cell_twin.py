@@ -32,8 +32,8 @@ from skills.motion import Devices
 class TwinOptions:
     seed: int = 0
     parts_in_bin: int = 10
-    yaw_spread: float = math.radians(10.0)  #: rad, uniform +- about the bin's x axis
-    position_jitter: float = 0.005  #: m, uniform +- on each spawn spot
+    yaw_spread: float = math.radians(3.0)  #: rad, uniform +- about the radial direction
+    position_jitter: float = 0.003  #: m, uniform +- on each spawn spot
     mu_ground: float = 0.4
     frictions: Frictions = field(default_factory=Frictions)
     machining_time: float = 5.0  #: s of simulated time
@@ -41,26 +41,47 @@ class TwinOptions:
 
 
 def spawn_spots(
-    layout: CellLayout, part: Part, count: int, rng: np.random.Generator, jitter: float
-) -> list[tuple[float, float]]:
-    """``count`` centres for lying parts in the bin, on a grid that keeps one finger's width
-    and more between neighbours (a bin of parts the pivot can reach one by one)."""
+    layout: CellLayout,
+    part: Part,
+    count: int,
+    rng: np.random.Generator,
+    jitter: float,
+    yaw_spread: float,
+) -> list[tuple[float, float, float]]:
+    """``count`` poses ``(x, y, yaw)`` for lying parts in the bin, open ends pointing away from
+    the robot along the radial direction, in two rows the pivot reaches.
+
+    The rows are where the pivot works in this cell (measured with ``cell pivot``): an open end
+    nearer than about 0.44 m from the base makes the swing back over G run the wrist into the
+    bin's near wall or out of reach; one past ``x_max - 0.11`` puts the tilted gripper over the
+    far wall. Neighbours keep a finger's width and more between them.
+    """
     x0, x1, y0, y1 = layout.bin_interior()
-    pitch_y = part.outer + 0.040
-    pitch_x = part.length + 0.050
-    # Open ends (far ends) must leave the gripper room before the far wall.
-    xs = np.arange(x0 + 0.5 * part.length + 0.03, x1 - 0.5 * part.length - 0.10, pitch_x)
-    ny = int((y1 - y0 - 0.02) // pitch_y)
+    far = x1 - 0.11
+    rows = [far - 0.13, far]
+    pitch_y = part.outer + 0.045
+    ny = int((y1 - y0 - 2 * 0.03) // pitch_y) + 1
     ys = (np.arange(ny) - 0.5 * (ny - 1)) * pitch_y + 0.5 * (y0 + y1)
-    spots = [(float(x), float(y)) for x in xs for y in ys]
+    spots = []
+    for xo in rows:
+        for yo in ys:
+            yaw = math.atan2(yo, xo)
+            cx = xo - 0.5 * part.length * math.cos(yaw)
+            cy = yo - 0.5 * part.length * math.sin(yaw)
+            if x0 + 0.02 <= cx - 0.5 * part.length and abs(yo) + 0.5 * part.outer < y1 - 0.005:
+                spots.append((cx, cy, yaw))
     if count > len(spots):
         raise ValueError(
-            f"sim.parts_in_bin: {count} {part.name}s do not fit in the bin "
-            f"({len(spots)} places of {pitch_x * 1e3:.0f} x {pitch_y * 1e3:.0f} mm)"
+            f"sim.parts_in_bin: {count} {part.name}s do not fit where the pivot reaches in this "
+            f"bin ({len(spots)} places; a wider bin_inner_size holds more)"
         )
     chosen = rng.choice(len(spots), size=count, replace=False)
     return [
-        (spots[i][0] + rng.uniform(-jitter, jitter), spots[i][1] + rng.uniform(-jitter, jitter))
+        (
+            spots[i][0] + rng.uniform(-jitter, jitter),
+            spots[i][1] + rng.uniform(-jitter, jitter),
+            spots[i][2] + rng.uniform(-yaw_spread, yaw_spread),
+        )
         for i in sorted(chosen)
     ]
 
@@ -79,10 +100,14 @@ class SimCellBackend:
             self.robot = robot = SimRobot(world)
             robot.gripper.set_finger_friction(options.frictions.mu_s, options.frictions.mu_h)
             self.bodies: list[PartBody] = []
-            for x, y in spawn_spots(
-                layout, part, options.parts_in_bin, rng, options.position_jitter
+            for x, y, yaw in spawn_spots(
+                layout,
+                part,
+                options.parts_in_bin,
+                rng,
+                options.position_jitter,
+                options.yaw_spread,
             ):
-                yaw = rng.uniform(-options.yaw_spread, options.yaw_spread)
                 self.bodies.append(
                     spawn_part(world, part, lying_pose(part, x, y, yaw), lateral_friction=1.0)
                 )
@@ -139,8 +164,16 @@ class SimCellBackend:
         if kind == "machined":
             from sim.judge import judge_in_slot
 
-            body = self._nearest(np.asarray(self.layout.slot_center, float))
-            return dict(judge_in_slot(self.world, body, self.layout, self.robot.body_id))
+            slot = np.asarray(self.layout.slot_center, float)
+            body = self._nearest(slot)
+            sv = judge_in_slot(self.world, body, slot, self.layout.slot_width, self.robot.body_id)
+            return {
+                "ok": sv.success,
+                "failure": sv.failure,
+                "tilt_deg": round(sv.tilt_deg, 2),
+                "offset_mm": round(1e3 * sv.offset_m, 2),
+                "bottom_mm": round(1e3 * sv.bottom_m, 2),
+            }
         if kind == "packed":
             from sim.judge import judge_packed
 
@@ -148,5 +181,26 @@ class SimCellBackend:
             if body.body_id not in self.packed_bodies:
                 self.packed_bodies.append(body.body_id)
             packed = [b for b in self.bodies if b.body_id in self.packed_bodies]
-            return dict(judge_packed(self.world, packed, self.layout, self.robot.body_id))
+            pv = judge_packed(
+                self.world,
+                packed,
+                self.layout.tray_interior(),
+                self.layout.tray_floor_z,
+                self.robot.body_id,
+            )
+            gaps = sorted(
+                {
+                    (min(a.index, j), max(a.index, j)): g
+                    for a in pv.parts
+                    for j, g in a.neighbour_gaps.items()
+                }.items()
+            )
+            return {
+                "ok": pv.success,
+                "failure": pv.failure,
+                "parts": len(packed),
+                "gaps_mm": [round(1e3 * g, 2) for _, g in gaps],
+                "max_neighbour_gap_mm": round(1e3 * pv.max_neighbour_gap_m, 2),
+                "max_home_gap_mm": round(1e3 * pv.max_home_gap_m, 2),
+            }
         return None

@@ -26,9 +26,9 @@ from py_trees import common
 from py_trees.behaviour import Behaviour
 
 from drivers.pose import Pose
-from skills.motion import Sequence
+from skills.motion import Guard, Sequence
 from skills.perception.bin_parts import Detection
-from skills.perception.look import DOWN, Look
+from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PivotFrame, Tilt
 from skills.status import Status as SkillStatus
 from skills.status import StepResult
@@ -286,7 +286,13 @@ class PutBack(SkillBehaviour):
         if self.bb.exists("/part/target"):
             key = location_key(self.bb.get("/part/target")["detection"].center)
             ctx.failures[key] = ctx.failures.get(key, 0) + 1
-        guard = ctx.default_guard
+        # After an abort the fingers may still press hard on the part: opening must be allowed
+        # under that load, or no recovery could ever start.
+        guard = Guard(
+            max_force=float(self.params.get("max_force_n", 250.0)),
+            max_torque=50.0,
+            timeout=ctx.default_guard.timeout,
+        )
         rise = float(self.params.get("rise_m", 0.10))
 
         def up() -> None:
@@ -311,7 +317,9 @@ class PutBack(SkillBehaviour):
 
 
 def _go_home(ctx: CellContext) -> None:
-    ctx.devices.arm.move_to(Pose(np.asarray(ctx.geometry.home, float), DOWN), 0.25, 1.0)
+    """A joint move to the home joints: it also unwinds the wrist that Cartesian moves wind up
+    (a straight TCP line that keeps the tool's yaw turns the last joint towards its limit)."""
+    ctx.devices.arm.move_joints(ctx.geometry.home_joints, 1.0, 2.0)
 
 
 class GoHome(SkillBehaviour):
@@ -377,7 +385,6 @@ class PickFromSlotBehaviour(SkillBehaviour):
         return PickFromSlot(
             np.asarray(g.slot_center, float),
             self.ctx.part,
-            self.ctx.params,
             self.ctx.devices,
             **_skill_kwargs(self.params),
         )

@@ -33,7 +33,7 @@ class CellGeometry:
     tray_places: NDArray[np.float64]  #: (n, 3) packing places, in packing order
     tray_roi: tuple[float, float, float, float]
     tray_floor_z: float
-    home: NDArray[np.float64]  #: home TCP position (tool pointing down)
+    home_joints: NDArray[np.float64]  #: home joint angles (rad)
 
 
 class Events(Protocol):

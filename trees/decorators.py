@@ -127,6 +127,8 @@ class Retry(Decorator):
         self.ctx, self.attempts = ctx, attempts
         self.failures = 0
         self.last_reason = ""
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
 
     def initialise(self) -> None:
         self.failures = 0
@@ -136,7 +138,8 @@ class Retry(Decorator):
         if status == Status.FAILURE:
             self.failures += 1
             self.last_reason = _deepest_feedback(self.decorated)
-            if self.failures >= self.attempts or self.ctx.events.stopped:
+            bin_empty = self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty")
+            if self.failures >= self.attempts or self.ctx.events.stopped or bin_empty:
                 self.feedback_message = (
                     f"gave up after {self.failures} of {self.attempts} attempts: {self.last_reason}"
                 )

@@ -184,7 +184,10 @@ class TreeBuilder:
             return self._decorator(kind, name, child, params)
         assert nt.leaf is not None
         motion = {k: params.pop(k) for k in list(params) if k in MOTION}
-        node = nt.leaf(name, self.ctx, **params)
+        leaf_params = dict(params)
+        if "max_force_n" in motion:
+            leaf_params["max_force_n"] = motion["max_force_n"]  # some leaves size inner guards
+        node = nt.leaf(name, self.ctx, **leaf_params)
         if getattr(nt.leaf, "moves", False):
             timeout = motion.get("timeout_s", self.defaults["timeout_s"])
             node = Timeout(f"{name} timeout", node, self.ctx, timeout)

@@ -44,6 +44,12 @@ class FakeArm:
     def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:
         self.move_path([pose], speed, acceleration)
 
+    def move_joints(self, q, speed: float, acceleration: float) -> None:
+        self.commands.append(("joints", tuple(q)))
+        self.queue = [self.pose]
+        self.remaining = self.ticks_per_move
+        self.state = MotionState.MOVING
+
     def servo(self, target: Pose) -> None:
         self.pose = target
 
