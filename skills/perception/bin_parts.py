@@ -378,6 +378,21 @@ def _fit_one(
         crest = (hs > 0.97 * top) & (hs < top + max(0.1 * top, 0.004))
         if np.count_nonzero(crest) < 5:
             crest = hs > 0.9 * top
+        # The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
+        # than wide; its whole top only 1.5 times): its direction is the better axis, unless
+        # the whole top is the longer strip. Not for a thin part: its flat top is all crest.
+        pts = uv[sel][crest]
+        if len(pts) >= 30 and outer >= settings.thin_part:
+            _, crest_axis = _principal(pts)
+            rel = pts - pts.mean(axis=0)
+            along = dot_last(rel, crest_axis)
+            side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
+            aspect = float(np.std(along)) / max(float(np.std(side)), 1e-9)
+            if aspect > 2.5 and aspect > float(np.std(s)) / max(float(np.std(c)), 1e-9):
+                axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
+                across = np.array([-axis[1], axis[0]])
+                s = dot_last(uv - mean, axis)
+                c = dot_last(uv - mean, across)
         c_mid = float(np.median(c[sel][crest]))
         s_lo, s_hi = float(np.percentile(s[sel], 1)), float(np.percentile(s[sel], 99))
         s_mid = 0.5 * (s_lo + s_hi)
