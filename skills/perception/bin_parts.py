@@ -58,6 +58,7 @@ class DetectorSettings:
     max_seed_slope: float = 1.0  #: seeds are flatter than this (rise over run)
     min_seed: int = 30  #: pixels of the smallest seed
     thin_part: float = 0.015  #: m, catalogue parts thinner than this seed from a height band
+    min_width: float = 0.5  #: a segment narrower than this times the part's size is not it
     min_hidden: float = 0.2  #: shortest visible fraction of a thin part running under another
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
@@ -421,6 +422,10 @@ def _fit_one(
                 center_uv = mean + s_mid * axis + c_mid * across
                 err, partial = settings.match_tolerance, True
         if part is None:  # matches nothing in the catalogue: not reported as a part
+            continue
+        if part.outer >= settings.thin_part and width < settings.min_width * part.outer:
+            # As tall and as long as the part but much narrower: a strip of a bigger part's
+            # flank cut off by the watershed (one of a can's gave a cup), not a part.
             continue
         center = (
             center_uv[0] * e1
