@@ -41,8 +41,7 @@ from skills.mechanics.region import (
 DEFAULT_LA = [0.3, 0.5, 0.7, 0.9]
 
 
-class UserError(Exception):
-    """An error in what the user gave us: reported in one line, exit status 2."""
+from cell.errors import UserError  # noqa: E402 -- re-exported for the commands
 
 
 def _deg(x: float | None) -> str:

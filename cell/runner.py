@@ -274,7 +274,7 @@ class TickLoop:
                 if self.on_tick is not None:
                     self.on_tick(tick)
                 if self.root.status != common.Status.RUNNING:
-                    status = self.root.status.value
+                    status = self.root.status.value.lower()
                     break
                 self.backend.step()
                 if self.realtime:

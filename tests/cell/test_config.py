@@ -1,0 +1,235 @@
+"""The YAML task configuration and trees from YAML: accepted, and refused with file/line/key."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cell.assemble import prepare
+from cell.config import config_from_text, default_config_path, load_config, schema
+from trees.registry import REGISTRY
+from trees.yaml_lines import ConfigError
+
+
+def _prepare(text: str, tmp_path: Path):
+    path = tmp_path / "cell.yaml"
+    path.write_text(text, encoding="utf-8")
+    config, doc = load_config(path)
+    return prepare(config, doc)
+
+
+def _error(text: str, tmp_path: Path) -> ConfigError:
+    with pytest.raises(ConfigError) as info:
+        _prepare(text, tmp_path)
+    return info.value
+
+
+def test_the_shipped_example_validates_and_builds_its_tree() -> None:
+    config, doc = load_config(default_config_path())
+    prep = prepare(config, doc)
+    assert config.cell.backend == "sim" and config.workflow.part == "bushing"
+    names = [n.name for n in prep.root.iterate()]
+    for leaf in (
+        "perceive",
+        "plan pick",
+        "grasp",
+        "tilt",
+        "align",
+        "feed slot",
+        "wait machining",
+        "pick from slot",
+        "pack in box",
+        "go home",
+        "put back",
+    ):
+        assert leaf in names
+    # Every motion leaf sits under a timeout under an FT guard.
+    assert "grasp timeout" in names and "grasp ft guard" in names
+    assert len(prep.geometry.tray_places) >= 10
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "key", "words"),
+    [
+        ("workflow:\n  cycles: 0\n", 2, "workflow.cycles", "greater than or equal to 1"),
+        ("workflow:\n  cyclez: 3\n", 2, "workflow.cyclez", "unknown key; valid keys: part"),
+        ("safety:\n  ft_abort_force_n: 5000\n", 2, "safety.ft_abort_force_n", "less than"),
+        (
+            "workflow:\n  machining_time_s: '5 s'\n",
+            2,
+            "workflow.machining_time_s",
+            "expected a number, got the text '5 s'",
+        ),
+        ("cell:\n  backend: robot\n", 2, "cell.backend", "'sim' or 'hw'"),
+        ("sim:\n  parts_in_bin: true\n", 2, "sim.parts_in_bin", "integer"),
+        ("\n\nworkflow:\n  part: teapot\n", 4, "workflow.part", "unknown part 'teapot'"),
+        ("workflow:\n  part: mounting_rail\n", 2, "workflow.part", "not pivotable"),
+        ("cell:\n  layout:\n    bin_center: [0.0, 0.0]\n", 3, "cell.layout.bin_center", "robot"),
+        ("cell:\n  layout:\n    tray_center: [0.1, -0.95]\n", 3, "cell.layout.tray_center", ""),
+        (
+            "devices:\n  arm:\n    home_joints_deg: [0, 0, 0, 0, 0, 999]\n",
+            3,
+            "devices.arm.home_joints_deg",
+            "outside the UR5",
+        ),
+    ],
+)
+def test_bad_values_name_file_line_and_key(tmp_path, text, line, key, words) -> None:
+    err = _error(text, tmp_path)
+    assert err.source.endswith("cell.yaml")
+    assert err.line == line, str(err)
+    assert err.key == key, str(err)
+    assert words in str(err)
+
+
+def test_broken_yaml_and_duplicate_keys_are_refused_with_their_line(tmp_path) -> None:
+    err = _error("workflow:\n  cycles: [1, 2\n", tmp_path)
+    assert "not valid YAML" in str(err) and err.line is not None
+    err = _error("workflow:\n  cycles: 1\n  cycles: 2\n", tmp_path)
+    assert "duplicate key 'cycles'" in str(err) and err.line == 3
+
+
+TREE = """\
+tree:
+  type: sequence
+  children:
+    - {type: perceive, timeout_s: 10}
+    - {type: grasp}
+"""
+
+
+def test_an_inline_tree_builds_with_guards_from_the_safety_defaults(tmp_path) -> None:
+    prep = _prepare(TREE + "safety:\n  ft_abort_force_n: 42\n", tmp_path)
+    guards = [n for n in prep.root.iterate() if n.name.endswith("ft guard")]
+    assert [g.max_force for g in guards] == [42.0, 42.0]
+    timeouts = {n.name: n.seconds for n in prep.root.iterate() if n.name.endswith("timeout")}
+    assert timeouts == {"perceive timeout": 10.0, "grasp timeout": 30.0}
+
+
+@pytest.mark.parametrize(
+    ("tree", "line", "key", "words"),
+    [
+        (
+            "    - {type: grasp2}\n",
+            6,
+            "tree.children[2].type",
+            "unknown behaviour type 'grasp2'; valid types: sequence",
+        ),
+        (
+            "    - {type: grasp, speed: 3}\n",
+            6,
+            "tree.children[2].speed",
+            "unknown parameter of 'grasp'; valid: name, timeout_s",
+        ),
+        (
+            "    - {type: retry, child: {type: grasp}}\n",
+            6,
+            "tree.children[2]",
+            "'retry' needs 'attempts'",
+        ),
+        (
+            "    - {type: retry, attempts: 0, child: {type: grasp}}\n",
+            6,
+            "tree.children[2].attempts",
+            "must lie in [1, 100]",
+        ),
+        (
+            "    - {type: grasp, timeout_s: '10 s'}\n",
+            6,
+            "tree.children[2].timeout_s",
+            "unit is in the key's name",
+        ),
+        (
+            "    - {type: sequence, children: []}\n",
+            6,
+            "tree.children[2].children",
+            "non-empty list",
+        ),
+        ("    - {type: timeout, seconds: 3}\n", 6, "tree.children[2]", "needs a 'child'"),
+        ("    - grasp\n", 6, "tree.children[2]", "a node must be a mapping"),
+    ],
+)
+def test_tree_errors_name_the_line_the_key_and_the_choices(tmp_path, tree, line, key, words):
+    err = _error(TREE + tree, tmp_path)
+    assert (err.line, err.key) == (line, key), str(err)
+    assert words in str(err)
+
+
+def test_a_tree_file_is_read_relative_to_the_config_and_its_errors_name_it(tmp_path) -> None:
+    (tmp_path / "my_tree.yaml").write_text("type: sequence\nchildren:\n  - {type: nope}\n")
+    err = _error("tree:\n  file: my_tree.yaml\n", tmp_path)
+    assert err.source.endswith("my_tree.yaml") and err.line == 3
+    assert "unknown behaviour type 'nope'" in str(err)
+    err = _error("tree:\n  file: missing.yaml\n", tmp_path)
+    assert err.key == "tree.file" and "no such tree file" in str(err)
+
+
+def test_schema_covers_every_section_and_the_registry_is_documented() -> None:
+    s = schema()
+    assert set(s["properties"]) == {"cell", "sim", "devices", "workflow", "safety", "log", "tree"}
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    for name in REGISTRY:
+        assert f"`{name}`" in readme, f"behaviour type {name} is not in the README"
+    for section, model in s["$defs"].items():
+        if section.endswith("Section"):
+            for key in model["properties"]:
+                assert f"`{key}`" in readme, f"config key {key} is not in the README"
+
+
+def test_config_from_text_reports_all_problems_at_once() -> None:
+    with pytest.raises(ConfigError) as info:
+        config_from_text("workflow:\n  cycles: 0\n  machining_time_s: -1\n", "x.yaml")
+    text = str(info.value)
+    assert "x.yaml:2: workflow.cycles" in text and "x.yaml:3: workflow.machining_time_s" in text
+
+
+def _cell(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cell.cli", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=120,
+    )
+
+
+def test_cli_bad_config_exits_2_without_traceback_or_device(tmp_path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("workflow:\n  cycles: -3\nlog:\n  tick_log: ticks.jsonl\n")
+    r = _cell("sim", "--config", str(bad), "--json", str(tmp_path / "o.json"), cwd=tmp_path)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert f"{bad}:2: workflow.cycles" in r.stderr
+    # Nothing was opened: no tick log, no state, no summary.
+    assert not (tmp_path / "ticks.jsonl").exists() and not (tmp_path / "o.json").exists()
+
+
+def test_cli_run_refuses_the_sim_backend_and_the_missing_hw_drivers(tmp_path) -> None:
+    sim = tmp_path / "sim.yaml"
+    sim.write_text("cell:\n  backend: sim\n")
+    r = _cell("run", "--config", str(sim), cwd=tmp_path)
+    assert r.returncode == 2 and "needs `backend: hw`" in r.stderr and "Traceback" not in r.stderr
+    hw = tmp_path / "hw.yaml"
+    hw.write_text("cell:\n  backend: hw\n")
+    r = _cell("run", "--config", str(hw), cwd=tmp_path)
+    assert r.returncode == 2 and "cell.backend" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_tree_prints_the_tree_and_writes_pictures(tmp_path) -> None:
+    r = _cell("tree", "--out", str(tmp_path / "pics"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "pick a part" in r.stdout and "feed slot ft guard" in r.stdout
+    assert (tmp_path / "pics" / "tree.dot").read_text().startswith("digraph")
+    assert (tmp_path / "pics" / "tree.png").stat().st_size > 10_000
+    r = _cell("tree", "--types", cwd=tmp_path)
+    assert "pack_in_box" in r.stdout
+
+
+def test_cli_schema_is_json(tmp_path) -> None:
+    r = _cell("schema", cwd=tmp_path)
+    assert r.returncode == 0
+    assert "workflow" in json.loads(r.stdout)["properties"]

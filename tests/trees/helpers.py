@@ -1,0 +1,87 @@
+"""A cell context on fake devices, for tree tests."""
+
+from __future__ import annotations
+
+import numpy as np
+from py_trees.behaviour import Behaviour
+from py_trees.common import Status
+
+from cell.catalogue import load_catalogue
+from drivers.machine import TimedMachine
+from drivers.pose import Pose
+from skills.mechanics.contact import Frictions
+from skills.mechanics.part import Gripper
+from skills.mechanics.planner import plan_pivot
+from skills.motion import Devices
+from skills.pivot import PivotParams
+from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
+from trees.context import CellContext, CellGeometry
+
+
+class Recorder:
+    """An events sink that remembers what it was told."""
+
+    def __init__(self) -> None:
+        self.events: list[tuple[str, dict]] = []
+        self.aborts: list[str] = []
+        self._stopped: str | None = None
+
+    def abort(self, reason: str) -> None:
+        self.aborts.append(reason)
+
+    def event(self, kind: str, **data: object) -> None:
+        self.events.append((kind, data))
+
+    def stop(self, reason: str) -> None:
+        self._stopped = self._stopped or reason
+
+    @property
+    def stopped(self) -> str | None:
+        return self._stopped
+
+    def kinds(self) -> list[str]:
+        return [k for k, _ in self.events]
+
+
+def make_ctx() -> CellContext:
+    part = load_catalogue(None).get("bushing")
+    plan = plan_pivot(part, Gripper(), Frictions())
+    clock = FakeClock()
+    dev = Devices(FakeArm(Pose(np.array([0.4, 0.0, 0.3]))), FakeGripper(), FakeFT(), clock)
+    geometry = CellGeometry(
+        bin_roi=(0.22, 0.72, -0.16, 0.16),
+        bin_view_xy=(0.47, 0.0),
+        bin_floor_z=0.0,
+        slot_center=np.array([0.1, 0.45, 0.06]),
+        slot_width=0.039,
+        machine_top_z=0.1,
+        tray_places=np.array([[0.15, -0.40, 0.005], [0.116, -0.40, 0.005]]),
+        tray_roi=(0.02, 0.18, -0.51, -0.39),
+        tray_floor_z=0.005,
+        home_joints=np.radians([167.39, -89.5, 82.82, -83.32, -90.0, -102.61]),
+    )
+    assert plan.l_a is not None and plan.alpha is not None
+    return CellContext(
+        devices=dev,
+        machine=TimedMachine(clock, 5.0),
+        geometry=geometry,
+        part=part,
+        plan=plan,
+        params=PivotParams(l_a=plan.l_a, alpha=plan.alpha),
+        events=Recorder(),
+    )
+
+
+def tick_tree(node: Behaviour, ctx: CellContext, ticks: int) -> list[Status]:
+    """Tick ``node`` up to ``ticks`` times, stepping the fakes between ticks like the world."""
+    out = []
+    dev = ctx.devices
+    for _ in range(ticks):
+        node.tick_once()
+        out.append(node.status)
+        if node.status != Status.RUNNING:
+            break
+        dev.arm.tick()
+        dev.gripper.tick()
+        dev.clock.t += dev.clock.dt
+    return out
