@@ -73,8 +73,11 @@ class FTGuard(_CheckFirst):
             w = np.asarray(self.bb.get(WRENCH_KEY), float)
         except KeyError:
             return None
-        force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
-        if force > self.max_force or torque > self.max_torque:
+        # Squared magnitudes against squared limits: this runs every tick on every active guard.
+        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
+        if f2 > self.max_force * self.max_force or t2 > self.max_torque * self.max_torque:
+            force, torque = f2**0.5, t2**0.5
             return (
                 f"{self.decorated.name}: force-torque abort: |F| {force:.1f} N (limit "
                 f"{self.max_force:g}), |T| {torque:.2f} N*m (limit {self.max_torque:g}); "
@@ -149,9 +152,8 @@ class Retry(Decorator):
             )
             self.decorated.stop(Status.INVALID)
             return Status.RUNNING
-        self.feedback_message = (
-            f"attempt {self.failures + 1} of {self.attempts}: {self.decorated.feedback_message}"
-        )
+        if status != Status.RUNNING:
+            self.feedback_message = f"attempt {self.failures + 1} of {self.attempts}: {status.name}"
         return status
 
 
@@ -231,11 +233,10 @@ class FTSampler(Behaviour):
         self.ctx = ctx
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key=WRENCH_KEY, access=common.Access.WRITE)
+        self.feedback_message = f"sampling the wrench into {WRENCH_KEY}"
 
     def update(self) -> Status:
-        w = self.ctx.devices.ft.wrench()
-        self.bb.set(WRENCH_KEY, w)
-        self.feedback_message = f"|F| {float(np.linalg.norm(w[:3])):.1f} N"
+        self.bb.set(WRENCH_KEY, self.ctx.devices.ft.wrench())
         return Status.RUNNING
 
 
