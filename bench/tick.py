@@ -30,6 +30,7 @@ from cell.config import default_config_path, load_config
 from cell.runner import TickLog
 from drivers.machine import TimedMachine
 from skills.status import RUNNING
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the fakes live in tests/
 from tests.trees.helpers import make_ctx  # noqa: E402
 from trees.behaviours import SkillBehaviour
