@@ -361,6 +361,33 @@ def _fit_one(
                 out += _fit_one(
                     sub, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam, False
                 )
+        if len(out) < strips:
+            # Parts touching end to side (a Z of two ducts) are not strips: split the segment
+            # into as many compact clusters instead, and keep that if it explains more of it.
+            centres = _clusters(uv * 1e3, strips)
+            pts_all = uv_all[idx] * 1e3
+            dist = np.stack([np.hypot(*(pts_all - c).T) for c in centres])
+            nearest = np.argmin(dist, axis=0)
+            alt: list[Detection] = []
+            for j in range(strips):
+                sub = idx[nearest == j]
+                if len(sub) >= settings.min_pixels:
+                    alt += _fit_one(
+                        sub,
+                        uv_all,
+                        hgt,
+                        smooth,
+                        hm,
+                        e1,
+                        e2,
+                        catalogue,
+                        robot_xy,
+                        settings,
+                        cam,
+                        False,
+                    )
+            if len(alt) > len(out):
+                out = alt
         return out
     dets = []
     for sel in (np.ones(len(c), bool),):
@@ -474,6 +501,23 @@ def _fit_one(
             )
         )
     return dets
+
+
+def _clusters(xy: NDArray[np.float64], n: int, iterations: int = 10) -> NDArray[np.float64]:
+    """``n`` k-means centres of 2D points, started at quantiles along the major axis
+    (deterministic, unlike a random start)."""
+    mean, major = _principal(xy)
+    along = dot_last(xy - mean, major)
+    centres = np.array(
+        [mean + float(np.percentile(along, 100.0 * (j + 0.5) / n)) * major for j in range(n)]
+    )
+    for _ in range(iterations):
+        dist = np.stack([np.hypot(*(xy - c).T) for c in centres])
+        nearest = np.argmin(dist, axis=0)
+        for j in range(n):
+            if np.any(nearest == j):
+                centres[j] = xy[nearest == j].mean(axis=0)
+    return centres
 
 
 def _window(idx: NDArray[np.int64], hm: HeightMap, margin: float) -> NDArray[np.int64]:
