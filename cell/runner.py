@@ -64,6 +64,8 @@ class CellState:
 
     def event(self, kind: str, **data: object) -> None:
         self.counts[kind] = self.counts.get(kind, 0) + 1
+        if kind == "packed" and isinstance(data.get("place"), int):
+            self.filled.append(int(data["place"]))  # type: ignore[arg-type]
         record: dict[str, Any] = {"kind": kind, "tick": self.tick, "t": round(self.time, 3)}
         record.update({k: _jsonable(v) for k, v in data.items()})
         for fn in self.on_event:

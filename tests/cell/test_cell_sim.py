@@ -86,6 +86,7 @@ def test_one_cycle_feeds_machines_and_packs_a_part_judged_by_the_twin(one_cycle)
 def test_state_is_saved_and_the_log_replays_as_a_timeline(one_cycle) -> None:
     state = json.loads(one_cycle["state"].read_text())
     assert state["counts"]["packed"] == 1 and state["stop_reason"] is None
+    assert state["filled"] == [0]  # the first box place
     lines = one_cycle["log"].read_text().splitlines()
     first = json.loads(lines[0])
     assert {"tick", "t", "changed", "tip", "feedback"} <= set(first)
