@@ -485,8 +485,8 @@ def _fit_one(
         toward = end - center
         yaw = math.atan2(toward[1], toward[0])
         conf = float(math.exp(-((err / 0.1) ** 2))) if part is not None else 0.0
-        if partial:
-            conf = min(conf, 0.2)
+        if partial:  # the centre rests on the catalogue length, not on a seen extent
+            conf = 0.2
         dets.append(
             Detection(
                 center=center,

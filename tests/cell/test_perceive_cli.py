@@ -28,6 +28,8 @@ def test_contract_form(tmp_path: Path, capsys) -> None:
     data = json.loads(out.read_text())
     assert KEYS <= set(data) and data["scenes"] == 2
     assert 0.0 <= data["recall"] <= 1.0 and data["found"] >= 1
+    # CPU time beside wall time, so that waiting for a core (another job) shows
+    assert data["cpu_ms_per_frame_median"] > 0.0 and data["ms_per_frame_p95"] > 0.0
     assert "recall" in capsys.readouterr().out
 
 
