@@ -56,6 +56,8 @@ WIDTHS = (12, 24, 48)
 MIN_INTERIOR_PX = 40
 #: Predicted part pixels farther than this (camera pixels) from every interior blob are dropped.
 MAX_GROW_PX = 12
+#: torch threads for one frame's inference (see LearnedSegmenter.logits).
+INFERENCE_THREADS = 1
 
 
 def _format_tensor() -> torch.Tensor:
@@ -241,11 +243,21 @@ class LearnedSegmenter:
 
     @torch.no_grad()
     def logits(self, hm: HeightMap, rgb: NDArray[np.uint8]) -> tuple[NDArray, tuple]:
-        """Class logits (3, H', W') at camera resolution over the bin crop, and the crop."""
+        """Class logits (3, H', W') at camera resolution over the bin crop, and the crop.
+
+        Runs on one thread (``INFERENCE_THREADS``), the process's setting restored after: with
+        torch's default of one thread per core, on this 2-core machine a frame took 95 ms
+        alone but 570 ms while another job kept a core busy (the two threads wait on each
+        other at every layer); one thread takes 95 ms either way."""
         _check_inputs(hm, rgb)
         crop = input_crop(hm.height)
         x = torch.from_numpy(network_input(hm.height, rgb, crop))[None]
-        y = self.net(x)
+        before = torch.get_num_threads()
+        torch.set_num_threads(INFERENCE_THREADS)
+        try:
+            y = self.net(x)
+        finally:
+            torch.set_num_threads(before)
         r0, r1, c0, c1 = crop
         y = F.interpolate(y, size=(r1 - r0, c1 - c0), mode="bilinear", align_corners=False)
         return y[0].numpy(), crop
