@@ -3,13 +3,16 @@
 1. Heights above the floor (:mod:`skills.perception.heightmap`: RANSAC floor, bin ROI).
 2. Segmentation: foreground above ``min_height``; one seed per part from its gently sloped top
    (the foreground cut at steep slopes: between touching parts, or a low part and a tall one,
-   the surfaces are steep), then a watershed on the heights grows the seeds over the flanks.
-   Two boxes touching side by side leave no valley; a segment as wide as ``n`` catalogue parts
-   of its height is cut into ``n`` strips along its axis.
+   the surfaces are steep), plus the band of its own height for a thin catalogue part; then a
+   watershed on the heights grows the seeds over the flanks, and each segment drops what it
+   took well above its own top. Two boxes touching side by side leave no valley; a segment as
+   wide as ``n`` catalogue parts of its height is cut into ``n`` strips along its axis (or
+   ``n`` compact clusters).
 3. A fit per segment on its 3D points: the axis from the principal direction of the upper half
    (the crest), the length from its extent, the outer size from the height (a lying part is as
    tall as it is wide), the centre on the crest line at half height; the nearest catalogue part
-   by length and outer size names it.
+   by length and outer size names it. A thin part seen only in part, one end free and the
+   other running under a neighbour, is placed from its free end and the catalogue length.
 4. The end for the hole finger: a tube is open at both ends, so the end farther from the robot
    (the gripper then swings back over the pivot, inside the bin). A cup or bottle: the end whose
    inside is seen (floor-level points inside the part's footprint, seen through the opening);
