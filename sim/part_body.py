@@ -216,6 +216,7 @@ def spawn_part(
     rolling_friction: float = 1e-4,
     spinning_friction: float = 1e-3,
     rgba: tuple[float, float, float, float] = (0.70, 0.72, 0.75, 1.0),
+    sleep_threshold: float | None = None,
 ) -> PartBody:
     """Create ``part`` as one dynamic body with its part frame at ``pose`` (world, m).
 
@@ -225,6 +226,10 @@ def spawn_part(
     freely about its floor contact. Bullet combines them as ``r_part * mu_other + r_other *
     mu_part``, so with fixtures at 0 the effective value is this one times the floor's friction.
     ``staves`` (round sections only) must leave room for the bottom within 16 child shapes.
+    ``sleep_threshold``: let the part fall asleep once it moves slower than this (Bullet's
+    velocity threshold, about m/s) -- a part left standing (packed in a box, in a slot) otherwise
+    creeps about 1 mm a minute on the solver's jitter; contact with a moving body wakes it.
+    None (default): never sleeps.
     """
     if part.hole_shape == "circle" and not (3 <= staves <= MAX_CHILD_SHAPES - 1):
         raise ValueError(f"staves must be in 3..{MAX_CHILD_SHAPES - 1}, got {staves}")
@@ -296,5 +301,12 @@ def spawn_part(
         restitution=0.0,
         collisionMargin=margin,
     )
+    if sleep_threshold is not None:
+        p.changeDynamics(
+            body,
+            -1,
+            activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
+            sleepThreshold=float(sleep_threshold),
+        )
     p.changeVisualShape(body, -1, rgbaColor=list(rgba))
     return PartBody(world, part, body, mass, staves)

@@ -3,10 +3,11 @@
 The application of Sec. IV-C of the paper (Fig. 15): a hybrid force-position push. The part is
 set down a few millimetres short of its place towards ``-x, -y``, then pushed ``-z`` until the
 box floor pushes back, ``+x`` until a wall or a packed neighbour does, ``+y`` likewise, let go and
-the gripper withdrawn up. Each push is a guarded straight move that stops the moment the force
-against it rises ``contact_force`` above what it was when the push began (the held part's weight
-and friction on the floor are in that reference, so they are not taken for contact), which is how
-a position-controlled arm with a wrist sensor does force-guided placing.
+the gripper withdrawn up (a last short ``+x`` push closes the millimetre the part was eased back
+before the ``+y`` push, see ``back_off``). Each push is a guarded straight move that stops the
+moment the force against it rises ``contact_force`` above what it was when the push began (the
+held part's weight and friction on the floor are in that reference, so they are not taken for
+contact), which is how a position-controlled arm with a wrist sensor does force-guided placing.
 
 Why the hole grasp helps: the finger in the hole and the one on the wall hold the part from one
 side only, so no finger sits between the part and the things it is pushed against; the gripper
@@ -64,7 +65,9 @@ class PackParams:
     contact_force: float = 4.0  #: N against a push that means contact
     overshoot: float = 0.004  #: m the -z push aims below the floor (contact stops it)
     lift_off: float = 0.0005  #: m back up after the floor contact, so the part slides freely
-    back_off: float = 0.0003  #: m back after the +x contact, so the +y push does not drag
+    #: m back after the +x contact, so the +y push does not rub along the +x neighbour (two
+    #: 12-sided parts sliding past each other catch corner on corner and stop the push short)
+    back_off: float = 0.001
     release: float = 0.006  #: m the jaws open to let go
     #: Fraction of the part's weight the wrench must lose after the release (0: no check).
     weight_check: float = 0.5
@@ -164,6 +167,11 @@ class PackInBox(SequenceSkill):
             "push +y", dev, p.push_guard, lambda: shifted(0.0, reach), p.push_speed,
             p.acceleration, p.contact_force,
         )
+        #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
+        self.push_x_again = ContactMove(
+            "push +x again", dev, p.push_guard, lambda: shifted(p.back_off + 0.002, 0.0),
+            p.push_speed, p.acceleration, p.contact_force,
+        )
 
         def clear_descent() -> str | None:
             if self.descend.contact:
@@ -234,6 +242,7 @@ class PackInBox(SequenceSkill):
                     shifted(-p.back_off, 0.0), p.approach_speed, p.acceleration)),
                 self.push_y.motion,
                 check("+y contact", dev, g, lambda: felt(self.push_y, "wall or part on +y")),
+                self.push_x_again.motion,
                 check("where it went", dev, g, placed),
                 dev.grip("let go", g, release),
                 dev.move("withdraw up", g, withdraw),

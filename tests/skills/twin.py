@@ -31,6 +31,8 @@ BIN_SPOTS = ((0.45, 0.08), (0.45, -0.08))
 #: Fingertips this far below the rim in the hole grasp (m): near the top, so the outer finger
 #: stays above the machine when the part stands on the slot floor (it protrudes 28 mm).
 GRIP_DEPTH = 0.020
+#: Parts fall asleep at rest (see :func:`sim.part_body.spawn_part`): packed ones do not creep.
+SLEEP_THRESHOLD = 0.05
 
 
 def bushing() -> Part:
@@ -93,7 +95,7 @@ def make_twin(
         dx, dy = rng.uniform(-jitter, jitter, 2)
         pose = upright_pose(part, x + dx, y + dy, layout.bin_floor_z)
         turned = Pose(pose.position, rot_z(rng.uniform(0.0, np.pi)) @ pose.rotation)
-        bodies.append(spawn_part(world, part, turned))
+        bodies.append(spawn_part(world, part, turned, sleep_threshold=SLEEP_THRESHOLD))
     camera = SimCamera(
         world, lambda: robot.world_pose(robot.arm.tool_pose()), tool_T_camera=layout.tool_T_camera()
     )
