@@ -131,3 +131,28 @@ def test_tray_places_lie_inside_the_tray() -> None:
     assert np.all((places[:, 0] > x0) & (places[:, 0] < x1))
     assert np.all((places[:, 1] > y0) & (places[:, 1] < y1))
     assert np.allclose(places[:, 2], layout.tray_floor_z)
+
+
+def test_the_default_tray_holds_at_least_ten_bushings_in_reach() -> None:
+    """Packing places (issue 6): >= 10 upright bushings, inside the tray, the hole grasp over
+    each (set down 4 mm short of it, fingers down, the outer finger on the -x, -y diagonal)
+    within the UR5's reach, at the floor and at the travel height."""
+    from sim.arm import REACH_TOLERANCE, solve_ik
+    from sim.robot import HOME_JOINTS
+    from skills.slot import hold_pose
+
+    layout = CellLayout()
+    places = layout.packing_places()
+    assert len(places) >= 10
+    x0, x1, y0, y1 = layout.tray_interior()
+    r = 0.5 * layout.slot_part_outer
+    assert np.all((places[:, 0] - r > x0) & (places[:, 0] + r < x1))
+    assert np.all((places[:, 1] - r > y0) & (places[:, 1] + r < y1))
+    assert places[0, 0] > places[1, 0] and places[0, 1] > places[-1, 1]  # from the +x,+y corner
+    bushing = Part("bushing", 0.068, 0.034, 0.028, mass=0.156)
+    for place in places:
+        for bottom_z in (layout.tray_floor_z - 0.004, 0.13):
+            pose = hold_pose(place[:2] - 0.004, bottom_z, bushing, (-1.0, -1.0, 0.0), 0.0134,
+                             0.020, 0.005)
+            _, residual = solve_ik(pose, HOME_JOINTS, iterations=200)
+            assert residual < REACH_TOLERANCE, place
