@@ -108,8 +108,16 @@ class SimCellBackend:
                 options.position_jitter,
                 options.yaw_spread,
             ):
+                # Resting parts may sleep: without it the solver's jitter creeps a packed part
+                # about 1 mm a minute, which over ten cycles would open the box's gaps.
                 self.bodies.append(
-                    spawn_part(world, part, lying_pose(part, x, y, yaw), lateral_friction=1.0)
+                    spawn_part(
+                        world,
+                        part,
+                        lying_pose(part, x, y, yaw),
+                        lateral_friction=1.0,
+                        sleep_threshold=0.05,
+                    )
                 )
             for _ in range(int(0.3 / world.settings.control_dt)):  # let the parts settle
                 world.step()
