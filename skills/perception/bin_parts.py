@@ -7,12 +7,15 @@
    watershed on the heights grows the seeds over the flanks, and each segment drops what it
    took well above its own top. Two boxes touching side by side leave no valley; a segment as
    wide as ``n`` catalogue parts of its height is cut into ``n`` strips along its axis (or
-   ``n`` compact clusters).
+   ``n`` compact clusters); two thin parts side by side, the second partly under a taller
+   neighbour, are cut at the catalogue width from the free side.
 3. A fit per segment on its 3D points: the axis from the principal direction of the upper half
    (the crest), the length from its extent, the outer size from the height (a lying part is as
    tall as it is wide), the centre on the crest line at half height; the nearest catalogue part
    by length and outer size names it. A thin part seen only in part, one end free and the
-   other running under a neighbour, is placed from its free end and the catalogue length.
+   other running under a neighbour, is placed from its free end and the catalogue length;
+   down to a stub of a tenth of its length when that is flat-topped, as wide as the part, and
+   the rest of its length lies under taller surfaces.
 4. The end for the hole finger: a tube is open at both ends, so the end farther from the robot
    (the gripper then swings back over the pivot, inside the bin). A cup or bottle: the end whose
    inside is seen (floor-level points inside the part's footprint, seen through the opening);
@@ -23,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -63,6 +66,11 @@ class DetectorSettings:
     thin_part: float = 0.015  #: m, catalogue parts thinner than this seed from a height band
     min_width: float = 0.5  #: a segment narrower than this times the part's size is not it
     min_hidden: float = 0.2  #: shortest visible fraction of a thin part running under another
+    thin_pair: float = 1.3  #: a thin segment this many part widths wide holds two side by side
+    min_stub: int = 60  #: pixels of the smallest visible end of a thin part (see min_stub_length)
+    min_stub_length: float = 0.1  #: shortest visible fraction of a thin part's length
+    max_stub_relief: float = 0.002  #: m, p10-p90 height spread of a stub's (flat) top
+    min_cover: float = 0.8  #: a stub's hidden rest: this fraction of it under taller surfaces
     min_pixels: int = 150  #: smaller segments are noise
     match_tolerance: float = 0.25  #: relative size error beyond which no catalogue part matches
     min_inside: int = 40  #: points seen through an opening that make an end the open one
@@ -302,8 +310,11 @@ def fit_segments(
     uv_all = np.column_stack([dot_last(pts, e1), dot_last(pts, e2)])
     out: list[Detection] = []
     for _, idx in sorted(_groups(labels).items()):
-        if len(idx) < settings.min_pixels:
-            continue
+        if len(idx) < settings.min_pixels and (
+            len(idx) < settings.min_stub
+            or float(np.percentile(smooth[idx], 80)) >= settings.thin_part
+        ):
+            continue  # too small for a part, and not the end of a thin one (_hidden_thin_part)
         for det in _fit_one(
             idx, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam
         ):
@@ -339,9 +350,19 @@ def _fit_one(
     s = dot_last(uv - mean, axis)
     c = dot_last(uv - mean, across)
     width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    # Two thin parts side by side, the second partly under a taller neighbour's overhang: a
+    # segment as long as the part but wider by a good part of its width (one alone was at most
+    # 1.2 times as wide in 600 scenes: its top and a little of a side face).
+    thin = _thin_match(outer, catalogue, settings)
+    length = float(np.percentile(s, 99) - np.percentile(s, 1))
+    pair = (
+        thin is not None
+        and width > settings.thin_pair * thin.outer
+        and abs(length - thin.length) < settings.match_tolerance * thin.length
+    )
     # Touching boxes leave no valley: a segment n parts wide is n parts side by side; each
     # strip is then fitted on its own (its own axis and length).
-    if split and width > 1.6 * outer:
+    if split and (width > 1.6 * outer or pair):
         # Side by side and offset along their axes, two parts make a blob whose principal axis
         # is diagonal; the smallest enclosing rectangle stays aligned with them.
         (_, _), (rw, rh), ang = cv2.minAreaRect((uv * 1e3).astype(np.float32))
@@ -355,15 +376,37 @@ def _fit_one(
         width = float(np.percentile(c, 99) - np.percentile(c, 1))
         strips = max(2, int(round(width / max(outer, 1e-6))))
         c_all = dot_last(uv_all[idx] - mean, across)
-        edges = np.linspace(np.percentile(c, 1), np.percentile(c, 99), strips + 1)
+        c_lo, c_hi = float(np.percentile(c, 1)), float(np.percentile(c, 99))
+        edges = np.linspace(c_lo, c_hi, strips + 1)
+        clipped, c_true = -1, 0.0
+        if thin is not None and width < (strips - 0.25) * thin.outer:
+            # Thin parts narrower together than the catalogue says: the one beside the taller
+            # neighbour is partly under it. The strips are the catalogue's width from the free
+            # side; the last, clipped one's centre is placed a whole width further on.
+            win = _window(idx, hm, 0.01)
+            s_in = (float(np.percentile(s, 5)), float(np.percentile(s, 95)))
+            free = [
+                _side_free(uv_all[win], hgt[win], mean, axis, across, s_in, edge, sign, settings)
+                for edge, sign in ((c_lo, -1.0), (c_hi, 1.0))
+            ]
+            steps = thin.outer * np.arange(strips + 1)
+            if free == [True, False]:
+                edges, clipped = c_lo + steps, strips - 1
+                c_true = c_lo + (strips - 0.5) * thin.outer
+            elif free == [False, True]:
+                edges, clipped = (c_hi - steps)[::-1].copy(), 0
+                c_true = c_hi - (strips - 0.5) * thin.outer
         edges[0], edges[-1] = -np.inf, np.inf
         out: list[Detection] = []
         for j in range(strips):
             sub = idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
             if len(sub) >= settings.min_pixels // 2:
-                out += _fit_one(
+                found = _fit_one(
                     sub, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam, False
                 )
+                if j == clipped:
+                    found = [_moved_across(d, mean, across, c_true, e1, e2) for d in found]
+                out += found
         if len(out) < strips:
             # Parts touching end to side (a Z of two ducts) are not strips: split the segment
             # into as many compact clusters instead, and keep that if it explains more of it.
@@ -424,29 +467,43 @@ def _fit_one(
         length = s_hi - s_lo
         part, err = _match(length, outer, catalogue, settings.match_tolerance)
         partial = False
-        if part is None and outer < settings.thin_part:
+        if part is None and thin is not None:
             # A thin part partly hidden under a taller one: see _hidden_thin_part.
-            win = _window(idx, hm, 0.02)
-            found = _hidden_thin_part(
-                uv_all[win],
-                hgt[win],
-                mean,
-                axis,
-                across,
-                s_lo,
-                s_hi,
-                c_mid,
-                outer,
-                width,
-                catalogue,
-                settings,
-            )
-            if found is not None:
-                part, s_mid = found
-                center_uv = mean + s_mid * axis + c_mid * across
-                err, partial = settings.match_tolerance, True
+            stub = length < settings.min_hidden * thin.length
+            # A stub's rest is looked for under its neighbour, and its axis is uncertain (11 by
+            # 8 mm): the enclosing rectangle's long side is tried after the principal axis.
+            win = _window(idx, hm, thin.length if stub else 0.02)
+            axes = [(axis, s_lo, s_hi, c_mid, width)]
+            if stub:
+                axes.append(_rect_axis(uv, mean, axis))
+            relief = float(np.percentile(smooth[idx], 90) - np.percentile(smooth[idx], 10))
+            for ax, lo, hi, mid, wide in axes:
+                ac = np.array([-ax[1], ax[0]])
+                found = _hidden_thin_part(
+                    uv_all[win],
+                    hgt[win],
+                    mean,
+                    ax,
+                    ac,
+                    lo,
+                    hi,
+                    mid,
+                    outer,
+                    wide,
+                    relief,
+                    catalogue,
+                    settings,
+                )
+                if found is not None:
+                    part, s_mid = found
+                    axis, across, c_mid = ax, ac, mid
+                    center_uv = mean + s_mid * axis + c_mid * across
+                    err, partial = settings.match_tolerance, True
+                    break
         if part is None:  # matches nothing in the catalogue: not reported as a part
             continue
+        if len(idx) < settings.min_pixels and not partial:
+            continue  # small segments are only reported as thin parts' stubs
         if part.outer >= settings.thin_part and width < settings.min_width * part.outer:
             # As tall and as long as the part but much narrower: a strip of a bigger part's
             # flank cut off by the watershed (one of a can's gave a cup), not a part.
@@ -506,6 +563,59 @@ def _fit_one(
     return dets
 
 
+def _thin_match(outer: float, catalogue: list[Part], settings: DetectorSettings) -> Part | None:
+    """The thin catalogue part (under ``settings.thin_part``) whose size ``outer`` matches."""
+    for part in catalogue:
+        if part.outer < settings.thin_part and abs(outer - part.outer) <= max(
+            0.002, 0.25 * part.outer
+        ):
+            return part
+    return None
+
+
+def _side_free(
+    uv_all: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    s_in: tuple[float, float],
+    edge: float,
+    sign: float,
+    settings: DetectorSettings,
+) -> bool:
+    """Bare floor just beyond a segment's long side at ``edge`` (across, from ``mean``), on the
+    ``sign`` side, along the segment's extent ``s_in``: False where something stands there or
+    nothing is seen (hidden under a taller neighbour)."""
+    rel = uv_all - mean
+    s = dot_last(rel, axis)
+    c = (dot_last(rel, across) - edge) * sign
+    beside = (s > s_in[0]) & (s < s_in[1]) & (c > 0.0015) & (c < 0.006)
+    h = hgt[beside]
+    h = h[h > -0.5]  # invalid pixels read -1
+    return len(h) >= 20 and float(np.median(h)) < settings.min_height
+
+
+def _moved_across(
+    det: Detection,
+    mean: NDArray[np.float64],
+    across: NDArray[np.float64],
+    c_true: float,
+    e1: NDArray[np.float64],
+    e2: NDArray[np.float64],
+) -> Detection:
+    """``det`` moved across its axis to ``c_true`` (from ``mean``, in the plane basis), with a low
+    confidence: its centre rests on the catalogue width, not on what was seen."""
+    uv = np.array([float(det.center @ e1), float(det.center @ e2)])
+    shift = (c_true - float((uv - mean) @ across)) * (across[0] * e1 + across[1] * e2)
+    return replace(
+        det,
+        center=det.center + shift,
+        open_end=det.open_end + shift,
+        confidence=min(det.confidence, 0.2),
+    )
+
+
 def _clusters(xy: NDArray[np.float64], n: int, iterations: int = 10) -> NDArray[np.float64]:
     """``n`` k-means centres of 2D points, started at quantiles along the major axis
     (deterministic, unlike a random start)."""
@@ -535,6 +645,24 @@ def _window(idx: NDArray[np.int64], hm: HeightMap, margin: float) -> NDArray[np.
     return (np.arange(r0, r1)[:, None] * cols + np.arange(c0, c1)[None, :]).reshape(-1)
 
 
+def _rect_axis(
+    uv: NDArray[np.float64], mean: NDArray[np.float64], axis: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float, float, float, float]:
+    """The long side of the smallest rectangle around ``uv`` as the axis, with the extent
+    (s_lo, s_hi), the middle across and the width along it (as :func:`_fit_one` measures them)."""
+    (_, _), (rw, rh), ang = cv2.minAreaRect((uv * 1e3).astype(np.float32))
+    a = math.radians(ang)
+    ax = np.array([math.cos(a), math.sin(a)])
+    if rh > rw:
+        ax = np.array([-ax[1], ax[0]])
+    ax = ax if float(ax @ axis) >= 0 else -ax
+    s = dot_last(uv - mean, ax)
+    c = dot_last(uv - mean, np.array([-ax[1], ax[0]]))
+    lo, hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
+    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    return ax, lo, hi, float(np.median(c)), width
+
+
 def _hidden_thin_part(
     uv_all: NDArray[np.float64],
     hgt: NDArray[np.float64],
@@ -546,15 +674,21 @@ def _hidden_thin_part(
     c_mid: float,
     outer: float,
     width: float,
+    relief: float,
     catalogue: list[Part],
     settings: DetectorSettings,
 ) -> tuple[Part, float] | None:
     """A segment too short for any part, with the cross-section of a thin catalogue part (as
     tall and as wide as it), one end on the bare floor and the other running on under something
-    (heights above the floor beyond it): that part, mostly hidden under its neighbour (a rail
-    against a can is overhung by it from most views). The free end is a true end, so the
-    centre is half the catalogue length from it. Returns (part, centre along ``axis`` from
-    ``mean``) or None."""
+    (heights above the floor beyond it, or nothing seen there: the floor hidden by a taller
+    neighbour): that part, mostly hidden under its neighbour (a rail against a can is overhung
+    by it from most views). The free end is a true end, so the centre is half the catalogue
+    length from it. Returns (part, centre along ``axis`` from ``mean``) or None.
+
+    A stub shorter than ``min_hidden`` of the part is no longer than a patch of a cup's inside
+    or a can's end face at the same height, so it must also show the part's whole width and a
+    flat top (``relief``: the spread of its filtered heights), and the rest of the part's length
+    must lie under taller surfaces."""
     length = s_hi - s_lo
     for part in catalogue:
         if part.outer >= settings.thin_part:
@@ -562,26 +696,38 @@ def _hidden_thin_part(
         slack = max(0.002, 0.25 * part.outer)
         if abs(outer - part.outer) > slack or width > part.outer + 2 * slack:
             continue
-        if not settings.min_hidden * part.length <= length < 0.9 * part.length:
+        if not settings.min_stub_length * part.length <= length < 0.9 * part.length:
             continue
-        ends = []
+        stub = length < settings.min_hidden * part.length
+        if stub and (relief > settings.max_stub_relief or width < 0.85 * part.outer):
+            continue
+        ends, rest = [], []
+        rel = uv_all - (mean + c_mid * across)
+        c = dot_last(rel, across)
+        on_line = np.abs(c) < 0.5 * part.outer
         for sign, s_end in ((1.0, s_hi), (-1.0, s_lo)):
             # Heights just beyond this end, on the part's line.
-            rel = uv_all - (mean + c_mid * across)
             s = dot_last(rel, axis) * sign - sign * s_end
-            c = dot_last(rel, across)
-            beyond = (s > 0.002) & (s < 0.010) & (np.abs(c) < 0.5 * part.outer)
+            beyond = (s > 0.002) & (s < 0.010) & on_line
             h = hgt[beyond]
-            h = h[h > -0.5]  # invalid pixels read -1
-            if len(h) < 10:
+            seen = h > -0.5  # invalid pixels read -1
+            if stub and np.count_nonzero(seen) < 10:
+                # Hardly any floor seen just beyond a stub's end: hidden under a taller part
+                # (beside a taller part the floor is in its shadow for several millimetres).
+                ends.append("hidden")
+            elif np.count_nonzero(seen) < 10:
                 ends.append("unknown")
-            elif float(np.median(h)) < settings.min_height:
+            elif float(np.median(h[seen])) < settings.min_height:
                 ends.append("free")
             else:  # a taller part over it, or a sliver of it seen past that part's flank
                 ends.append("hidden")
-        if ends == ["free", "hidden"]:  # the +axis end (s_hi) is the free one
-            return part, s_hi - 0.5 * part.length
-        if ends == ["hidden", "free"]:
+            # What is seen over the rest of the part's length, were this end the hidden one.
+            h = hgt[(s > 0.002) & (s < part.length - length) & on_line]
+            h = h[h > -0.5]
+            rest.append(float(np.mean(h > 0.8 * part.outer)) if len(h) else 1.0)
+        if ends == ["free", "hidden"] and (not stub or rest[1] >= settings.min_cover):
+            return part, s_hi - 0.5 * part.length  # the +axis end (s_hi) is the free one
+        if ends == ["hidden", "free"] and (not stub or rest[0] >= settings.min_cover):
             return part, s_lo + 0.5 * part.length
     return None
 

@@ -104,6 +104,36 @@ def test_a_rail_running_under_a_cup_is_placed_from_its_free_end() -> None:
     assert rail.pos_err < 0.004 and rail.detection.confidence <= 0.2
 
 
+def test_two_rails_side_by_side_one_under_a_can_are_both_found() -> None:
+    # One segment 10.7 mm wide (a rail and 3 mm of a second one beside it, the rest of that
+    # one under a can's overhang): it was fitted as one rail between the two.
+    matches, missed, false_pos = _found(10173)
+    assert missed == 0 and false_pos == 0
+    rails = [m for m in matches if m.truth.name == "mounting_rail"]
+    assert len(rails) == 2
+    for m in rails:
+        assert m.detection.part == "mounting_rail"
+        assert m.pos_err < 0.003 and m.yaw_err < math.radians(3.0)
+    assert min(m.detection.confidence for m in rails) <= 0.2  # the clipped one's centre is
+    # placed from the catalogue width
+
+
+@pytest.mark.parametrize(
+    "seed",
+    [
+        10079,  # 11 mm of it out from under a cup's end (110 pixels)
+        10176,  # 11 mm of it out beyond a cup, the rest under the cup's flank (100 pixels)
+    ],
+)
+def test_a_rail_stub_out_from_under_a_cup_is_found(seed: int) -> None:
+    matches, missed, false_pos = _found(seed)
+    assert missed == 0 and false_pos == 0
+    (rail,) = [m for m in matches if m.truth.name == "mounting_rail"]
+    assert rail.detection.part == "mounting_rail"
+    assert rail.pos_err < 0.004 and rail.yaw_err < math.radians(5.0)
+    assert rail.detection.confidence <= 0.2
+
+
 @pytest.mark.parametrize(
     "seed",
     [
