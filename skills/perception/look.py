@@ -60,7 +60,13 @@ class Look:
                 best = min(dets, key=lambda d: math.dist(d.center[:2], near_xy))
                 if self.result is None or best.open_end_seen:
                     self.result = best
-            self.detections = dets
+            # The second, closer view sees less of the bin: it refines the parts it sees again
+            # and adds any new ones, but never forgets what the wide view found.
+            merged = list(dets)
+            for old in self.detections:
+                if all(math.dist(old.center[:2], d.center[:2]) > 0.02 for d in dets):
+                    merged.append(old)
+            self.detections = merged
 
         def none_found() -> str | None:
             return None if self.result is not None else "no part found in the bin"
