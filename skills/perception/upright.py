@@ -61,7 +61,15 @@ def locate_upright_part(
     pts = back_project_image(frame.depth, intr, world_T_camera).reshape(-1, 3)
     pts = pts[np.isfinite(pts[:, 0])].astype(np.float64)
     rim_z = floor_z + part.length
+    higher = pts[pts[:, 2] > rim_z + 1.5 * band, :2]
     pts = pts[np.abs(pts[:, 2] - rim_z) < band]
+    if len(higher) and len(pts):
+        # Nothing stands higher than the rim of a free-standing part: band points beside
+        # something taller are the face of a wall (the bin's, or a fixture's), not a rim.
+        from scipy.spatial import cKDTree
+
+        near_tall = cKDTree(higher).query(pts[:, :2], distance_upper_bound=0.006)[0]
+        pts = pts[~np.isfinite(near_tall)]
     reach = 0.5 * part.outer * (math.sqrt(2.0) if part.hole_shape == "rectangle" else 1.0)
     center = np.asarray(expected_xy, float)[:2]
     radius = reach + search

@@ -55,3 +55,25 @@ def test_a_lying_part_is_not_taken_for_a_standing_one() -> None:
             cam.capture(), cam.intrinsics(), tool @ cam.tool_T_camera(), part, [0.47, 0.0]
         )
     assert found is None
+
+
+def test_a_wall_beside_the_part_is_not_taken_for_its_rim() -> None:
+    """A part standing 7 cm from the bin's wall (taller than the part): the wall's inner face
+    crosses the rim's height band inside the search radius and once pulled the fit off."""
+    from sim.cell_layout import CellLayout
+
+    part = load_catalogue().get("bushing")
+    layout = CellLayout(bin_inner_size=(0.50, 0.44))  # walls at y = +-0.22, 80 mm tall
+    with SimWorld(seed=3) as world:
+        build_cell(world, layout)
+        true_xy = np.array([0.405, 0.150])
+        spawn_part(world, part, upright_pose(part, *true_xy))
+        for _ in range(50):
+            world.step()
+        guess = true_xy + [-0.008, -0.003]
+        cam, tool = look(world, guess, part.length + 0.2)
+        found = locate_upright_part(
+            cam.capture(), cam.intrinsics(), tool @ cam.tool_T_camera(), part, guess
+        )
+    assert found is not None
+    assert np.linalg.norm(found.center - true_xy) < 0.0015
