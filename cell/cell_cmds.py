@@ -182,8 +182,11 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         state_file=config.log.state_file,
     )
     max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
+    box_png = None
     try:
         result = loop.run(max_time)
+        if recorder is not None:
+            box_png = _box_picture(backend, prep, args.record)
     finally:
         log.close()
         backend.close()
@@ -193,6 +196,8 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     if recorder is not None and recorder.frames:
         recorder.save_gif(args.record, fps=12)
         print(f"wrote {args.record} ({len(recorder.frames)} frames)")
+    if box_png is not None:
+        print(f"wrote {box_png} (the box at the end)")
     if args.json is not None:
         from cell.cli import _write_json
 
@@ -204,6 +209,23 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         )
         return 128 + int(result.signum or 2)
     return 0 if result.status == "success" else 1
+
+
+def _box_picture(backend: Any, prep: Any, record: Path) -> Path:
+    """A close-up of the box at the end of the run, beside the GIF."""
+    from PIL import Image
+
+    from sim.recorder import Recorder
+
+    x0, x1, y0, y1 = prep.geometry.tray_roi
+    target = (0.5 * (x0 + x1), 0.5 * (y0 + y1), prep.geometry.tray_floor_z)
+    rec = Recorder(
+        backend.world, target, (0.35, 0.35, 0.0), distance=0.25, height=0.35, size=(480, 360)
+    )
+    rec.capture()
+    path = record.with_name(record.stem + "_box.png")
+    Image.fromarray(rec.frames[0]).save(path)
+    return path
 
 
 class _Progress:

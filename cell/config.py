@@ -101,7 +101,12 @@ class WorkflowSection(_Section):
     """The bushing-machining workflow of the paper's Section I."""
 
     part: str = Field("bushing", description="catalogue part the cell handles")
-    cycles: int = Field(10, ge=1, le=100000, description="cycles to run (pick, feed, machine, pack); also `cell sim --cycles`")
+    cycles: int = Field(
+        10,
+        ge=1,
+        le=100000,
+        description="cycles to run (pick, feed, machine, pack); also `cell sim --cycles`",
+    )
     machining_time_s: float = Field(5.0, ge=0.0, le=3600.0)
     max_failures_per_part: int = Field(
         2, ge=1, le=10, description="a part that failed this many picks is skipped"
