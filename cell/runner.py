@@ -178,6 +178,8 @@ class TickLog:
         if self._fh is not None:
             self._fh.write(json.dumps(line) + "\n")
             self.lines += 1
+            if self.lines % 50 == 0:
+                self._fh.flush()  # a crash loses at most the last few lines
 
     def flush(self) -> None:
         if self._fh is not None:

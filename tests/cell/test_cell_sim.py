@@ -25,10 +25,10 @@ log:
 """
 
 
-def _write_config(tmp_path: Path) -> tuple[Path, Path, Path]:
+def _write_config(tmp_path: Path, text: str = CONFIG) -> tuple[Path, Path, Path]:
     log, state = tmp_path / "ticks.jsonl", tmp_path / "state.json"
     cfg = tmp_path / "cell.yaml"
-    cfg.write_text(CONFIG.format(log=log, state=state))
+    cfg.write_text(text.format(log=log, state=state))
     return cfg, log, state
 
 
@@ -119,7 +119,10 @@ def test_replay_of_a_broken_log_is_a_clear_error(tmp_path) -> None:
 
 
 def test_sigterm_stops_the_arm_flushes_the_log_saves_the_state(tmp_path) -> None:
-    cfg, log, state = _write_config(tmp_path)
+    long_run = CONFIG.replace("parts_in_bin: 2", "parts_in_bin: 6").replace(
+        "cycles: 1", "cycles: 6"
+    )
+    cfg, log, state = _write_config(tmp_path, long_run)
     proc = subprocess.Popen(
         [sys.executable, "-m", "cell.cli", "sim", "--config", str(cfg), "--quiet"],
         stdout=subprocess.PIPE,
@@ -131,7 +134,7 @@ def test_sigterm_stops_the_arm_flushes_the_log_saves_the_state(tmp_path) -> None
         if log.exists() and log.stat().st_size > 0:
             break
         time.sleep(0.2)
-    time.sleep(1.0)
+    assert proc.poll() is None, "the run ended before it could be interrupted"
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err[-2000:]
