@@ -244,6 +244,10 @@ class PackInBox(SequenceSkill):
                 check("+y contact", dev, g, lambda: felt(self.push_y, "wall or part on +y")),
                 self.push_x_again.motion,
                 check("where it went", dev, g, placed),
+                # Hold where the part actually is, not where the push aimed: letting go under the
+                # push's preload (up to 50 N seen) wedges the fingers.
+                dev.move("relax the push", g, lambda: arm.move_to(
+                    arm.tool_pose(), p.approach_speed, p.acceleration)),
                 dev.grip("let go", g, release),
                 dev.move("withdraw up", g, withdraw),
                 wait("settle", dev, g, p.settle),
