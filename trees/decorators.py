@@ -150,8 +150,7 @@ class Retry(Decorator):
             self.feedback_message = (
                 f"attempt {self.failures} of {self.attempts} failed ({self.last_reason}); retrying"
             )
-            self.decorated.stop(Status.INVALID)
-            return Status.RUNNING
+            return Status.RUNNING  # the child restarts (initialise()) on its next tick
         if status != Status.RUNNING:
             self.feedback_message = f"attempt {self.failures + 1} of {self.attempts}: {status.name}"
         return status
@@ -220,8 +219,7 @@ class Cycles(Decorator):
             self.ctx.events.stop(why)
             self.feedback_message = f"cell stopped: {why}"
             return Status.FAILURE
-        self.decorated.stop(Status.INVALID)  # next tick starts the next cycle afresh
-        return Status.RUNNING
+        return Status.RUNNING  # the child restarts afresh on its next tick
 
 
 class FTSampler(Behaviour):
