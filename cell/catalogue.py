@@ -14,6 +14,7 @@ from pathlib import Path
 import yaml
 
 from skills.mechanics.part import HOLE_SHAPES, Part
+from trees.yaml_lines import UniqueKeyLoader
 
 REQUIRED = ("length_mm", "outer_mm", "hole_mm", "hole_shape", "mass_kg")
 OPTIONAL = ("rigid", "open_ends", "paper", "description")
@@ -26,21 +27,6 @@ def default_catalogue_path() -> Path:
 
 class CatalogueError(ValueError):
     """A malformed catalogue; the message names the file and the key."""
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """Safe YAML that refuses a repeated key instead of silently keeping the last one."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        seen: set[object] = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r}", key_node.start_mark
-                )
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
 
 
 @dataclass(frozen=True)
@@ -126,7 +112,7 @@ def load_catalogue(path: str | Path | None = None) -> Catalogue:
     except UnicodeDecodeError as exc:
         raise CatalogueError(f"{p}: not UTF-8 text (byte {exc.start})") from None
     try:
-        data = yaml.load(text, Loader=_UniqueKeyLoader)
+        data = yaml.load(text, Loader=UniqueKeyLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
