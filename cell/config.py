@@ -57,7 +57,11 @@ class SimSection(_Section):
 
 class ArmDevice(_Section):
     host: str = Field("192.168.1.10", min_length=1, description="UR controller address")
-    rtde_frequency_hz: float = Field(125.0, ge=10.0, le=500.0)
+    rtde_frequency_hz: float = Field(
+        125.0, ge=10.0, le=500.0, description="RTDE rate: 125 on a CB3, up to 500 on e-Series"
+    )
+    dashboard_port: int = Field(29999, ge=1, le=65535, description="dashboard server port")
+    connect_timeout_s: float = Field(5.0, gt=0.0, le=60.0, description="per connection try")
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
         min_length=6,
@@ -76,16 +80,36 @@ class ArmDevice(_Section):
 
 
 class GripperDevice(_Section):
+    transport: Literal["modbus", "urcap"] = Field(
+        "modbus",
+        description="modbus: Modbus RTU on the gripper's serial line; urcap: the Robotiq URCap "
+        "socket on the UR controller (devices.arm.host)",
+    )
     port: str = Field("/dev/ttyUSB0", min_length=1, description="2F-85 Modbus RTU serial port")
-    slave_id: int = Field(9, ge=1, le=247)
+    baudrate: int = Field(115200, ge=1200, le=1000000)
+    slave_id: int = Field(9, ge=1, le=247, description="Modbus unit id")
+    urcap_port: int = Field(63352, ge=1, le=65535, description="URCap socket port")
+    timeout_s: float = Field(0.5, gt=0.0, le=10.0, description="per request")
 
 
 class FTDevice(_Section):
     port: str = Field("/dev/ttyUSB1", min_length=1, description="FT300 serial port")
+    baudrate: int = Field(19200, ge=1200, le=1000000)
+    slave_id: int = Field(9, ge=1, le=247, description="Modbus unit id (stream start)")
+    stale_after_s: float = Field(
+        0.05,
+        gt=0.0,
+        le=5.0,
+        description="a sample older than this is an error (the FT300 streams at 100 Hz)",
+    )
 
 
 class CameraDevice(_Section):
     serial: str | None = Field(None, description="D435 serial number (None: the only one)")
+    width: int = Field(640, ge=64, le=1920)
+    height: int = Field(480, ge=48, le=1080)
+    fps: int = Field(30, ge=1, le=90)
+    timeout_ms: int = Field(1000, ge=10, le=30000, description="a frame must arrive within")
 
 
 class DevicesSection(_Section):
