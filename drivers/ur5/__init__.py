@@ -1,0 +1,12 @@
+"""The UR5 on its controller: the :class:`drivers.arm.Arm` interface over ``ur_rtde``
+(:mod:`drivers.ur5.arm`, through the thin :mod:`drivers.ur5.rtde_adapter`) and the dashboard
+server client (:mod:`drivers.ur5.dashboard`).
+
+Importing this package does not import ``ur_rtde``; only :meth:`UR5Arm.connect` does.
+"""
+
+from drivers.ur5.arm import UR5Arm, UR5Settings
+from drivers.ur5.dashboard import DashboardClient
+from drivers.ur5.rtde_adapter import RTDEAdapter, URRTDEAdapter
+
+__all__ = ["DashboardClient", "RTDEAdapter", "UR5Arm", "UR5Settings", "URRTDEAdapter"]

@@ -1,0 +1,228 @@
+"""The only module that touches ``ur_rtde``: a thin adapter exposing exactly the calls
+:class:`drivers.ur5.arm.UR5Arm` makes.
+
+Why an adapter: ``ur_rtde``'s control interface uploads a URScript program to the controller and
+talks to it over RTDE input registers, so it needs a UR controller (or URSim) that cannot run on
+a build machine. Everything the driver decides (states, faults, reconnect, stop) is therefore
+written against :class:`RTDEAdapter` and tested with a recording double; this module stays so
+thin that reading it is the review. ``rtde_control``/``rtde_receive`` are imported inside
+:meth:`URRTDEAdapter.connect` so the simulated cell never needs the library.
+
+Poses cross this boundary in the controller's own convention, ``[x, y, z, rx, ry, rz]`` (m and an
+axis-angle rotation vector in rad, base frame); conversion to :class:`drivers.pose.Pose` is the
+driver's job.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol, runtime_checkable
+
+RTDE_PORT = 30004  #: the controller's RTDE port (fixed; ur_rtde does not let it be changed)
+
+
+@runtime_checkable
+class RTDEAdapter(Protocol):
+    """What the driver needs from the controller; every method maps to one ``ur_rtde`` call."""
+
+    host: str
+
+    def connect(self) -> None:
+        """Open the control and receive interfaces (blocking; start-up only)."""
+        ...
+
+    def disconnect(self) -> None: ...
+
+    def is_connected(self) -> bool:
+        """Both RTDE links up (cheap: a flag in ur_rtde)."""
+        ...
+
+    def reconnect(self) -> bool:
+        """Reopen lost links (blocking: TCP connects and the script upload)."""
+        ...
+
+    def reupload_script(self) -> bool:
+        """Restart the control script after a protective stop was unlocked."""
+        ...
+
+    # --- control side (commands) ---------------------------------------------------------
+
+    def move_l(self, pose: Sequence[float], speed: float, acceleration: float) -> bool:
+        """``moveL(pose, speed, acceleration, asynchronous=True)``."""
+        ...
+
+    def move_l_path(self, path: Sequence[Sequence[float]]) -> bool:
+        """``moveL(path, asynchronous=True)``; rows ``[x, y, z, rx, ry, rz, v, a, blend]``."""
+        ...
+
+    def move_j(self, q: Sequence[float], speed: float, acceleration: float) -> bool:
+        """``moveJ(q, speed, acceleration, asynchronous=True)``."""
+        ...
+
+    def async_progress(self) -> int:
+        """``getAsyncOperationProgress()``: >= 0 while an async move runs; < 0 when none does,
+        toggling between -1 and -2 so that the end of a short move is still seen."""
+        ...
+
+    def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
+        """``servoL(pose, 0, 0, time, lookahead, gain)`` (speed and acceleration are unused)."""
+        ...
+
+    def servo_stop(self, deceleration: float) -> bool: ...
+
+    def stop_l(self, deceleration: float) -> None:
+        """``stopL(a, asynchronous=True)``: returns at once, the controller decelerates."""
+        ...
+
+    def stop_j(self, deceleration: float) -> None:
+        """``stopJ(a, asynchronous=True)``."""
+        ...
+
+    def force_mode(
+        self,
+        task_frame: Sequence[float],
+        selection: Sequence[int],
+        wrench: Sequence[float],
+        frame_type: int,
+        limits: Sequence[float],
+    ) -> bool: ...
+
+    def force_mode_stop(self) -> bool: ...
+
+    def is_program_running(self) -> bool:
+        """The control script runs on the controller (it ends on a protective stop)."""
+        ...
+
+    def set_watchdog(self, min_frequency: float) -> bool: ...
+
+    def kick_watchdog(self) -> bool: ...
+
+    # --- receive side (state) ------------------------------------------------------------
+
+    def tcp_pose(self) -> list[float]:
+        """``getActualTCPPose()``: ``[x, y, z, rx, ry, rz]``."""
+        ...
+
+    def joint_positions(self) -> list[float]:
+        """``getActualQ()`` (rad)."""
+        ...
+
+    def safety_status_bits(self) -> int:
+        """``getSafetyStatusBits()``; bit meanings in :data:`drivers.ur5.arm.SAFETY_BITS`."""
+        ...
+
+    def robot_mode(self) -> int:
+        """``getRobotMode()``; names in :data:`drivers.ur5.arm.ROBOT_MODES`."""
+        ...
+
+
+class URRTDEAdapter:
+    """:class:`RTDEAdapter` over ``ur_rtde``'s ``RTDEControlInterface`` and
+    ``RTDEReceiveInterface``.
+
+    ``frequency``: the RTDE rate (Hz), 125 on a CB3 UR5, 500 on an e-Series; -1 lets ur_rtde
+    choose from the controller version.
+    """
+
+    def __init__(self, host: str, frequency: float = 125.0) -> None:
+        self.host = host
+        self.frequency = frequency
+        self._control: Any = None
+        self._receive: Any = None
+
+    def connect(self) -> None:
+        # Imported here, not at the top: only the hardware path needs ur_rtde.
+        import rtde_control
+        import rtde_receive
+
+        self._receive = rtde_receive.RTDEReceiveInterface(self.host, self.frequency)
+        self._control = rtde_control.RTDEControlInterface(self.host, self.frequency)
+
+    def disconnect(self) -> None:
+        for iface in (self._control, self._receive):
+            if iface is not None:
+                iface.disconnect()
+
+    def is_connected(self) -> bool:
+        return bool(
+            self._control is not None
+            and self._receive is not None
+            and self._control.isConnected()
+            and self._receive.isConnected()
+        )
+
+    def reconnect(self) -> bool:
+        if self._control is None or self._receive is None:
+            self.connect()
+            return self.is_connected()
+        ok = True
+        if not self._receive.isConnected():
+            ok = bool(self._receive.reconnect()) and ok
+        if not self._control.isConnected():
+            ok = bool(self._control.reconnect()) and ok
+        return ok
+
+    def reupload_script(self) -> bool:
+        return bool(self._control.reuploadScript())
+
+    def move_l(self, pose: Sequence[float], speed: float, acceleration: float) -> bool:
+        return bool(self._control.moveL(list(pose), speed, acceleration, True))
+
+    def move_l_path(self, path: Sequence[Sequence[float]]) -> bool:
+        return bool(self._control.moveL([list(row) for row in path], True))
+
+    def move_j(self, q: Sequence[float], speed: float, acceleration: float) -> bool:
+        return bool(self._control.moveJ(list(q), speed, acceleration, True))
+
+    def async_progress(self) -> int:
+        return int(self._control.getAsyncOperationProgress())
+
+    def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
+        return bool(self._control.servoL(list(pose), 0.0, 0.0, time, lookahead, gain))
+
+    def servo_stop(self, deceleration: float) -> bool:
+        return bool(self._control.servoStop(deceleration))
+
+    def stop_l(self, deceleration: float) -> None:
+        self._control.stopL(deceleration, True)
+
+    def stop_j(self, deceleration: float) -> None:
+        self._control.stopJ(deceleration, True)
+
+    def force_mode(
+        self,
+        task_frame: Sequence[float],
+        selection: Sequence[int],
+        wrench: Sequence[float],
+        frame_type: int,
+        limits: Sequence[float],
+    ) -> bool:
+        return bool(
+            self._control.forceMode(
+                list(task_frame), list(selection), list(wrench), frame_type, list(limits)
+            )
+        )
+
+    def force_mode_stop(self) -> bool:
+        return bool(self._control.forceModeStop())
+
+    def is_program_running(self) -> bool:
+        return bool(self._control.isProgramRunning())
+
+    def set_watchdog(self, min_frequency: float) -> bool:
+        return bool(self._control.setWatchdog(min_frequency))
+
+    def kick_watchdog(self) -> bool:
+        return bool(self._control.kickWatchdog())
+
+    def tcp_pose(self) -> list[float]:
+        return list(self._receive.getActualTCPPose())
+
+    def joint_positions(self) -> list[float]:
+        return list(self._receive.getActualQ())
+
+    def safety_status_bits(self) -> int:
+        return int(self._receive.getSafetyStatusBits())
+
+    def robot_mode(self) -> int:
+        return int(self._receive.getRobotMode())
