@@ -1,0 +1,1 @@
+"""Protocol peers of the real devices, for the driver tests."""
