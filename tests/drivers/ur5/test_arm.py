@@ -1,0 +1,454 @@
+"""UR5Arm's logic tick by tick against the recording double of the ur_rtde adapter.
+
+These tests check what the driver sends and how it reads the controller's state; they cannot
+check that a UR controller answers as the double is scripted to (that needs URSim or the cell).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from drivers.arm import Arm, MotionState
+from drivers.health import DeviceError
+from drivers.pose import Pose, rot_x, rot_y
+from drivers.ur5.arm import (
+    BLEND_FRACTION,
+    UR5Arm,
+    UR5Settings,
+    describe_safety_bits,
+    pose_to_vector,
+    vector_to_pose,
+)
+from tests.drivers.ur5.recording_adapter import FakeClock, RecordingAdapter
+
+NORMAL = 1
+PROTECTIVE = 1 << 2
+EMERGENCY = 1 << 7
+
+
+def make(settings: UR5Settings | None = None) -> tuple[UR5Arm, RecordingAdapter, FakeClock]:
+    rtde, clock = RecordingAdapter(), FakeClock()
+    arm = UR5Arm(rtde, clock, settings, spawn=lambda f: f())
+    return arm, rtde, clock
+
+
+def goal_at(rtde: RecordingAdapter) -> Pose:
+    return vector_to_pose(rtde.pose)
+
+
+def test_implements_the_arm_protocol() -> None:
+    arm, _, _ = make()
+    assert isinstance(arm, Arm)
+    assert arm.status().state is MotionState.IDLE
+
+
+# --- asynchronous moves --------------------------------------------------------------------
+
+def test_move_to_runs_moving_then_done() -> None:
+    arm, rtde, _ = make()
+    goal = goal_at(rtde)
+    rtde.progress = -1
+    arm.move_to(goal, 0.1, 0.5)
+    (pose, speed, acc), = rtde.args("move_l")
+    assert np.allclose(pose, pose_to_vector(goal)) and (speed, acc) == (0.1, 0.5)
+    assert arm.status().state is MotionState.MOVING
+    for p in (0, 0, 0):  # running: the controller reports progress 0
+        rtde.progress = p
+        assert arm.status().state is MotionState.MOVING
+    rtde.progress = -2  # the toggled end value
+    assert arm.status().state is MotionState.DONE
+    assert arm.status().state is MotionState.DONE  # stays DONE, no more progress reads needed
+    assert rtde.names() == ["move_l"]
+
+
+def test_move_too_short_to_be_seen_running_is_done_by_the_toggle() -> None:
+    arm, rtde, _ = make()
+    rtde.progress = -2
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.progress = -1  # ended between two ticks: a new negative value
+    assert arm.status().state is MotionState.DONE
+
+
+def test_move_not_yet_started_stays_moving() -> None:
+    arm, rtde, _ = make()
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    for _ in range(5):  # same negative value as before the command: not started
+        assert arm.status().state is MotionState.MOVING
+    rtde.progress_script = [0, -2]
+    assert arm.status().state is MotionState.MOVING
+    assert arm.status().state is MotionState.DONE
+
+
+def test_replacing_a_running_move_waits_for_the_previous_end() -> None:
+    arm, rtde, _ = make()
+    rtde.progress = 0  # an earlier async move still runs
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.progress_script = [0, -1, -1, 0, 0]  # previous ends (-1), ours starts
+    for _ in range(5):
+        assert arm.status().state is MotionState.MOVING
+    rtde.progress = -2
+    assert arm.status().state is MotionState.DONE
+
+
+def test_move_that_ends_away_from_its_goal_is_a_fault() -> None:
+    arm, rtde, _ = make()
+    goal = Pose(goal_at(rtde).position + [0.01, 0.0, 0.0], goal_at(rtde).rotation)
+    rtde.progress = -1
+    arm.move_to(goal, 0.1, 0.5)
+    rtde.progress_script = [0, -2]
+    arm.status()
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "10.0 mm" in st.message
+
+
+def test_move_rejected_by_the_controller_is_a_fault() -> None:
+    arm, rtde, _ = make()
+    rtde.accept = False
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "moveL rejected" in st.message
+
+
+def test_bad_speed_raises_before_anything_is_sent() -> None:
+    arm, rtde, _ = make()
+    with pytest.raises(ValueError):
+        arm.move_to(goal_at(rtde), 0.0, 0.5)
+    assert rtde.names() == []
+
+
+def test_move_path_is_one_blended_movel_ending_on_the_last_waypoint() -> None:
+    arm, rtde, _ = make(UR5Settings(path_blend=0.02))
+    start = goal_at(rtde)
+    w1 = Pose(start.position + [0.0, 0.0, 0.10], start.rotation)
+    w2 = Pose(start.position + [0.10, 0.0, 0.10], start.rotation)
+    w3 = Pose(start.position + [0.10, 0.03, 0.10], start.rotation)  # short segment: 3 cm
+    w4 = Pose(start.position + [0.10, 0.23, 0.10], start.rotation @ rot_x(0.3))
+    rtde.progress = -1
+    arm.move_path([w1, w2, w3, w4], 0.2, 1.0)
+    (rows,), = rtde.args("move_l_path")
+    assert len(rows) == 4 and all(len(r) == 9 for r in rows)
+    for row, w in zip(rows, [w1, w2, w3, w4], strict=True):
+        assert np.allclose(row[:6], pose_to_vector(w))
+        assert row[6:8] == [0.2, 1.0]
+    blends = [r[8] for r in rows]
+    assert blends[0] == pytest.approx(0.02)  # neighbours 10 cm and 10 cm: the setting
+    assert blends[1] == pytest.approx(BLEND_FRACTION * 0.03)  # capped by the 3 cm segment
+    assert blends[2] == pytest.approx(BLEND_FRACTION * 0.03)
+    assert blends[3] == 0.0  # ends on the last waypoint
+    rtde.pose = pose_to_vector(w4)
+    rtde.progress_script = [0, -2]
+    assert arm.status().state is MotionState.MOVING
+    assert arm.status().state is MotionState.DONE
+
+
+def test_move_joints_is_an_async_movej_done_at_the_goal() -> None:
+    arm, rtde, _ = make()
+    q = [0.1, -1.5, 1.5, -1.6, -1.57, 0.2]
+    rtde.progress = -1
+    arm.move_joints(q, 1.0, 2.0)
+    assert rtde.args("move_j") == [(q, 1.0, 2.0)]
+    rtde.progress = 0
+    assert arm.status().state is MotionState.MOVING
+    rtde.q = q
+    rtde.progress = -2
+    assert arm.status().state is MotionState.DONE
+
+
+# --- stop ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(
+    ("start", "expected"),
+    [
+        ("move", ("stop_l", (10.0,))),
+        ("joints", ("stop_j", (4.0,))),
+        ("servo", ("servo_stop", (10.0,))),
+        ("force", ("force_mode_stop", ())),
+    ],
+)
+def test_stop_is_idempotent_and_matches_the_mode(start: str, expected: tuple) -> None:
+    arm, rtde, _ = make()
+    goal = goal_at(rtde)
+    {
+        "move": lambda: arm.move_to(goal, 0.1, 0.5),
+        "joints": lambda: arm.move_joints(rtde.q, 1.0, 1.0),
+        "servo": lambda: arm.servo(goal),
+        "force": lambda: arm.force_mode([False] * 6, [0.0] * 6, [0.1] * 6),
+    }[start]()
+    commands = len(rtde.names())
+    arm.stop()
+    assert rtde.calls[-1] == expected
+    assert arm.status().state is MotionState.STOPPED
+    arm.stop()
+    arm.stop()
+    assert len(rtde.names()) == commands + 1  # the later stops sent nothing
+    assert arm.status().state is MotionState.STOPPED
+
+
+def test_stop_when_idle_or_done_sends_nothing_and_keeps_the_state() -> None:
+    arm, rtde, _ = make()
+    arm.stop()
+    assert rtde.names() == [] and arm.status().state is MotionState.IDLE
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.progress = -2
+    assert arm.status().state is MotionState.DONE
+    arm.stop()
+    assert rtde.names() == ["move_l"] and arm.status().state is MotionState.DONE
+
+
+def test_stop_never_raises_on_a_dead_link() -> None:
+    arm, rtde, _ = make()
+    arm.servo(goal_at(rtde))
+    rtde.raise_on["servo_stop"] = RuntimeError("RTDE socket closed")
+    rtde.reconnect_results = [False]
+    arm.stop()
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "RTDE socket closed" in st.message
+
+
+# --- safety --------------------------------------------------------------------------------
+
+def test_protective_stop_is_a_fault_with_the_flag_latched_until_the_next_command() -> None:
+    arm, rtde, _ = make()
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.progress = 0
+    assert arm.status().state is MotionState.MOVING
+    rtde.safety_bits = NORMAL | PROTECTIVE
+    rtde.program_running = False  # the control script ends with the stop
+    st = arm.status()
+    assert st.state is MotionState.FAULT and st.protective_stop
+    assert "protective stop" in st.message
+    # A command while the stop is active is refused without sending anything.
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.names() == ["move_l"]
+    st = arm.status()
+    assert st.state is MotionState.FAULT and st.protective_stop
+    # Unlocked (and the script back): the fault stays latched until the next command.
+    rtde.safety_bits, rtde.program_running, rtde.progress = NORMAL, True, -1
+    st = arm.status()
+    assert st.state is MotionState.FAULT and st.protective_stop
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    st = arm.status()
+    assert st.state is MotionState.MOVING and not st.protective_stop
+
+
+@pytest.mark.parametrize(
+    ("bits", "mode", "running", "words"),
+    [
+        (NORMAL | EMERGENCY, 7, True, "emergency stop"),
+        (NORMAL | 1 << 6, 7, True, "robot emergency stop"),
+        (NORMAL | 1 << 4, 7, True, "safeguard stop"),
+        (NORMAL | 1 << 8, 7, True, "safety violation"),
+        (NORMAL, 3, True, "robot mode POWER_OFF"),
+        (NORMAL, 5, True, "robot mode IDLE"),
+        (NORMAL, 7, False, "control script is not running"),
+    ],
+)
+def test_other_stops_are_faults_without_the_protective_flag(
+    bits: int, mode: int, running: bool, words: str
+) -> None:
+    arm, rtde, _ = make()
+    arm.servo(goal_at(rtde))
+    rtde.safety_bits, rtde.mode, rtde.program_running = bits, mode, running
+    st = arm.status()
+    assert st.state is MotionState.FAULT and not st.protective_stop
+    assert words in st.message
+
+
+# --- lost link and reconnect ---------------------------------------------------------------
+
+def test_lost_link_is_a_fault_with_bounded_reconnects_and_backoff() -> None:
+    arm, rtde, clock = make(UR5Settings(reconnect_attempts=4, reconnect_first_delay=0.5))
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.connected = False
+    st = arm.status()
+    assert st.state is MotionState.FAULT and not st.protective_stop
+    assert "lost connection to the controller at 10.0.0.2:30004" in st.message
+    assert rtde.names().count("reconnect") == 1  # the first attempt at once
+    attempt_times = [clock.t]
+    # 125 Hz ticks for 10 s: attempts only when the back-off has passed, at most 4 in all.
+    for _ in range(1250):
+        clock.t += 0.008
+        before = rtde.names().count("reconnect")
+        st = arm.status()
+        assert st.state is MotionState.FAULT
+        if rtde.names().count("reconnect") > before:
+            attempt_times.append(clock.t)
+    gaps = np.diff(attempt_times)
+    assert len(attempt_times) == 4
+    assert np.allclose(gaps, [0.5, 1.0, 2.0], atol=0.01)
+    assert "gave up after 4 reconnect attempts" in st.message
+    # Reading the pose without a link is an error, not a stale value.
+    with pytest.raises(DeviceError, match="10.0.0.2:30004"):
+        arm.tool_pose()
+    # An operator grants a fresh budget; this attempt succeeds.
+    rtde.reconnect_results = [True]
+    arm.reconnect()
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "reconnected, the motion was dropped" in st.message
+    assert rtde.names().count("reconnect") == 5
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert arm.status().state is MotionState.MOVING
+
+
+def test_reconnect_that_raises_counts_as_a_failed_attempt() -> None:
+    arm, rtde, clock = make(UR5Settings(reconnect_attempts=2))
+    rtde.reconnect_results = [RuntimeError("timed out connecting"), True]
+    rtde.connected = False
+    st = arm.status()
+    assert "timed out connecting" in st.message and "attempt 2/2" in st.message
+    clock.t += 0.5
+    arm.status()
+    assert arm.status().state is MotionState.FAULT  # latched until a new command
+    assert rtde.names().count("reconnect") == 2
+    assert np.allclose(arm.tool_pose().position, rtde.pose[:3])
+
+
+def test_an_exception_from_a_read_is_a_lost_link() -> None:
+    arm, rtde, _ = make()
+    rtde.raise_on["safety_status_bits"] = RuntimeError("RTDE receive: connection reset")
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "connection reset" in st.message
+
+
+def test_commands_during_a_lost_link_are_refused_without_traffic() -> None:
+    arm, rtde, _ = make(UR5Settings(reconnect_attempts=1))
+    rtde.connected = False
+    arm.status()
+    n = len(rtde.calls)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    arm.servo(goal_at(rtde))
+    arm.stop()
+    assert [c for c, _ in rtde.calls[n:]] == []
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "lost connection" in st.message
+
+
+# --- servo and force mode ------------------------------------------------------------------
+
+def test_servo_streams_one_servol_per_tick_at_the_control_rate() -> None:
+    arm, rtde, _ = make(UR5Settings(frequency=125.0, servo_lookahead=0.05, servo_gain=500))
+    start = goal_at(rtde)
+    targets = [Pose(start.position + [0.0005 * i, 0, 0], start.rotation) for i in range(10)]
+    for t in targets:
+        arm.servo(t)
+        assert arm.status().state is MotionState.MOVING
+    sent = rtde.args("servo_l")
+    assert len(sent) == 10
+    for (pose, dt, lookahead, gain), t in zip(sent, targets, strict=True):
+        assert np.allclose(pose, pose_to_vector(t))
+        assert (dt, lookahead, gain) == (pytest.approx(0.008), 0.05, 500)
+    assert arm.last_servo_target is targets[-1]
+    assert "async_progress" not in rtde.names(include_reads=True)  # servo has no progress
+
+
+def test_leaving_servo_for_a_move_stops_servoing_first() -> None:
+    arm, rtde, _ = make()
+    arm.servo(goal_at(rtde))
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.names() == ["servo_l", "servo_stop", "move_l"]
+
+
+def test_force_mode_maps_selection_wrench_and_limits_in_the_base_frame() -> None:
+    settings = UR5Settings(force_deviation=(0.01, 0.02, 0.03, 0.1, 0.2, 0.3))
+    arm, rtde, _ = make(settings)
+    arm.force_mode(
+        [True, False, True, False, False, True],
+        [5.0, 0.0, -10.0, 0.0, 0.0, 0.5],
+        [0.02, 0.5, -0.01, 1.0, 1.0, 0.2],
+    )
+    (frame, sel, wrench, kind, limits), = rtde.args("force_mode")
+    assert frame == [0.0] * 6 and kind == 2  # task frame = base, not transformed
+    assert sel == [1, 0, 1, 0, 0, 1]
+    assert wrench == [5.0, 0.0, -10.0, 0.0, 0.0, 0.5]
+    # Compliant axes: the speed limits (magnitudes); the others: the allowed deviation.
+    assert limits == [0.02, 0.02, 0.01, 0.1, 0.2, 0.2]
+    assert arm.status().state is MotionState.MOVING
+    with pytest.raises(ValueError):
+        arm.force_mode([True] * 5, [0.0] * 6, [0.1] * 6)
+
+
+def test_force_mode_during_a_move_stops_the_move_first() -> None:
+    arm, rtde, _ = make()
+    rtde.progress = -1
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    arm.force_mode([False, False, True, False, False, False], [0, 0, -5, 0, 0, 0], [0.01] * 6)
+    assert rtde.names() == ["move_l", "stop_l", "force_mode"]
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.names()[-2:] == ["force_mode_stop", "move_l"]
+
+
+def test_watchdog_is_armed_and_kicked_each_status_poll_when_configured() -> None:
+    arm, rtde, _ = make(UR5Settings(watchdog_hz=5.0))
+    assert rtde.calls[0] == ("set_watchdog", (5.0,))
+    for _ in range(3):
+        arm.status()
+    assert rtde.names().count("kick_watchdog") == 3
+    arm2, rtde2, _ = make()
+    arm2.status()
+    assert "kick_watchdog" not in rtde2.names() and "set_watchdog" not in rtde2.names()
+
+
+# --- conversions, settings, check ----------------------------------------------------------
+
+def test_rotation_vector_round_trip() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        rv = Rotation.random(random_state=rng).as_rotvec()
+        v = [*rng.uniform(-0.8, 0.8, 3), *rv]
+        pose = vector_to_pose(v)
+        back = pose_to_vector(pose)
+        assert np.allclose(back, v, atol=1e-9)
+        assert vector_to_pose(back).distance(pose)[1] < 1e-9
+
+
+def test_rotation_vector_meaning() -> None:
+    # UR's tool-down pose: rotation vector (0, pi, 0) is a half turn about the base y axis.
+    pose = vector_to_pose([0.4, 0.1, 0.3, 0.0, np.pi, 0.0])
+    assert np.allclose(pose.rotation, rot_y(np.pi))
+    assert np.allclose(pose.rotation[:, 2], [0, 0, -1])  # tool z points down
+    assert np.allclose(pose.position, [0.4, 0.1, 0.3])
+    assert np.allclose(pose_to_vector(Pose([0, 0, 0], rot_x(np.pi / 2)))[3:], [np.pi / 2, 0, 0])
+    with pytest.raises(ValueError):
+        vector_to_pose([0.0] * 5)
+
+
+def test_tool_pose_and_joints_read_the_receive_side() -> None:
+    arm, rtde, _ = make()
+    assert np.allclose(pose_to_vector(arm.tool_pose()), rtde.pose, atol=1e-9)
+    assert np.allclose(arm.joint_positions(), rtde.q) and arm.joint_positions().shape == (6,)
+
+
+def test_settings_reject_values_outside_urs_ranges() -> None:
+    with pytest.raises(ValueError, match="servo_lookahead"):
+        UR5Settings(servo_lookahead=0.5)
+    with pytest.raises(ValueError, match="servo_gain"):
+        UR5Settings(servo_gain=50)
+    with pytest.raises(ValueError, match="frequency"):
+        UR5Settings(frequency=0)
+
+
+def test_check_reports_mode_safety_and_script_without_moving() -> None:
+    arm, rtde, _ = make()
+    res = arm.check()
+    assert res.ok and res.error is None
+    assert res.device == "UR5" and res.address == "10.0.0.2:30004"
+    assert res.details["robot_mode"] == "RUNNING"
+    assert res.details["safety_status"] == "normal mode"
+    assert res.details["control_script"] == "running"
+    assert rtde.names() == []  # no command sent
+    rtde.safety_bits = NORMAL | PROTECTIVE
+    res = arm.check()
+    assert not res.ok and "protective stop" in (res.error or "")
+    assert res.details["safety_status"] == "normal mode, protective stop"
+
+
+def test_describe_safety_bits() -> None:
+    assert describe_safety_bits(0) == "none"
+    assert describe_safety_bits(NORMAL | 1 << 9) == "normal mode, safety fault"

@@ -1,0 +1,68 @@
+"""UR5Arm's start-up check and protective-stop recovery: the dashboard side through the real TCP
+peer, the RTDE side through the recording double."""
+
+from __future__ import annotations
+
+import pytest
+
+from drivers.arm import MotionState
+from drivers.health import DeviceError
+from drivers.ur5.arm import UR5Arm
+from drivers.ur5.dashboard import DashboardClient
+from tests.drivers.peers.dashboard_peer import DashboardPeer
+from tests.drivers.ur5.recording_adapter import FakeClock, RecordingAdapter
+
+
+@pytest.fixture
+def peer():
+    with DashboardPeer() as p:
+        p.robot_mode = "RUNNING"
+        yield p
+
+
+def make(peer: DashboardPeer) -> tuple[UR5Arm, RecordingAdapter]:
+    rtde = RecordingAdapter()
+    dash = DashboardClient(peer.host, peer.port, timeout=0.5, connect_attempts=1)
+    return UR5Arm(rtde, FakeClock(), dashboard=dash, spawn=lambda f: f()), rtde
+
+
+def test_check_reports_version_serial_and_both_views_of_the_state(peer: DashboardPeer) -> None:
+    arm, rtde = make(peer)
+    res = arm.check()
+    assert res.ok, res.error
+    d = res.details
+    assert d["controller_version"] == "URSoftware 3.15.7.106331 (Jun 08 2021)"
+    assert d["serial_number"] == "2018300123"
+    assert d["robot_model"] == "UR5"
+    assert d["dashboard_robot_mode"] == "RUNNING" and d["robot_mode"] == "RUNNING"
+    assert d["dashboard_safety_status"] == "NORMAL" and d["control_script"] == "running"
+    assert rtde.names() == []  # the check never moves the arm
+    assert "power on" not in peer.received and "brake release" not in peer.received
+
+
+def test_check_fails_with_the_dashboard_reason(peer: DashboardPeer) -> None:
+    arm, _ = make(peer)
+    peer.replies["get serial number"] = "could not understand: 'get serial number'"
+    res = arm.check()
+    assert not res.ok and "could not understand" in (res.error or "")
+    assert res.details["serial_number"] == "unavailable"
+
+
+def test_recover_unlocks_the_protective_stop_and_restarts_the_script(peer: DashboardPeer) -> None:
+    arm, rtde = make(peer)
+    peer.safety_status = "PROTECTIVE_STOP"
+    rtde.safety_bits, rtde.program_running = 1 | 1 << 2, False
+    assert arm.status().protective_stop
+    rtde.safety_bits = 1  # what the controller does on the unlock
+    arm.recover()
+    assert peer.received[-2:] == ["close safety popup", "unlock protective stop"]
+    assert rtde.names() == ["reupload_script"]
+    assert arm.status().state is MotionState.IDLE
+
+
+def test_recover_refused_within_five_seconds(peer: DashboardPeer) -> None:
+    arm, rtde = make(peer)
+    peer.unlock_refused = True
+    with pytest.raises(DeviceError, match="until 5s after occurrence"):
+        arm.recover()
+    assert "reupload_script" not in rtde.names()
