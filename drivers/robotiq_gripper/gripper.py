@@ -24,6 +24,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 
 from drivers.health import CheckResult, DeviceError
 from drivers.robotiq_gripper.registers import (
@@ -183,7 +184,7 @@ class Robotiq2F85:
             if self._confirmed < self._queued:
                 return True
             st = self._status
-        return st is not None and st.gto == 1 and st.obj == OBJ_MOVING
+        return st is not None and st.activated and st.gto == 1 and st.obj == OBJ_MOVING
 
     def object_detected(self) -> bool:
         """True when the fingers stalled on an object (gOBJ 1 or 2) in the newest motion."""
@@ -335,12 +336,23 @@ class Robotiq2F85:
             self._wake.clear()
 
     def _send_queued(self) -> None:
-        """Send what the tick queued, in order; a failed command is dropped and reported."""
+        """Send what the tick queued, in order; a failed command is dropped and reported.
+
+        A go-to waits in the queue while an activation runs or before the first status (so it
+        never lands mid-activation, which the gripper would delay with fault 0x05). On a gripper
+        in reset (gACT = 0) it is sent with rACT = 0: the gripper then refuses it with fault
+        0x07 instead of silently starting an activation, which would sweep the fingers through
+        the whole stroke.
+        """
         while True:
             with self._lock:
                 if not self._queue:
                     return
-                item = self._queue.popleft()
+                item = self._queue[0]
+                st = self._status
+                if item != _RESET and (self._activating or st is None):
+                    return
+                self._queue.popleft()
                 seq = self._queued
             try:
                 if item == _RESET:
@@ -349,6 +361,8 @@ class Robotiq2F85:
                         self._reset_sent = True
                 else:
                     assert isinstance(item, ActionRequest)
+                    if st is not None and st.act == 0:
+                        item = replace(item, act=False)
                     self.transport.write_request(item)
                     with self._lock:
                         self._sent_pr, self._sent_seq = item.position, seq

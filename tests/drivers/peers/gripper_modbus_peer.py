@@ -13,7 +13,10 @@ Three pieces, each usable alone:
   is how a peer goes silent or a cable is pulled.
 * :class:`GripperModbusPeer`: pymodbus's ``ModbusSerialServer`` (RTU framing, unit id 9 by
   default) on one end of the null modem, its registers driven by the model. Requests for other
-  unit ids get no answer at all (``ignore_missing_devices``), as on a real RS-485 line.
+  unit ids get no answer at all, as on a real RS-485 line. (pymodbus 3.16's ``SimCore`` raises
+  KeyError for an unknown id instead of honouring ``ignore_missing_devices``, and answers with
+  an exception reply; so a catch-all device takes those requests and the outgoing-packet hook
+  drops every reply not from ``unit_id``.)
 
 The register map lives in ``drivers.robotiq_gripper.registers``; the peer uses only its encode
 and decode helpers, and models the motion on its own (own open/closed limits, own speed law), so
@@ -100,7 +103,7 @@ class GripperModel:
             prev, self._req = self._req, req
             if not req.act:  # reset: clears the activation and the request-caused faults
                 self._act = self._sta = self._obj = 0
-                self._flt = 0
+                self._flt = 0x07 if req.gto else 0  # a go-to without rACT is refused
                 self._activation_end = None
                 return
             if not prev.act:  # rising rACT: activation starts
@@ -204,16 +207,16 @@ class GripperModbusPeer:
     def __init__(self, port: str, model: GripperModel, unit_id: int = 9,
                  baudrate: int = 115200) -> None:
         self.model, self.unit_id = model, unit_id
-        self.function_codes: list[int] = []
-        device = SimDevice(
-            id=unit_id,
-            simdata=[
-                SimData(ACTION_ADDRESS, count=3, values=0, datatype=DataType.REGISTERS),
-                SimData(STATUS_ADDRESS, count=3, values=0, datatype=DataType.REGISTERS),
-            ],
-            action=self._action,
-        )
-        self._device, self._port, self._baudrate = device, port, baudrate
+        self.function_codes: list[int] = []  #: requests served for ``unit_id``, in order
+        self.dropped_replies = 0  #: requests for other unit ids, left unanswered
+
+        def registers() -> list[SimData]:
+            return [SimData(ACTION_ADDRESS, count=3, values=0, datatype=DataType.REGISTERS),
+                    SimData(STATUS_ADDRESS, count=3, values=0, datatype=DataType.REGISTERS)]
+
+        self._devices = [SimDevice(id=unit_id, simdata=registers(), action=self._action),
+                         SimDevice(id=0, simdata=registers())]  # any other id; never answers
+        self._port, self._baudrate = port, baudrate
         self._server: ModbusSerialServer | None = None
         self._loop = asyncio.new_event_loop()
         self._error: BaseException | None = None
@@ -227,8 +230,8 @@ class GripperModbusPeer:
     async def _listen(self) -> None:
         # pymodbus binds its server to the running loop, so it is built inside it.
         self._server = ModbusSerialServer(
-            [self._device], framer=FramerType.RTU, port=self._port, baudrate=self._baudrate,
-            ignore_missing_devices=True,
+            self._devices, framer=FramerType.RTU, port=self._port, baudrate=self._baudrate,
+            ignore_missing_devices=True, trace_packet=self._outgoing,
         )
         await self._server.serve_forever(background=True)
 
@@ -242,6 +245,13 @@ class GripperModbusPeer:
             return
         started.set()
         self._loop.run_forever()
+
+    def _outgoing(self, sending: bool, packet: bytes) -> bytes:
+        """Drop replies for other unit ids: on RS-485 only the addressed device talks."""
+        if sending and packet and packet[0] != self.unit_id:
+            self.dropped_replies += 1
+            return b""
+        return packet
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
                       registers: list[int], set_values: list[int] | list[bool] | None) -> None:
