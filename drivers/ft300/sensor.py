@@ -25,7 +25,8 @@ from drivers.health import CheckResult, DeviceError, backoff_delays
 
 DEVICE = "FT300"
 #: Optional hook called from the reader thread with each valid sample and its arrival time
-#: (``time.monotonic()``); for logging and latency measurements. It must be quick.
+#: (``time.monotonic()``); for logging and latency measurements. It must be quick and must
+#: not raise (an exception ends the reader, and wrench() then raises DeviceError).
 SampleHook = Callable[[NDArray[np.float64], float], None]
 
 
