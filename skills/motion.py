@@ -19,6 +19,7 @@ from drivers.camera import Camera
 from drivers.clock import Clock
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
+from drivers.health import DeviceError
 from skills.status import RUNNING, Status, StepResult
 
 
@@ -61,7 +62,11 @@ class GuardedMotion:
     def tick(self) -> StepResult:
         if self._t0 is None:
             self.start()
-        w = self.ft.wrench()
+        try:
+            w = self.ft.wrench()
+        except DeviceError as exc:  # a dead or stale FT stream: nothing guards this motion
+            self.arm.stop()
+            return StepResult(Status.FAILURE, f"{self.name}: {exc}; arm stopped")
         force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
         self.peak_force = max(self.peak_force, force)
         if force > self.guard.max_force or torque > self.guard.max_torque:

@@ -16,6 +16,7 @@ from py_trees.behaviour import Behaviour
 from py_trees.decorators import Decorator
 
 from drivers.clock import Clock
+from drivers.health import DeviceError
 from trees.context import CellContext
 
 Status = common.Status
@@ -234,7 +235,15 @@ class FTSampler(Behaviour):
         self.feedback_message = f"sampling the wrench into {WRENCH_KEY}"
 
     def update(self) -> Status:
-        self.bb.set(WRENCH_KEY, self.ctx.devices.ft.wrench())
+        try:
+            self.bb.set(WRENCH_KEY, self.ctx.devices.ft.wrench())
+        except DeviceError as exc:
+            # No guard can trust a dead or stale stream: the whole tree stops (the parallel
+            # above fails, halting every running leaf, which stops the arm).
+            self.feedback_message = f"force-torque sensor lost: {exc}"
+            self.ctx.events.abort(self.feedback_message)
+            self.ctx.events.stop(self.feedback_message)
+            return Status.FAILURE
         return Status.RUNNING
 
 

@@ -200,3 +200,28 @@ def test_devices_are_used_only_through_the_interfaces() -> None:
     dev = Devices(FakeArm(Pose()), FakeGripper(), FakeFT(), FakeClock())
     assert isinstance(TimedMachine(dev.clock, 1.0).busy(), bool)
     assert Guard().max_force > 0
+
+
+def test_a_dead_ft_stream_stops_the_tree_and_the_arm(ctx) -> None:
+    from drivers.health import DeviceError
+
+    class DeadFT:
+        def wrench(self):  # type: ignore[no-untyped-def]
+            raise DeviceError("FT300", "/dev/ttyUSB1", "newest sample is 0.20 s old")
+
+    ctx.devices.arm.ticks_per_move = 100
+    leaf = lv.GoHome("home", ctx)
+    sampler = FTSampler("ft", ctx)
+    root = py_trees.composites.Parallel(
+        "root",
+        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[leaf]),
+        children=[sampler, leaf],
+    )
+    root.tick_once()
+    assert root.status == Status.RUNNING
+    stops = ctx.devices.arm.stops
+    object.__setattr__(ctx.devices, "ft", DeadFT())
+    root.tick_once()
+    assert root.status == Status.FAILURE
+    assert leaf.status == Status.INVALID and ctx.devices.arm.stops > stops
+    assert "0.20 s old" in ctx.events.stopped
