@@ -116,12 +116,26 @@ class RTDEAdapter(Protocol):
         ...
 
 
+#: What the receive side subscribes to: only what the driver reads, so the recipe also works on
+#: controllers whose software lacks some of ur_rtde's default outputs (its default list asks for
+#: ``payload_inertia``, for one).
+RECEIVE_VARIABLES = [
+    "timestamp",
+    "actual_q",
+    "actual_TCP_pose",
+    "robot_mode",
+    "safety_mode",
+    "safety_status_bits",
+]
+
+
 class URRTDEAdapter:
     """:class:`RTDEAdapter` over ``ur_rtde``'s ``RTDEControlInterface`` and
     ``RTDEReceiveInterface``.
 
     ``frequency``: the RTDE rate (Hz), 125 on a CB3 UR5, 500 on an e-Series; -1 lets ur_rtde
-    choose from the controller version.
+    choose from the controller version. The ``*_receive``/``*_control`` halves exist so the
+    receive side can be tested alone against an RTDE peer.
     """
 
     def __init__(self, host: str, frequency: float = 125.0) -> None:
@@ -131,11 +145,20 @@ class URRTDEAdapter:
         self._receive: Any = None
 
     def connect(self) -> None:
+        self.connect_receive()
+        self.connect_control()
+
+    def connect_receive(self) -> None:
         # Imported here, not at the top: only the hardware path needs ur_rtde.
-        import rtde_control
         import rtde_receive
 
-        self._receive = rtde_receive.RTDEReceiveInterface(self.host, self.frequency)
+        self._receive = rtde_receive.RTDEReceiveInterface(
+            self.host, self.frequency, RECEIVE_VARIABLES
+        )
+
+    def connect_control(self) -> None:
+        import rtde_control
+
         self._control = rtde_control.RTDEControlInterface(self.host, self.frequency)
 
     def disconnect(self) -> None:
@@ -143,24 +166,29 @@ class URRTDEAdapter:
             if iface is not None:
                 iface.disconnect()
 
+    def receive_connected(self) -> bool:
+        return self._receive is not None and bool(self._receive.isConnected())
+
+    def control_connected(self) -> bool:
+        return self._control is not None and bool(self._control.isConnected())
+
     def is_connected(self) -> bool:
-        return bool(
-            self._control is not None
-            and self._receive is not None
-            and self._control.isConnected()
-            and self._receive.isConnected()
-        )
+        return self.receive_connected() and self.control_connected()
+
+    def reconnect_receive(self) -> bool:
+        if self._receive is None:
+            self.connect_receive()
+            return self.receive_connected()
+        return self.receive_connected() or bool(self._receive.reconnect())
+
+    def reconnect_control(self) -> bool:
+        if self._control is None:
+            self.connect_control()
+            return self.control_connected()
+        return self.control_connected() or bool(self._control.reconnect())
 
     def reconnect(self) -> bool:
-        if self._control is None or self._receive is None:
-            self.connect()
-            return self.is_connected()
-        ok = True
-        if not self._receive.isConnected():
-            ok = bool(self._receive.reconnect()) and ok
-        if not self._control.isConnected():
-            ok = bool(self._control.reconnect()) and ok
-        return ok
+        return self.reconnect_receive() and self.reconnect_control()
 
     def reupload_script(self) -> bool:
         return bool(self._control.reuploadScript())
