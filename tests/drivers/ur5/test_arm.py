@@ -452,3 +452,15 @@ def test_check_reports_mode_safety_and_script_without_moving() -> None:
 def test_describe_safety_bits() -> None:
     assert describe_safety_bits(0) == "none"
     assert describe_safety_bits(NORMAL | 1 << 9) == "normal mode, safety fault"
+
+
+def test_importing_the_driver_does_not_import_ur_rtde() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, drivers.ur5, drivers.ur5.arm, drivers.ur5.rtde_adapter;"
+        "print(any(m.startswith(('rtde_control', 'rtde_receive')) for m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
