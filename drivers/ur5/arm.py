@@ -615,8 +615,9 @@ class UR5Arm:
                     details[key] = read()
                 except DeviceError as e:
                     details[key] = "unavailable"
-                    if key != "robot_model":  # older CB3 software lacks it; not a failure
-                        problems.append(e.cause)
+                    # Older CB3 software lacks these two commands: reported, not a failure.
+                    if key not in ("serial_number", "robot_model"):
+                        problems.append(str(e))  # names the dashboard's address
         problem = None if problems else self._health()
         if problem is not None:
             problems.append(problem[0])

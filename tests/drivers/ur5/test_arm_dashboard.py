@@ -42,10 +42,25 @@ def test_check_reports_version_serial_and_both_views_of_the_state(peer: Dashboar
 
 def test_check_fails_with_the_dashboard_reason(peer: DashboardPeer) -> None:
     arm, _ = make(peer)
-    peer.replies["get serial number"] = "could not understand: 'get serial number'"
+    peer.replies["polyscopeversion"] = "could not understand: 'PolyscopeVersion'"
     res = arm.check()
     assert not res.ok and "could not understand" in (res.error or "")
-    assert res.details["serial_number"] == "unavailable"
+    assert f"UR5 dashboard at 127.0.0.1:{peer.port}" in (res.error or "")
+    assert res.details["controller_version"] == "unavailable"
+
+
+def test_check_passes_without_serial_on_older_software(peer: DashboardPeer) -> None:
+    arm, _ = make(peer)
+    peer.replies["get serial number"] = "could not understand: 'get serial number'"
+    res = arm.check()
+    assert res.ok and res.details["serial_number"] == "unavailable"
+
+
+def test_check_fails_when_the_dashboard_does_not_answer(peer: DashboardPeer) -> None:
+    arm, _ = make(peer)
+    peer.stop()
+    res = arm.check()
+    assert not res.ok and "cannot connect" in (res.error or "")
 
 
 def test_recover_unlocks_the_protective_stop_and_restarts_the_script(peer: DashboardPeer) -> None:
