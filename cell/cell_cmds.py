@@ -6,6 +6,7 @@ Contract forms (scripts rely on them; keep them exactly):
 * ``cell run --config FILE``
 * ``cell tree --config FILE``
 * ``cell replay LOG``
+* ``cell check-hardware --config FILE [--move-test]``
 
 A configuration that fails validation exits 2 with ``file:line: key: reason`` lines and opens no
 device. Ctrl-C / SIGTERM during a run stop the arm, flush the log, save the state and exit 130 /
@@ -93,6 +94,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("log", type=Path, help="the JSONL tick log (log.tick_log in the config)")
     p.add_argument("--all", action="store_true", help="every status change, not only leaves")
     p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser(
+        "check-hardware",
+        help="connect to and check every configured device",
+        description="Connects to the UR5 (RTDE and dashboard), the 2F-85 (activates it), the "
+        "FT300 (stream rate, bias) and the D435 (one frame), prints a table, and closes them. "
+        "Never moves the arm unless --move-test. Exit 0 only when every check passes.",
+    )
+    p.add_argument("--config", type=Path, required=True, help="cell configuration YAML")
+    p.add_argument(
+        "--move-test",
+        action="store_true",
+        help="also turn the last wrist joint 2 deg and back, slowly",
+    )
+    p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.set_defaults(func=cmd_check_hardware)
 
     p = sub.add_parser("schema", help="print the configuration's JSON Schema (for editors)")
     p.add_argument("--out", type=Path, default=None, help="write it to a file instead")
@@ -365,6 +382,28 @@ def cmd_replay(args: argparse.Namespace) -> int:
     for row in timeline(lines, every=args.all):
         print(row)
     return 0
+
+
+def cmd_check_hardware(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    from cell.hardware import check_hardware, format_table
+
+    try:
+        prep = _load(args.config)
+    except ConfigError as exc:
+        return _fail_config(exc, "check-hardware")
+    rows = check_hardware(prep.config, prep.layout, move_test=args.move_test)
+    print(format_table(rows))
+    if args.json is not None:
+        from cell.cli import _write_json
+
+        _write_json(
+            args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]}
+        )
+    ok = all(r.ok for r in rows)
+    print("all checks passed" if ok else f"{sum(not r.ok for r in rows)} of {len(rows)} failed")
+    return 0 if ok else 1
 
 
 def cmd_schema(args: argparse.Namespace) -> int:

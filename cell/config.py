@@ -60,8 +60,9 @@ class ArmDevice(_Section):
     rtde_frequency_hz: float = Field(
         125.0, ge=10.0, le=500.0, description="RTDE rate: 125 on a CB3, up to 500 on e-Series"
     )
-    dashboard_port: int = Field(29999, ge=1, le=65535, description="dashboard server port")
-    connect_timeout_s: float = Field(5.0, gt=0.0, le=60.0, description="per connection try")
+    connect_timeout_s: float = Field(
+        5.0, gt=0.0, le=60.0, description="dashboard server (TCP 29999) reply timeout"
+    )
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
         min_length=6,

@@ -60,13 +60,21 @@ class GuardedMotion:
         self._command()
 
     def tick(self) -> StepResult:
+        try:
+            return self._tick()
+        except (DeviceError, TimeoutError) as exc:
+            # A device that stopped answering (a lost link, a stale FT stream, no camera frame):
+            # the motion cannot be guarded or finished. Stop the arm and say which device.
+            try:
+                self.arm.stop()
+            except DeviceError:
+                pass
+            return StepResult(Status.FAILURE, f"{self.name}: {exc}; arm stopped")
+
+    def _tick(self) -> StepResult:
         if self._t0 is None:
             self.start()
-        try:
-            w = self.ft.wrench()
-        except DeviceError as exc:  # a dead or stale FT stream: nothing guards this motion
-            self.arm.stop()
-            return StepResult(Status.FAILURE, f"{self.name}: {exc}; arm stopped")
+        w = self.ft.wrench()
         force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
         self.peak_force = max(self.peak_force, force)
         if force > self.guard.max_force or torque > self.guard.max_torque:

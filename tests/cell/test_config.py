@@ -218,15 +218,21 @@ def test_cli_bad_config_exits_2_without_traceback_or_device(tmp_path) -> None:
     assert not (tmp_path / "ticks.jsonl").exists() and not (tmp_path / "o.json").exists()
 
 
-def test_cli_run_refuses_the_sim_backend_and_the_missing_hw_drivers(tmp_path) -> None:
+def test_cli_run_refuses_the_sim_backend_and_devices_that_fail_their_checks(tmp_path) -> None:
     sim = tmp_path / "sim.yaml"
     sim.write_text("cell:\n  backend: sim\n")
     r = _cell("run", "--config", str(sim), cwd=tmp_path)
     assert r.returncode == 2 and "needs `backend: hw`" in r.stderr and "Traceback" not in r.stderr
     hw = tmp_path / "hw.yaml"
-    hw.write_text("cell:\n  backend: hw\n")
+    hw.write_text(
+        "cell:\n  backend: hw\ndevices:\n  arm: {host: 127.0.0.1}\n"
+        f"  gripper: {{port: {tmp_path}/no_tty0}}\n  ft: {{port: {tmp_path}/no_tty1}}\n"
+    )
     r = _cell("run", "--config", str(hw), cwd=tmp_path)
-    assert r.returncode == 2 and "cell.backend" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "start-up checks failed, nothing moved" in r.stderr
+    for device in ("UR5 at 127.0.0.1:30004", "no_tty0", "no_tty1", "D435"):
+        assert device in r.stderr, device
 
 
 def test_cli_tree_prints_the_tree_and_writes_pictures(tmp_path) -> None:

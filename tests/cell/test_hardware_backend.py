@@ -1,0 +1,87 @@
+"""The hardware backend's start-up and shut-down, with the device openers replaced by stand-ins
+(the drivers themselves are tested against their protocol peers in tests/drivers/)."""
+
+from __future__ import annotations
+
+import pytest
+
+from cell import hardware
+from cell.assemble import prepare
+from cell.config import config_from_text
+from drivers.health import CheckResult, DeviceError
+from trees.yaml_lines import ConfigError
+
+
+class _Dev:
+    def __init__(self, name: str, ok: bool = True) -> None:
+        self.name, self.ok, self.calls = name, ok, []
+
+    def check(self, activate: bool = False) -> CheckResult:
+        self.calls.append(("check", activate))
+        return CheckResult(self.name, "addr", self.ok, error=None if self.ok else "it is on fire")
+
+    def stop(self) -> None:
+        self.calls.append("stop")
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+    def disconnect(self) -> None:
+        self.calls.append("disconnect")
+
+
+def _prep():
+    config, doc = config_from_text("cell:\n  backend: hw\n", "hw.yaml")
+    return prepare(config, doc)
+
+
+def test_a_failed_check_refuses_the_run_and_closes_what_was_opened(monkeypatch) -> None:
+    made: dict[str, _Dev] = {}
+
+    def opener(name: str, ok: bool = True):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            made[name] = _Dev(name, ok)
+            return made[name]
+
+        return make
+
+    def unreachable(cfg, layout, clock):  # type: ignore[no-untyped-def]
+        raise DeviceError("D435", "usb (any)", "no RealSense camera connected")
+
+    monkeypatch.setattr(
+        hardware,
+        "OPENERS",
+        {
+            "arm": opener("arm"),
+            "gripper": opener("gripper", ok=False),
+            "ft": opener("ft"),
+            "camera": unreachable,
+        },
+    )
+    with pytest.raises(ConfigError) as info:
+        hardware.open_hardware(_prep())
+    text = str(info.value)
+    assert "start-up checks failed, nothing moved" in text
+    assert "it is on fire" in text and "no RealSense camera" in text
+    assert made["gripper"].calls[0] == ("check", True)  # the gripper is activated by its check
+    assert made["arm"].calls[-2:] == ["stop", "close"]  # the arm stopped, then closed
+    assert made["gripper"].calls[-1] == "disconnect"  # the gripper keeps its state
+    assert made["ft"].calls[-1] == "stop"
+
+
+def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
+    made: dict[str, _Dev] = {}
+
+    def opener(name: str):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            made[name] = _Dev(name)
+            return made[name]
+
+        return make
+
+    monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
+    backend = hardware.open_hardware(_prep())
+    assert backend.devices.arm is made["arm"] and backend.devices.camera is made["camera"]
+    assert backend.judge("packed", {}) is None  # no ground truth on a real cell
+    backend.close()
+    assert made["arm"].calls[-2:] == ["stop", "close"]
