@@ -201,7 +201,10 @@ class HardwareBackend:
         return self.devices.clock
 
     def step(self) -> None:
-        """Nothing to advance: the drivers run their own I/O; the tick loop paces wall time."""
+        """Poll the arm once per tick even when no motion runs: it is the heartbeat that lets a
+        controller-side watchdog (`UR5Settings.watchdog_hz`) stop the arm if this process dies
+        or the link drops. The drivers run their own I/O; the tick loop paces wall time."""
+        self.devices.arm.status()
 
     def judge(self, kind: str, data: dict[str, Any]) -> dict[str, Any] | None:
         return None  # no ground truth on a real cell
