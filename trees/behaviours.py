@@ -261,7 +261,7 @@ class TiltBehaviour(SkillBehaviour):
 
 class AlignBehaviour(SkillBehaviour):
     def keys(self) -> dict[str, common.Access]:
-        return {"/part/pivot_frame": common.Access.READ}
+        return {"/part/pivot_frame": common.Access.READ, "/part/target": common.Access.READ}
 
     def make_skill(self) -> Skill:
         if not self.bb.exists("/part/pivot_frame"):
@@ -270,7 +270,11 @@ class AlignBehaviour(SkillBehaviour):
         return Align(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
 
     def on_success(self) -> None:
-        self.ctx.events.event("picked")
+        data: dict[str, object] = {}
+        if self.bb.exists("/part/target"):  # where it lay: the journal's record of the bin
+            c = self.bb.get("/part/target")["detection"].center
+            data = {"x": round(float(c[0]), 4), "y": round(float(c[1]), 4)}
+        self.ctx.events.event("picked", **data)
 
 
 class PutBack(SkillBehaviour):
@@ -353,8 +357,32 @@ class WaitMachining(Behaviour):
             self.feedback_message = f"machining: {elapsed:.1f} s"
             return Status.RUNNING
         self.feedback_message = f"machined in {elapsed:.1f} s"
+        self.ctx.slot_state = "machined"
         self.ctx.events.event("machined")
         return Status.SUCCESS
+
+
+class SlotHolds(Behaviour):
+    """Condition: SUCCESS when the slot holds a part (``state`` "fed": fed or machined;
+    "machined": machined). Lets a resumed cell go on with the part in the slot instead of
+    feeding a second one."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, state: str = "fed", **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx, self.state = ctx, state
+
+    def update(self) -> Status:
+        slot = self.ctx.slot_state
+        held = slot in ("fed", "machined") if self.state == "fed" else slot == "machined"
+        self.feedback_message = f"slot: {slot}"
+        return Status.SUCCESS if held else Status.FAILURE
+
+
+class SlotMachined(SlotHolds):
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name, ctx, state="machined")
 
 
 # ------------------------------------------------------------------ slot and box (skills/)
@@ -374,6 +402,7 @@ class FeedSlotBehaviour(SkillBehaviour):
         )
 
     def on_success(self) -> None:
+        self.ctx.slot_state = "fed"
         self.ctx.events.event("fed")
 
 
@@ -390,6 +419,7 @@ class PickFromSlotBehaviour(SkillBehaviour):
         )
 
     def on_success(self) -> None:
+        self.ctx.slot_state = "empty"
         self.ctx.events.event("picked_from_slot")
 
 

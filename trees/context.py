@@ -79,5 +79,7 @@ class CellContext:
     #: Called once per tick by the loop before the tree ticks (sim stepping is not here).
     on_tick: list[Callable[[], None]] = field(default_factory=list)
     tick: int = 0
+    #: What the machine's slot holds: "empty", "fed" or "machined" (restored on resume).
+    slot_state: str = "empty"
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)

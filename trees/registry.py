@@ -100,6 +100,12 @@ REGISTRY: dict[str, NodeType] = {
     "feed_slot": NodeType(
         "leaf", "part into the machine slot, release, drag away", dict(MOTION), lv.FeedSlotBehaviour
     ),
+    "slot_holds_part": NodeType(
+        "leaf", "condition: the slot holds a part (fed or machined)", {}, lv.SlotHolds
+    ),
+    "slot_machined": NodeType(
+        "leaf", "condition: the part in the slot is machined", {}, lv.SlotMachined
+    ),
     "wait_machining": NodeType("leaf", "start the machine, wait until done", {}, lv.WaitMachining),
     "pick_from_slot": NodeType(
         "leaf",
