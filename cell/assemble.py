@@ -190,7 +190,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     return Prepared(config, doc, layout, part, [part], plan, params, geometry, ctx, root, state)
 
 
-def open_backend(prep: Prepared, seed: int | None = None) -> Backend:
+def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) -> Backend:
     """Create the twin or connect the hardware named by ``cell.backend`` and hand its devices to
     the tree's context."""
     config = prep.config
@@ -210,7 +210,7 @@ def open_backend(prep: Prepared, seed: int | None = None) -> Backend:
             machining_time=config.workflow.machining_time_s,
         )
         try:
-            backend = SimCellBackend(prep.layout, prep.part, options)
+            backend = SimCellBackend(prep.layout, prep.part, options, resume=resume)
         except ValueError as exc:
             raise prep.doc.error(("sim", "parts_in_bin"), str(exc).split(": ", 1)[-1]) from None
     prep.ctx.devices = backend.devices  # type: ignore[attr-defined]

@@ -61,6 +61,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="simulated seconds before the run is cut (default: 150 per cycle)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from the journal (log.journal) after a crash or a stop",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -72,6 +77,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, required=True, help="cell configuration YAML")
     p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
     p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue from the journal (log.journal) after a crash or a stop",
+    )
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser(
@@ -165,8 +175,15 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     from cell.runner import TickLog, TickLoop
 
     try:
-        backend = open_backend(prep, seed=seed)
+        resume = _open_journal(prep, command, bool(getattr(args, "resume", False)))
+    except _NothingToDo as done:
+        print(str(done))
+        return 0
+    try:
+        backend = open_backend(prep, seed=seed, resume=resume)
     except ConfigError as exc:
+        if prep.state.journal is not None:
+            prep.state.journal.close()
         return _fail_config(exc, command)
     config = prep.config
     cycles = prep.ctx.limits.cycles
@@ -200,15 +217,22 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     )
     max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
     box_png = None
+    parts = None
     try:
         result = loop.run(max_time)
         if recorder is not None:
             box_png = _box_picture(backend, prep, args.record)
+        if hasattr(backend, "account"):
+            parts = backend.account()
     finally:
         log.close()
         backend.close()
+        if prep.state.journal is not None:
+            prep.state.journal.close()
     progress.done()
     summary = _summary(prep, result, cycles)
+    if parts is not None:
+        summary["parts"] = parts  # where every part is at the end, judged by the twin
     _print_summary(summary)
     if recorder is not None and recorder.frames:
         recorder.save_gif(args.record, fps=12)
@@ -243,6 +267,72 @@ def _box_picture(backend: Any, prep: Any, record: Path) -> Path:
     path = record.with_name(record.stem + "_box.png")
     Image.fromarray(rec.frames[0]).save(path)
     return path
+
+
+class _NothingToDo(Exception):
+    pass
+
+
+def _open_journal(prep: Any, command: str, resume: bool) -> Any:
+    """Open the crash-safe journal; with ``resume``, restore the cell's state from it.
+
+    A fresh run keeps the previous journal beside it (``.prev``) rather than deleting it. On
+    resume, a part the journal says was in the gripper cannot be re-created in the twin (nor
+    trusted on hardware): in the twin it goes back where it came from -- the bin, or for a
+    machined part the slot -- and the journal says so; on hardware the run is refused until a
+    person has done the same.
+    """
+    from cell.cli import UserError
+    from cell.journal import Journal, JournalError, Resume
+
+    path = prep.config.log.journal
+    if path is None:
+        if resume:
+            raise UserError("--resume needs a journal: log.journal is null in the configuration")
+        return None
+    p = Path(path)
+    if not resume and p.exists():
+        for suffix in ("", "-wal", "-shm"):
+            old = Path(str(p) + suffix)
+            if old.exists():
+                old.replace(Path(str(p.with_suffix(".prev" + p.suffix)) + suffix))
+    if resume and not p.exists():
+        raise UserError(f"--resume: no journal at {p} (log.journal)")
+    try:
+        journal = Journal(p)
+        state = Resume.from_events(journal.events()) if resume else None
+    except JournalError as exc:
+        raise UserError(f"log.journal: {exc}") from None
+    prep.state.journal = journal
+    if state is None:
+        return None
+    if state.in_hand is not None:
+        if command == "run":
+            journal.close()
+            where = "the bin" if state.in_hand == "bin" else "the slot (it is machined)"
+            raise UserError(
+                f"--resume: the journal ({p}) says the gripper held a part when the cell "
+                f"stopped; take it out and put it back in {where}, then resume"
+            )
+        kind = "returned_to_bin" if state.in_hand == "bin" else "returned_to_slot"
+        journal.append(
+            0, 0.0, kind, {"why": "held at the crash; the twin cannot re-create a grasp"}
+        )
+        state = Resume.from_events(journal.events())
+    ctx = prep.ctx
+    ctx.filled = set(state.filled)
+    ctx.slot_state = state.slot
+    ctx.limits.cycles_done = state.cycles_done
+    if state.cycles_done >= ctx.limits.cycles:
+        journal.close()
+        raise _NothingToDo(
+            f"{state.cycles_done} of {ctx.limits.cycles} cycles already done (journal {p})"
+        )
+    print(
+        f"resuming run {state.runs + 1}: {state.cycles_done} cycles done, box places "
+        f"{sorted(state.filled)} filled, slot {state.slot}"
+    )
+    return state
 
 
 class _Progress:

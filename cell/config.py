@@ -156,6 +156,11 @@ class LogSection(_Section):
     state_file: str | None = Field(
         "out/cell_state.json", description="the cell's state, saved after each cycle and on exit"
     )
+    journal: str | None = Field(
+        "out/cell_journal.sqlite",
+        description="crash-safe journal (SQLite, WAL) of every workflow event; `--resume` "
+        "continues from it",
+    )
 
 
 class CellConfig(_Section):

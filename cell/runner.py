@@ -57,10 +57,17 @@ class CellState:
     on_event: list[Callable[[str, dict[str, Any]], dict[str, Any] | None]] = field(
         default_factory=list, repr=False
     )
+    #: The crash-safe journal (cell/journal.py); every event is committed as it happens.
+    journal: Any = field(default=None, repr=False)
+
+    def _journal(self, kind: str, data: dict[str, Any]) -> None:
+        if self.journal is not None:
+            self.journal.append(self.tick, self.time, kind, data)
 
     # -- trees.context.Events ------------------------------------------------------------
     def abort(self, reason: str) -> None:
         self.aborts.append({"reason": reason, "tick": self.tick, "t": round(self.time, 3)})
+        self._journal("abort", {"reason": reason})
 
     def event(self, kind: str, **data: object) -> None:
         self.counts[kind] = self.counts.get(kind, 0) + 1
@@ -73,10 +80,12 @@ class CellState:
             if verdict is not None:
                 record["verdict"] = _jsonable(verdict)
         self.events.append(record)
+        self._journal(kind, {k: v for k, v in record.items() if k not in ("kind", "tick", "t")})
 
     def stop(self, reason: str) -> None:
         if self.stop_reason is None:
             self.stop_reason = reason
+            self._journal("stop", {"reason": reason})
 
     @property
     def stopped(self) -> str | None:

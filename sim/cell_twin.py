@@ -91,8 +91,16 @@ class SimCellBackend:
 
     name = "sim"
 
-    def __init__(self, layout: CellLayout, part: Part, options: TwinOptions) -> None:
+    def __init__(
+        self, layout: CellLayout, part: Part, options: TwinOptions, resume: Any = None
+    ) -> None:
+        """``resume`` (a :class:`cell.journal.Resume`): rebuild the world a journal describes
+        after a crash -- the twin's world dies with the process, a real cell's does not. Parts
+        packed stand in their box places, a part fed stands in the slot, the parts taken from
+        the bin are gone from it, and a part that was in the hand is back in the bin (an
+        operator's job on a real cell: nothing can re-create a grasp honestly)."""
         self.layout, self.part, self.options = layout, part, options
+        self._packed_at_start: list[PartBody] = []
         rng = np.random.default_rng(options.seed)
         self.world = world = SimWorld(seed=options.seed, settings=options.physics)
         try:
@@ -100,14 +108,17 @@ class SimCellBackend:
             self.robot = robot = SimRobot(world)
             robot.gripper.set_finger_friction(options.frictions.mu_s, options.frictions.mu_h)
             self.bodies: list[PartBody] = []
-            for x, y, yaw in spawn_spots(
+            spots = spawn_spots(
                 layout,
                 part,
                 options.parts_in_bin,
                 rng,
                 options.position_jitter,
                 options.yaw_spread,
-            ):
+            )
+            if resume is not None:
+                spots = self._rebuild(resume, spots)
+            for x, y, yaw in spots:
                 # Resting parts may sleep: without it the solver's jitter creeps a packed part
                 # about 1 mm a minute, which over ten cycles would open the box's gaps.
                 self.bodies.append(
@@ -132,7 +143,79 @@ class SimCellBackend:
         except Exception:
             world.close()
             raise
-        self.packed_bodies: list[int] = []
+        self.packed_bodies: list[int] = [b.body_id for b in self._packed_at_start]
+
+    def _rebuild(
+        self, resume: Any, spots: list[tuple[float, float, float]]
+    ) -> list[tuple[float, float, float]]:
+        """Spawn what left the bin where the journal says it is; the bin's spots still full."""
+        from sim.part_body import upright_pose
+
+        world, layout, part = self.world, self.layout, self.part
+        taken = list(resume.picked_from)
+        if resume.in_hand and taken:
+            taken.pop()  # the part in the hand at the crash is back in the bin
+        left = list(spots)
+        for x, y in taken:
+            if left:
+                k = min(range(len(left)), key=lambda i: math.dist(left[i][:2], (x, y)))
+                left.pop(k)
+        places = layout.packing_places(part.outer)
+        for i in resume.filled:
+            px, py, pz = places[i]
+            self._packed_at_start.append(
+                spawn_part(
+                    world,
+                    part,
+                    upright_pose(part, px, py, pz),
+                    lateral_friction=1.0,
+                    sleep_threshold=0.05,
+                )
+            )
+        self.bodies.extend(self._packed_at_start)
+        if resume.slot != "empty":
+            sx, sy, sz = layout.slot_center
+            self.bodies.append(
+                spawn_part(
+                    world,
+                    part,
+                    upright_pose(part, sx, sy, sz),
+                    lateral_friction=1.0,
+                    sleep_threshold=0.05,
+                )
+            )
+        return left
+
+    def account(self) -> dict[str, int]:
+        """Where every part is now, from the simulated state: in the bin, in the hand, in the
+        slot, packed in the box, or elsewhere (on the floor: lost)."""
+        out = {"in_bin": 0, "in_hand": 0, "in_slot": 0, "packed": 0, "on_floor": 0}
+        x0, x1, y0, y1 = self.layout.bin_interior()
+        tx0, tx1, ty0, ty1 = self.layout.tray_interior()
+        slot = np.asarray(self.layout.slot_center, float)
+        fingers = [self.robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")]
+        for b in self.bodies:
+            pos = b.pose().position
+            held = any(
+                self.world.p.getContactPoints(
+                    bodyA=b.body_id, bodyB=self.robot.body_id, linkIndexB=link
+                )
+                for link in fingers
+            )
+            if held and b.lowest_z() > 0.005:
+                out["in_hand"] += 1
+            elif (
+                float(np.max(np.abs(pos[:2] - slot[:2]))) < 0.5 * self.layout.slot_width
+                and b.lowest_z() < slot[2] + 0.01
+            ):
+                out["in_slot"] += 1
+            elif tx0 <= pos[0] <= tx1 and ty0 <= pos[1] <= ty1:
+                out["packed"] += 1
+            elif x0 <= pos[0] <= x1 and y0 <= pos[1] <= y1:
+                out["in_bin"] += 1
+            else:
+                out["on_floor"] += 1
+        return out
 
     @property
     def clock(self):  # type: ignore[no-untyped-def]

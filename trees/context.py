@@ -59,6 +59,7 @@ class WorkflowLimits:
     max_failures_per_part: int = 2
     max_failed_cycles: int = 3
     cycles: int = 10
+    cycles_done: int = 0  #: cycles a resumed cell had already done
 
 
 @dataclass

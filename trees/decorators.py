@@ -189,6 +189,10 @@ class Cycles(Decorator):
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
         self.bb.set("/cell/cycles_done", 0)
 
+    def initialise(self) -> None:
+        self.done = self.ctx.limits.cycles_done  # a resumed cell goes on counting
+        self.bb.set("/cell/cycles_done", self.done)
+
     def update(self) -> Status:
         status = self.decorated.status
         limits = self.ctx.limits

@@ -22,6 +22,7 @@ workflow:
 log:
   tick_log: {log}
   state_file: {state}
+  journal: {state}.sqlite
 """
 
 

@@ -1,0 +1,125 @@
+"""The crash-safe journal and `--resume`: state derived from events, refusals, and one real
+SIGKILL in the middle of a simulated run followed by a resume that finishes the job."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cell.journal import Journal, JournalError, Resume
+
+
+def _ev(kind: str, seq: int, **data: object) -> dict:
+    return {"kind": kind, "seq": seq, "run": 1, "tick": seq, "t": float(seq), **data}
+
+
+def test_state_follows_the_events() -> None:
+    events = [
+        _ev("picked", 1, x=0.5, y=0.0),
+        _ev("fed", 2),
+        _ev("machined", 3),
+        _ev("picked_from_slot", 4),
+        _ev("packed", 5, place=0),
+        _ev("cycle_done", 6),
+        _ev("picked", 7, x=0.5, y=0.1),
+        _ev("fed", 8),
+    ]
+    r = Resume.from_events(events)
+    assert r.filled == [0] and r.slot == "fed" and r.in_hand is None and r.cycles_done == 1
+    assert r.picked_from == [[0.5, 0.0], [0.5, 0.1]]
+    r = Resume.from_events(events[:4])
+    assert r.in_hand == "machined" and r.slot == "empty"
+    r = Resume.from_events([*events[:1], _ev("returned_to_bin", 2)])
+    assert r.in_hand is None and r.picked_from == []
+
+
+def test_a_box_place_filled_twice_or_a_slot_fed_twice_is_refused() -> None:
+    with pytest.raises(JournalError, match="box place 0 packed twice"):
+        Resume.from_events([_ev("packed", 1, place=0), _ev("packed", 2, place=0)])
+    with pytest.raises(JournalError, match="slot was fed twice"):
+        Resume.from_events([_ev("fed", 1), _ev("fed", 2)])
+
+
+def test_events_survive_reopening_and_runs_are_numbered(tmp_path) -> None:
+    j = Journal(tmp_path / "j.sqlite")
+    j.append(3, 0.1, "picked", {"x": 0.5, "y": 0.0})
+    j.close()
+    j = Journal(tmp_path / "j.sqlite")
+    assert j.run == 2
+    assert [e["kind"] for e in j.events()] == ["picked"] and j.events()[0]["x"] == 0.5
+
+
+def test_a_corrupt_journal_is_an_error_naming_it_never_discarded(tmp_path) -> None:
+    bad = tmp_path / "j.sqlite"
+    bad.write_bytes(b"this is not a database, but somebody's file" * 100)
+    with pytest.raises(JournalError, match=str(bad)):
+        Journal(bad).events()
+    assert bad.read_bytes().startswith(b"this is not")  # left as it was
+
+
+CONFIG = """\
+sim: {{seed: 0, parts_in_bin: 2}}
+workflow: {{machining_time_s: 1, cycles: 2}}
+log: {{tick_log: {d}/ticks.jsonl, state_file: {d}/state.json, journal: {d}/journal.sqlite}}
+"""
+
+
+def _cell(*args: str) -> list[str]:
+    return [sys.executable, "-m", "cell.cli", *args]
+
+
+def test_cli_refuses_resume_without_or_with_a_corrupt_journal(tmp_path) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(CONFIG.format(d=tmp_path))
+    r = subprocess.run(
+        _cell("sim", "--config", str(cfg), "--resume"), capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 2 and "no journal at" in r.stderr and "Traceback" not in r.stderr
+    (tmp_path / "journal.sqlite").write_bytes(b"garbage" * 500)
+    r = subprocess.run(
+        _cell("sim", "--config", str(cfg), "--resume"), capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 2 and "not a readable cell journal" in r.stderr
+    assert "journal.sqlite" in r.stderr
+
+
+def test_sigkill_mid_run_then_resume_finishes_without_doing_anything_twice(tmp_path) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(CONFIG.format(d=tmp_path))
+    journal = tmp_path / "journal.sqlite"
+    proc = subprocess.Popen(
+        _cell("sim", "--config", str(cfg), "--quiet"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:  # kill it once the first part is in the slot
+        if journal.exists():
+            kinds = [e["kind"] for e in Journal(journal).events()]
+            if "fed" in kinds:
+                break
+        time.sleep(0.3)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    before = Resume.from_events(Journal(journal).events())
+    assert before.slot in ("fed", "machined") or before.filled, before
+    out = tmp_path / "final.json"
+    r = subprocess.run(
+        _cell("sim", "--config", str(cfg), "--resume", "--quiet", "--json", str(out)),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "resuming run" in r.stdout
+    after = Resume.from_events(Journal(journal).events())  # raises on a double feed or fill
+    assert sorted(after.filled) == [0, 1] and after.cycles_done == 2
+    parts = json.loads(out.read_text())["parts"]
+    assert parts == {"in_bin": 0, "in_hand": 0, "in_slot": 0, "packed": 2, "on_floor": 0}
+    assert Path(str(journal)).exists()
