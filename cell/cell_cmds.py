@@ -336,15 +336,28 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
 
 
 class _Progress:
+    """A progress bar on a terminal (packed parts against cycles, simulated time, the tree's
+    tip), with a line per workflow step and per abort; just the lines when stderr is a file."""
+
     def __init__(self, prep: Any, cycles: int, quiet: bool) -> None:
         self.prep, self.cycles, self.quiet = prep, cycles, quiet
         self.seen = 0
+        self.aborts = 0
         self.wall0 = time.perf_counter()
+        self.tty = sys.stderr.isatty()
+        self.bar_shown = False
+
+    def _line(self, text: str) -> None:
+        if self.bar_shown:
+            sys.stderr.write("\r\033[K")  # clear the bar, print the line, redraw below
+            self.bar_shown = False
+        sys.stderr.write(text + "\n")
 
     def update(self, tick: int) -> None:
         if self.quiet:
             return
-        events = self.prep.state.events
+        state = self.prep.state
+        events = state.events
         while self.seen < len(events):
             e = events[self.seen]
             self.seen += 1
@@ -353,20 +366,30 @@ class _Progress:
                 judged = ""
                 if isinstance(verdict, dict):
                     judged = (
-                        " [twin: ok]"
-                        if verdict.get("ok")
-                        else (f" [twin: {verdict.get('failure')}]")
+                        " [twin: ok]" if verdict.get("ok") else f" [twin: {verdict.get('failure')}]"
                     )
-                packed = self.prep.state.counts.get("packed", 0)
-                sys.stderr.write(
+                packed = state.counts.get("packed", 0)
+                self._line(
                     f"  t={e['t']:7.1f} s  {e['kind']:<12s}{judged}  packed {packed}/"
-                    f"{self.cycles}  wall {time.perf_counter() - self.wall0:.0f} s\n"
+                    f"{self.cycles}  wall {time.perf_counter() - self.wall0:.0f} s"
                 )
-        for a in self.prep.state.aborts[getattr(self, "_aborts", 0) :]:
-            sys.stderr.write(f"  t={a['t']:7.1f} s  abort        {a['reason']}\n")
-        self._aborts = len(self.prep.state.aborts)
+        for a in state.aborts[self.aborts :]:
+            self._line(f"  t={a['t']:7.1f} s  abort        {a['reason']}")
+        self.aborts = len(state.aborts)
+        if self.tty and tick % 50 == 0:
+            packed = state.counts.get("packed", 0)
+            width = 30
+            filled = int(round(width * min(packed, self.cycles) / max(1, self.cycles)))
+            tip = self.prep.root.tip()
+            sys.stderr.write(
+                f"\r\033[K[{'#' * filled}{'.' * (width - filled)}] {packed}/{self.cycles} packed"
+                f"  t={state.time:6.1f} s  {tip.name if tip else ''}"
+            )
+            self.bar_shown = True
 
     def done(self) -> None:
+        if self.bar_shown:
+            sys.stderr.write("\n")
         sys.stderr.flush()
 
 
