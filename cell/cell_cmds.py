@@ -376,7 +376,9 @@ class _Progress:
         for a in state.aborts[self.aborts :]:
             self._line(f"  t={a['t']:7.1f} s  abort        {a['reason']}")
         self.aborts = len(state.aborts)
-        if self.tty and tick % 50 == 0:
+        now = time.perf_counter()
+        if self.tty and now - getattr(self, "_drawn", 0.0) >= 0.2:  # 5 redraws a second
+            self._drawn = now
             packed = state.counts.get("packed", 0)
             width = 30
             filled = int(round(width * min(packed, self.cycles) / max(1, self.cycles)))
