@@ -314,6 +314,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_pivot(sub)
 
+    from cell.sweep_cmd import add_parser as add_sweep
+
+    add_sweep(sub)
+
     from cell.calibrate_cmd import add_parser as add_calibrate
 
     add_calibrate(sub)
