@@ -330,6 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_train_perception(sub)
 
+    from cell.compare_cmd import add_parser as add_compare
+
+    add_compare(sub)
+
     from cell.cell_cmds import add_parser as add_cell
 
     add_cell(sub)

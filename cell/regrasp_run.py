@@ -1,0 +1,315 @@
+"""Regrasp trials in the twin, and what ``cell compare`` measures on any trial: tact time and the
+volume swept by the gripper.
+
+:func:`run_regrasp_trial` is :func:`cell.pivot_run.run_trial` with the baseline in place of the
+pivot: the same :class:`TrialSetup`, the same seeded perturbation drawn in the same order (so a
+seed gives both methods the same true pose, frictions and mass), the same finger frictions, the
+same nominal pose given to the skills, the same 0.3 s hold before the same judge
+(:func:`sim.judge.judge`) looks at the simulated state. Physics decides: nothing is welded or
+moved by hand.
+
+:class:`GripperProbe` is called after every control step (``on_frame`` with ``frame_every=1``) and
+observes only the robot:
+
+* **tact time**: from the first control step in which the arm or the gripper executes a command
+  to the end of the step in which the arm last reported a motion DONE (for a successful trial,
+  the lift of the hole grasp: nothing moves after it);
+* **swept volume**: the gripper's collision geometry as the twin's URDF defines it -- the FT300
+  puck (cylinder), the gripper body (box) and both fingers (boxes) -- placed at each step's link
+  poses and voxelized on a fixed 5 mm world grid; a voxel counts when its centre lies inside a
+  shape at some sampled step. A shape is re-sampled once any of its corners has moved
+  ``min_step`` (1 mm) since its last sample, which keeps the union continuous to within that
+  and skips the many steps where nothing moves. The wrist and arm links are not counted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cell.pivot_run import TrialResult, TrialSetup, _run_skill
+from drivers.arm import MotionState
+from drivers.pose import Pose
+from sim.camera import SimCamera
+from sim.cell_layout import build_cell
+from sim.judge import judge
+from sim.part_body import lying_pose, spawn_part
+from sim.robot import SimRobot
+from sim.robot_model import (
+    FINGER_LENGTH,
+    FINGER_THICKNESS,
+    FINGER_WIDTH,
+    FT_HEIGHT,
+    FT_RADIUS,
+    GRIPPER_BODY_SIZE,
+)
+from sim.world import SimWorld
+from skills.motion import Devices
+from skills.pivot import Align, PivotParams
+from skills.regrasp import Regrasp, RegraspOptions
+
+VOXEL = 0.005  #: m, edge of the swept-volume grid's voxels
+#: m, the dense grid's extent in the world (the UR5 reaches 0.85 m); beyond it a set takes over.
+GRID_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-0.2, 1.2))
+
+
+# ------------------------------------------------------------------------ swept volume
+@dataclass(frozen=True)
+class Solid:
+    """A box (``half`` = half extents) or a cylinder along its local z (``half`` = (r, r, half
+    length)), centred at ``offset`` in the frame it is attached to (m)."""
+
+    kind: str
+    half: tuple[float, float, float]
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def corners(self) -> NDArray[np.float64]:
+        """The 8 corners of its local bounding box, in the attached frame (m)."""
+        h = np.asarray(self.half, float)
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return np.asarray(self.offset, float) + signs * h
+
+    def contains(self, local: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Which points (N x 3, attached frame) lie inside."""
+        d = local - np.asarray(self.offset, float)
+        h = self.half
+        if self.kind == "box":
+            return np.all(np.abs(d) <= np.asarray(h), axis=1)
+        if self.kind == "cylinder":
+            return (np.abs(d[:, 2]) <= h[2]) & (d[:, 0] ** 2 + d[:, 1] ** 2 <= h[0] ** 2)
+        raise ValueError(f"unknown solid kind {self.kind!r}")
+
+
+class SweptVolume:
+    """The union of solids placed at poses, voxelized on a world grid of ``voxel`` m."""
+
+    def __init__(
+        self,
+        voxel: float = VOXEL,
+        bounds: tuple[tuple[float, float], ...] = GRID_BOUNDS,
+    ) -> None:
+        self.voxel = voxel
+        self._lo = np.array([math.floor(b[0] / voxel) for b in bounds], dtype=np.int64)
+        hi = np.array([math.ceil(b[1] / voxel) for b in bounds], dtype=np.int64)
+        self._shape = tuple(int(v) for v in hi - self._lo)
+        self._grid = np.zeros(self._shape, dtype=bool)
+        self._outside: set[tuple[int, int, int]] = set()
+
+    def add(self, solid: Solid, pose: Pose) -> None:
+        """Mark every voxel whose centre lies inside ``solid`` placed at ``pose`` (world)."""
+        v = self.voxel
+        corners = pose.transform(solid.corners())
+        lo = np.ceil(corners.min(axis=0) / v - 0.5).astype(np.int64)
+        hi = np.floor(corners.max(axis=0) / v - 0.5).astype(np.int64)
+        if np.any(hi < lo):
+            return
+        axes = [np.arange(lo[k], hi[k] + 1) for k in range(3)]
+        idx = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        centres = (idx + 0.5) * v
+        local = (centres - pose.position) @ pose.rotation
+        idx = idx[solid.contains(local)]
+        rel = idx - self._lo
+        inside = np.all((rel >= 0) & (rel < np.array(self._shape)), axis=1)
+        r = rel[inside]
+        self._grid[r[:, 0], r[:, 1], r[:, 2]] = True
+        if not np.all(inside):
+            self._outside.update(map(tuple, idx[~inside].tolist()))
+
+    @property
+    def count(self) -> int:
+        """Voxels marked."""
+        return int(np.count_nonzero(self._grid)) + len(self._outside)
+
+    @property
+    def volume_cm3(self) -> float:
+        return self.count * (self.voxel * 100.0) ** 3
+
+
+def gripper_solids() -> dict[str, tuple[Solid, ...]]:
+    """The gripper's collision shapes per twin link (as :mod:`sim.robot_model` builds them),
+    in each link's frame."""
+    body = GRIPPER_BODY_SIZE
+    finger = (0.5 * FINGER_THICKNESS, 0.5 * FINGER_WIDTH, 0.5 * FINGER_LENGTH)
+    return {
+        "ft_sensor": (
+            Solid("cylinder", (FT_RADIUS, FT_RADIUS, 0.5 * FT_HEIGHT), (0, 0, 0.5 * FT_HEIGHT)),
+        ),
+        "gripper_body": (
+            Solid("box", (0.5 * body[0], 0.5 * body[1], 0.5 * body[2]), (0, 0, 0.5 * body[2])),
+        ),
+        "finger_a": (Solid("box", finger, (0.5 * FINGER_THICKNESS, 0, 0.5 * FINGER_LENGTH)),),
+        "finger_b": (Solid("box", finger, (-0.5 * FINGER_THICKNESS, 0, 0.5 * FINGER_LENGTH)),),
+    }
+
+
+class GripperProbe:
+    """Tact time and swept volume of one trial, from the robot's state after each control step
+    (pass :meth:`__call__` as ``on_frame`` with ``frame_every=1``)."""
+
+    def __init__(self, voxel: float = VOXEL, min_step: float = 0.001) -> None:
+        self.sweep = SweptVolume(voxel)
+        self.min_step = min_step
+        self.t_start: float | None = None  #: s, start of the first step that executed a command
+        self.t_done: float | None = None  #: s, end of the step where a motion last became DONE
+        self._was_moving = False
+        self._last: dict[tuple[str, int], NDArray[np.float64]] = {}
+        self._solids = gripper_solids()
+
+    def __call__(self, world: Any, robot: SimRobot) -> None:
+        now = world.clock.now()
+        state = robot.arm.status().state
+        if self.t_start is None and (
+            state is not MotionState.IDLE or robot.gripper.moving()
+        ):
+            self.t_start = now - world.settings.control_dt
+        if state is MotionState.MOVING:
+            self._was_moving = True
+        elif state is MotionState.DONE and self._was_moving:
+            self._was_moving = False
+            self.t_done = now
+        else:
+            self._was_moving = False
+        self.sample(robot)
+
+    def sample(self, robot: SimRobot) -> None:
+        """Add the gripper's shapes where they are now (those that moved ``min_step``)."""
+        for link, solids in self._solids.items():
+            pose = robot.link_pose(link)
+            for k, solid in enumerate(solids):
+                corners = pose.transform(solid.corners())
+                last = self._last.get((link, k))
+                if last is not None and float(np.max(np.abs(corners - last))) < self.min_step:
+                    continue
+                self._last[(link, k)] = corners
+                self.sweep.add(solid, pose)
+
+    @property
+    def tact_time(self) -> float | None:
+        """s from the first motion to the last motion that ended DONE; None if none did."""
+        if self.t_start is None or self.t_done is None:
+            return None
+        return self.t_done - self.t_start
+
+
+# ------------------------------------------------------------------------ regrasp trial
+@dataclass
+class RegraspResult(TrialResult):
+    """A :class:`TrialResult` of the baseline; ``grip_offset``: m of the pinch off centre."""
+
+    grip_offset: float = 0.0
+
+
+def run_regrasp_trial(
+    setup: TrialSetup,
+    seed: int,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
+    frame_every: int = 6,
+    options: RegraspOptions | None = None,
+) -> RegraspResult:
+    """One perturbed regrasp trial (Regrasp, then Align), judged from the simulated state.
+
+    The perturbation is drawn exactly as :func:`cell.pivot_run.run_trial` draws it, in the same
+    order from ``numpy.random.default_rng(seed)``; the skills get the nominal pose (the
+    comparison is of manipulation, not perception: ``setup.perceive`` is ignored).
+    """
+    wall0 = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    pert = setup.perturbation
+
+    def jitter(value: float, rel: float) -> float:
+        return value * (1.0 + rng.uniform(-rel, rel))
+
+    mu_s = jitter(setup.frictions.mu_s, pert.friction)
+    mu_h = jitter(setup.frictions.mu_h, pert.friction)
+    mu_g = jitter(setup.frictions.mu_g, pert.friction)
+    if setup.mu_ground is not None:
+        mu_g = setup.mu_ground
+    true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
+    nominal = setup.nominal_center()
+    x = nominal[0] + rng.uniform(-pert.position, pert.position)
+    y = nominal[1] + rng.uniform(-pert.position, pert.position)
+    yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
+
+    world = SimWorld(seed=seed, settings=setup.physics)
+    try:
+        cell = build_cell(world, setup.layout, floor_friction=mu_g)
+        robot = SimRobot(world)
+        # finger_a (tool +x) ends on the outer wall in the hole grasp, finger_b in the hole: the
+        # same finger frictions as the pivot's S and H fingers.
+        robot.gripper.set_finger_friction(mu_s, mu_h)
+        body = spawn_part(world, true_part, lying_pose(true_part, x, y, yaw), lateral_friction=1.0)
+        for _ in range(int(0.3 / world.settings.control_dt)):  # let the part settle
+            world.step()
+        robot.ft.bias()
+
+        assert setup.plan.l_a is not None and setup.plan.alpha is not None
+        params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
+        camera = SimCamera(
+            world,
+            lambda: robot.world_pose(robot.arm.tool_pose()),
+            tool_T_camera=setup.layout.tool_T_camera(),
+        )
+        dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
+        t_end = world.clock.now() + setup.max_time
+        frame = setup.frame()
+        regrasp = Regrasp(frame, setup.part, params, dev, options)
+        phases = [
+            ("regrasp", regrasp),
+            ("align", Align(regrasp.standing_frame, setup.part, params, dev)),
+        ]
+        failure: str | None = None
+        phase_name = "done"
+        for phase_name, skill in phases:
+            failure = _run_skill(phase_name, skill, world, robot, t_end, on_frame, frame_every)
+            if failure is not None:
+                break
+        else:
+            phase_name = "done"
+        for _ in range(int(0.3 / world.settings.control_dt)):  # hold still, then judge
+            world.step()
+            if on_frame is not None and world.steps % frame_every == 0:
+                on_frame(world, robot)
+        tips = {name: robot.fingertip(name) for name in ("finger_a", "finger_b")}
+        verdict = judge(
+            world,
+            body,
+            cell.floor,
+            robot.body_id,
+            {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
+            tips,
+        )
+        success = failure is None and verdict.success
+        return RegraspResult(
+            seed=seed,
+            success=success,
+            failure=None if success else (failure or verdict.failure),
+            phase=phase_name,
+            tilt_deg=verdict.tilt_deg,
+            height_m=verdict.height_m,
+            sim_time=world.clock.now(),
+            wall_time=time.perf_counter() - wall0,
+            true_pose={"x": x, "y": y, "yaw": yaw},
+            frictions={"S": mu_s, "H": mu_h, "G": mu_g},
+            mass=true_part.mass,
+            perceived_pose=None,
+            grip_offset=regrasp.grip_offset,
+        )
+    finally:
+        world.close()
+
+
+__all__ = [
+    "GripperProbe",
+    "RegraspResult",
+    "Solid",
+    "SweptVolume",
+    "gripper_solids",
+    "run_regrasp_trial",
+]

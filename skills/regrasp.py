@@ -1,0 +1,314 @@
+"""The regrasp baseline the pivot is measured against (issue 8, item 4): pinch the lying part
+from above, turn it upright in the air, stand it on the bin floor, let go; :class:`Align` then
+takes the hole grasp on the standing part exactly as it does after the pivot's Tilt.
+
+Why a baseline: the paper's claim for the pivot is that it reaches the hole grasp with less
+motion than picking the part, turning it and regrasping it. The comparison is fair only if the
+baseline runs under the same limits -- the pivot's ``approach_speed`` (and twice it for moves
+through free space, as the pivot's own free moves), ``acceleration``, guards, grip force -- and
+ends in the same hole grasp taken by the same :class:`Align`.
+
+Geometry (the lying part's :class:`PivotFrame`: axis ``u`` towards the open end, ``normal =
+up x u``):
+
+1. fingers straight down (tool ``z = -up``), closing line ``x`` along ``+normal`` (tool ``y =
+   u``), the jaws open by ``wall_gap`` on each side of the outer diameter; the TCP on the part's
+   axis ``grip_offset`` from its centre towards the open end (the pads on the outer wall at its
+   widest, fingertips kept ``floor_clearance`` off the floor); go down, pinch with
+   ``hold_force``;
+2. one path, no stop between its waypoints: lift until the part can swing clear of the floor,
+   turn the tool by 90 deg about ``-normal`` through the TCP -- the only turn that brings ``u``
+   to ``up`` (open end up) with the pinch line kept horizontal; the fingers end pointing along
+   ``+u``, away from the robot (the UR5's wrist pitches forward, the pose it reaches in; the
+   other way round the wrist would have to fold back over the arm) -- and down until the part's
+   bottom is ``place_gap`` above the floor;
+3. zero the wrist sensor (the tool's own weight now pulls sideways in the tool frame) and go
+   down at half the approach speed until the floor pushes back ``contact_force`` (a guarded
+   contact move; arriving ``place_overshoot`` below the floor without feeling it fails);
+4. open by ``wall_gap`` a side, back the fingers off the part along the tool axis, rise and
+   turn fingers-down to just below where Align's wrist camera will look from (Align first
+   draws the fingers back ``approach_distance``, which lands on that view), zero the sensor
+   again (nothing held, fingers down: the state Align's guards assume).
+
+Why ``grip_offset``: standing, the part is held at the height of the pinch with the tool
+horizontal, and the wrist sensor (75 mm across) hangs 37.5 mm below the tool axis; pinched at
+its centre a 68 mm bushing would put the sensor into the floor. The pinch moves just far enough
+towards the open end to keep the TCP ``min_place_height`` above the floor.
+
+After SUCCESS :meth:`Regrasp.standing_frame` is the frame to give :class:`Align`: its predicted
+axis is where the TCP set the part down.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from drivers.pose import Pose
+from skills.mechanics.part import Part
+from skills.motion import Devices, GuardedMotion, Sequence, wait
+from skills.pivot.align import hole_grasp_rotation
+from skills.pivot.frame import PivotFrame
+from skills.pivot.params import PivotParams
+from skills.slot import ContactMove, check
+from skills.status import Status, StepResult
+
+
+@dataclass(frozen=True)
+class RegraspOptions:
+    """What only the baseline needs (SI). Speeds, accelerations, guards, grip force, jaw gap,
+    approach distance and clearances come from :class:`PivotParams`, shared with the pivot."""
+
+    #: rad the pinch leans the fingers back towards the robot (about the closing line; the pads
+    #: still lie flat on the wall's sides). Standing, the tool then points forward and this far
+    #: down, so the UR5's wrist rides above and behind the TCP, clear of the floor and the bin's
+    #: near wall; at 0 (tool horizontal) the wrist links reach below the floor.
+    #: None: the largest up to ``max_tilt`` whose gripper body clears the lying part.
+    pinch_tilt: float | None = None
+    max_tilt: float = math.radians(55.0)  #: rad
+    body_offset: float = 0.050  #: m from the TCP to the gripper body's face, along the fingers
+    body_half_depth: float = 0.0175  #: m, half the gripper body's depth across the pad width
+    body_clearance: float = 0.005  #: m kept between the gripper body and the lying part
+    #: +1 or -1: the closing line along ``+-normal``. -1 keeps wrist 3 near 0 rad through the
+    #: whole maneuver (+1 takes it to about -3.4 rad, nearer its +-2 pi limit).
+    closing_sign: int = -1
+    tip_floor_clearance: float = 0.005  #: m, the lowest fingertip corner above the floor
+    #: m from the part's centre towards the open end where the pads pinch; None: the least that
+    #: keeps the TCP ``min_place_height`` above the floor when the part stands.
+    grip_offset: float | None = None
+    #: m of the TCP above the floor, tool horizontal: the wrist sensor's radius (37.5 mm) and a
+    #: margin below the tool axis.
+    min_place_height: float = 0.030
+    turn_clearance: float = 0.015  #: m between the swinging part and the floor during the turn
+    place_gap: float = 0.008  #: m above the floor the carrying path leaves the part's bottom
+    place_overshoot: float = 0.008  #: m below the floor the contact move aims (contact stops it)
+    contact_force: float = 3.0  #: N of floor reaction that ends the descent
+    back_off: float = 0.015  #: m the fingertips clear the standing part's wall when backing off
+    zero_wait: float = 0.1  #: s held still before the sensor is zeroed (it averages 64 ms)
+
+
+def _rotation_about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
+    return Rotation.from_rotvec(np.asarray(axis, float) * angle).as_matrix()
+
+
+def pinch_rotation(frame: PivotFrame, tilt: float = 0.0, sign: int = -1) -> NDArray[np.float64]:
+    """Closing line along ``sign * normal``; fingers down, leaning ``tilt`` (rad) back towards
+    ``-u`` (the gripper body over the part's open-end side)."""
+    x = sign * frame.normal
+    z = -math.cos(tilt) * frame.up - math.sin(tilt) * frame.u
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+def upright_turn(frame: PivotFrame) -> NDArray[np.float64]:
+    """The world rotation that takes the lying part's axis ``u`` to ``up`` (90 deg about
+    ``-normal``): the open end up, the closed end of a cup or bottle down."""
+    return _rotation_about(-frame.normal, 0.5 * math.pi)
+
+
+class Regrasp:
+    """Pinch, lift, turn upright, set down on the floor, let go, back off (module doc)."""
+
+    def __init__(
+        self,
+        frame: PivotFrame,
+        part: Part,
+        params: PivotParams,
+        dev: Devices,
+        options: RegraspOptions | None = None,
+    ) -> None:
+        """``frame``: the lying part's frame (its nominal or perceived pose; ``center`` at the
+        axis, ``floor_z`` the floor). Raises ValueError when the part does not fit the jaws."""
+        o = options or RegraspOptions()
+        p, arm, gripper, ft = params, dev.arm, dev.gripper, dev.ft
+        self.frame, self.part, self.params, self.options, self.dev = frame, part, p, o, dev
+        opening = part.outer + 2.0 * p.wall_gap
+        if opening > gripper.stroke:
+            raise ValueError(
+                f"regrasp needs a jaw opening of {opening * 1e3:.1f} mm across the "
+                f"{part.name}, the gripper has {gripper.stroke * 1e3:.1f} mm"
+            )
+        a, b = 0.5 * part.length, 0.5 * part.outer
+        floor = frame.floor_z
+        # Pinch point along the axis (from the centre, towards the open end).
+        room = a - 0.5 * gripper.finger_width - 0.002
+        if o.grip_offset is None:
+            offset = min(max(0.0, o.min_place_height - a), room)
+        else:
+            offset = o.grip_offset
+        if not -room <= offset <= room:
+            raise ValueError(f"grip_offset {offset:g} m puts the pads off the {part.name}")
+        self.grip_offset = offset
+        if o.closing_sign not in (1, -1):
+            raise ValueError(f"closing_sign must be +1 or -1, got {o.closing_sign}")
+        tilt = o.pinch_tilt if o.pinch_tilt is not None else self._clear_tilt(offset)
+        self.tilt = tilt  #: rad the pinch leans
+        # Pads at the widest; the lowest fingertip corner (the pad leans by ``tilt``) off the floor.
+        tip_drop = p.tip_offset * math.cos(tilt) + 0.5 * gripper.finger_width * math.sin(tilt)
+        tcp_h = max(b, o.tip_floor_clearance + tip_drop)
+        rot = pinch_rotation(frame, tilt, o.closing_sign)
+        self.grasp = Pose(frame.point(offset, tcp_h), rot)  #: TCP pose of the pinch
+        pre = Pose(self.grasp.position - p.approach_distance * rot[:, 2], rot)
+
+        # The turn about the TCP: where the part's centre and bottom end up relative to it.
+        turn = upright_turn(frame)
+        centre = frame.point(0.0, b)
+        rel_centre = turn @ (centre - self.grasp.position)
+        bottom_below = a - rel_centre[2]  # m from the TCP down to the part's bottom, standing
+        # Everything of the part lies within this of the TCP: it can swing through the turn.
+        swing = math.hypot(a + abs(offset), b) + abs(tcp_h - b)
+        lift_z = floor + max(swing + o.turn_clearance, o.min_place_height)
+        lift_z = max(lift_z, self.grasp.position[2])
+        lifted = Pose(np.array([*self.grasp.position[:2], lift_z]), rot)
+        turned_rot = turn @ rot
+        turned = Pose(lifted.position, turned_rot)
+        place_z = floor + bottom_below + o.place_gap
+        self.place_z = floor + bottom_below  #: TCP height with the part standing on the floor
+        above_floor = Pose(np.array([*self.grasp.position[:2], place_z]), turned_rot)
+        down = Pose(
+            above_floor.position - (o.place_gap + o.place_overshoot) * frame.up, turned_rot
+        )
+        self.standing_axis: NDArray[np.float64] = (self.grasp.position + rel_centre)[:2].copy()
+        g = p.guard
+        st: dict[str, Pose] = {}
+
+        self._contact = ContactMove(
+            "set down on the floor",
+            dev,
+            p.descent_guard,
+            lambda: down,
+            0.5 * p.approach_speed,
+            p.acceleration,
+            o.contact_force,
+        )
+
+        def carry() -> None:
+            # One profile over lift, turn and descent: the arm does not stop at the waypoints.
+            arm.move_path([lifted, turned, above_floor], 2 * p.approach_speed, p.acceleration)
+
+        def floor_felt() -> str | None:
+            if not self._contact.contact:
+                return (
+                    f"no floor felt {o.place_overshoot * 1e3:.0f} mm below where it should be"
+                )
+            pose = arm.tool_pose()
+            st["placed"] = pose
+            self.standing_axis = (pose.position + rel_centre)[:2].copy()
+            return None
+
+        def let_go() -> None:
+            gripper.open(opening)
+
+        def back_off() -> None:
+            # Along the fingers until the fingertips are clear of the near side of the wall.
+            tool = arm.tool_pose()
+            z = tool.rotation[:, 2]
+            reach = max(float(np.hypot(z[0], z[1])), 0.3)
+            back = Pose(tool.position - (b + p.tip_offset + o.back_off) / reach * z, tool.rotation)
+            arm.move_path([back, self._hand_over()], 2 * p.approach_speed, p.acceleration)
+
+        def pinched() -> str | None:
+            return None if gripper.object_detected() else "the pinch closed on nothing"
+
+        def zero(name: str) -> GuardedMotion:
+            return GuardedMotion(
+                name, ft.bias, lambda: True, arm, ft, dev.clock, g
+            )
+
+        self.sequence = Sequence(
+            "regrasp",
+            [
+                dev.grip("open across the part", g, lambda: gripper.open(opening)),
+                dev.move(
+                    "above the part", g, lambda: arm.move_to(pre, 2 * p.approach_speed,
+                                                             p.acceleration)
+                ),
+                dev.move(
+                    "down beside the wall",
+                    p.descent_guard,
+                    lambda: arm.move_to(self.grasp, p.approach_speed, p.acceleration),
+                ),
+                dev.grip(
+                    "pinch across the diameter",
+                    g,
+                    lambda: gripper.close(p.hold_force),
+                    settle=0.3,
+                ),
+                check("part in the pinch", dev, g, pinched),
+                dev.move("lift and turn upright", g, carry),
+                wait("hold still", dev, g, o.zero_wait),
+                zero("zero the wrist sensor"),
+                self._contact.motion,
+                check("on the floor", dev, g, floor_felt),
+                dev.grip("let go", g, let_go),
+                dev.move("back off", g, back_off),
+                wait("hold still again", dev, g, o.zero_wait),
+                zero("zero the wrist sensor again"),
+            ],
+        )
+
+    def _hand_over(self) -> Pose:
+        """Where the back-off ends: fingers down, turned as Align turns them, ``approach_distance``
+        straight below the pose from which Align's wrist camera looks at the standing part.
+
+        Align starts by drawing the fingers back ``approach_distance`` along their axis and then
+        moves the camera over the part; ending here makes that first move land on the view and
+        the second one nil. Without a camera: ``clear_height`` over the rim."""
+        p, f, dev = self.params, self.frame, self.dev
+        rot = hole_grasp_rotation(-f.u)
+        rim = f.floor_z + self.part.length
+        if dev.camera is None:
+            return Pose(np.array([*self.standing_axis, rim + p.clear_height + p.tip_offset]), rot)
+        cam = dev.camera.tool_T_camera().position
+        view = np.array([*self.standing_axis, rim + p.view_height]) - rot @ cam
+        return Pose(view - p.approach_distance * f.up, rot)
+
+    def _clear_tilt(self, offset: float) -> float:
+        """The largest tilt (5 deg steps, at most ``max_tilt``) at which the gripper body's lower
+        edge stays ``body_clearance`` above the lying part wherever it is over it."""
+        o, part = self.options, self.part
+        a, b = 0.5 * part.length, 0.5 * part.outer
+        steps = int(math.floor(math.degrees(o.max_tilt) / 5.0))
+        for k in range(steps, -1, -1):
+            tilt = math.radians(5.0 * k)
+            c, s = math.cos(tilt), math.sin(tilt)
+            ok = True
+            for t in np.linspace(-1.0, 1.0, 21):  # along the face's lower edge (s, h from TCP)
+                along = o.body_offset * s - t * o.body_half_depth * c
+                height = o.body_offset * c + t * o.body_half_depth * s
+                over_part = -a - o.body_clearance <= offset + along <= a + o.body_clearance
+                if over_part and height < b + o.body_clearance:
+                    ok = False
+                    break
+            if ok:
+                return tilt
+        return 0.0
+
+    def standing_frame(self) -> PivotFrame:
+        """A frame whose Align prediction (``pivot - outer/2 u``) is the standing part's axis."""
+        f = self.frame
+        xy = self.standing_axis
+        centre = np.array([*xy, 0.0]) + (f.section.a + 0.5 * self.part.outer) * f.u
+        centre[2] = f.floor_z + 0.5 * self.part.outer
+        return replace(f, center=centre)
+
+    @property
+    def step(self) -> str:
+        """Name of the step in progress (or ``done``)."""
+        s = self.sequence
+        return s.steps[s.index].name if s.index < len(s.steps) else "done"
+
+    def tick(self) -> StepResult:
+        result = self.sequence.tick()
+        if result.status is Status.FAILURE:
+            return StepResult(Status.FAILURE, f"regrasp: {result.message}")
+        return result
+
+    def halt(self) -> None:
+        self.sequence.halt()
+
+
+__all__ = ["Regrasp", "RegraspOptions", "pinch_rotation", "upright_turn"]
