@@ -57,7 +57,14 @@ def add_parser(sub: Any) -> None:
         "success rate against l_a and alpha. Trial i of every part uses seed S+i, as "
         "`cell pivot` does, so the results equal a serial run's.",
     )
-    p.add_argument("--part", nargs="+", required=True, metavar="NAME", help="catalogue parts")
+    p.add_argument(
+        "--part",
+        nargs="+",
+        action="extend",
+        required=True,
+        metavar="NAME",
+        help="catalogue parts, in table order (--part may also be repeated)",
+    )
     p.add_argument("--trials", type=int, required=True, help="trials per part (N >= 1)")
     p.add_argument(
         "--workers",
@@ -126,6 +133,8 @@ def prepare(args: argparse.Namespace) -> list[PartSweep]:
         raise UserError(f"--trials: must be >= 1, got {args.trials}")
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers: must be >= 1, got {args.workers}")
+    if args.address is not None:
+        _split_address(args.address)  # its form; whether it answers is for connect_ray
     seen: set[str] = set()
     for name in args.part:
         if name in seen:
