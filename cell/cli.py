@@ -337,6 +337,10 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.cell_cmds import add_parser as add_cell
 
     add_cell(sub)
+
+    from cell.soak_cmd import add_parser as add_soak
+
+    add_soak(sub)
     return parser
 
 

@@ -163,6 +163,33 @@ class LogSection(_Section):
     )
 
 
+def _rate(what: str) -> Any:
+    return Field(0.0, ge=0.0, le=1.0, description=f"probability per {what}")
+
+
+class FaultRates(_Section):
+    """Fault rates of the twin (``sim/faults.py``): each the probability that the fault happens
+    at one opportunity of its kind. One field per fault, so an unknown name is an error."""
+
+    missed_grasp: float = _rate("gripper close command (it is not executed)")
+    slip_in_tilt: float = _rate("Tilt (finger friction drops briefly; the part slips)")
+    drop_in_transit: float = _rate("carry between stations (the jaws open; the part falls)")
+    ft_spike: float = _rate("arm motion command (150-300 N for 1-3 samples)")
+    camera_lost: float = _rate("capture (TimeoutError)")
+    camera_invalid: float = _rate("capture (all-zero depth)")
+    gripper_fault: float = _rate("gripper command (fault() reports a code for 0.3-2 s)")
+    protective_stop: float = _rate("arm motion command (the arm faults, protective_stop=True)")
+    link_lost: float = _rate("arm motion command (the FT sensor raises DeviceError 5-50 samples)")
+
+
+class FaultsSection(_Section):
+    """Fault injection in the twin (`cell soak`; ignored on hardware)."""
+
+    enabled: bool = Field(False, description="inject the faults at `rates`")
+    seed: int = Field(0, ge=0, description="seed of the faults' generator")
+    rates: FaultRates = Field(default_factory=FaultRates)
+
+
 class CellConfig(_Section):
     """The whole task configuration. ``tree`` is a behaviour spec or ``{file: PATH}``."""
 
@@ -172,6 +199,7 @@ class CellConfig(_Section):
     workflow: WorkflowSection = Field(default_factory=WorkflowSection)
     safety: SafetySection = Field(default_factory=SafetySection)
     log: LogSection = Field(default_factory=LogSection)
+    faults: FaultsSection = Field(default_factory=FaultsSection)
     tree: dict[str, Any] = Field(
         default_factory=lambda: {"file": "trees/bushing_machining.yaml"},
         description="the behaviour tree: a node spec, or {file: PATH} relative to this file "

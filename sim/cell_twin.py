@@ -11,6 +11,7 @@ tree; it only goes into the run's report.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -190,6 +191,13 @@ class SimCellBackend:
         """Where every part is now, from the simulated state: in the bin, in the hand, in the
         slot, packed in the box, or elsewhere (on the floor: lost)."""
         out = {"in_bin": 0, "in_hand": 0, "in_slot": 0, "packed": 0, "on_floor": 0}
+        for _, where in self.parts_where():
+            out[where] += 1
+        return out
+
+    def parts_where(self) -> list[tuple[PartBody, str]]:
+        """Each part with its place (the keys of :meth:`account`), from the simulated state."""
+        out: list[tuple[PartBody, str]] = []
         x0, x1, y0, y1 = self.layout.bin_interior()
         tx0, tx1, ty0, ty1 = self.layout.tray_interior()
         slot = np.asarray(self.layout.slot_center, float)
@@ -203,19 +211,54 @@ class SimCellBackend:
                 for link in fingers
             )
             if held and b.lowest_z() > 0.005:
-                out["in_hand"] += 1
+                where = "in_hand"
             elif (
                 float(np.max(np.abs(pos[:2] - slot[:2]))) < 0.5 * self.layout.slot_width
                 and b.lowest_z() < slot[2] + 0.01
             ):
-                out["in_slot"] += 1
+                where = "in_slot"
             elif tx0 <= pos[0] <= tx1 and ty0 <= pos[1] <= ty1:
-                out["packed"] += 1
+                where = "packed"
             elif x0 <= pos[0] <= x1 and y0 <= pos[1] <= y1:
-                out["in_bin"] += 1
+                where = "in_bin"
             else:
-                out["on_floor"] += 1
+                where = "on_floor"
+            out.append((b, where))
         return out
+
+    # --------------------------------------------------- hooks for `cell soak` (sim/faults.py)
+    def wrap_devices(self, wrap: Callable[[Devices], Devices]) -> Devices:
+        """Put the devices behind ``wrap`` (fault injection): what the cell is handed from now."""
+        self.devices = wrap(self.devices)
+        return self.devices
+
+    def remove_part(self, body: PartBody) -> None:
+        """A person takes the part out of the cell (it leaves the world, recorded by the
+        caller); the only way a part leaves other than by physics."""
+        self.world.p.removeBody(body.body_id)
+        self.bodies = [b for b in self.bodies if b.body_id != body.body_id]
+        self.packed_bodies = [i for i in self.packed_bodies if i != body.body_id]
+
+    def refill_bin(self, count: int, seed: int) -> list[PartBody]:
+        """A person tips ``count`` new parts into the empty bin: spawned lying where the pivot
+        reaches (:func:`spawn_spots`, seeded), then left to settle for 0.3 s."""
+        rng = np.random.default_rng(seed)
+        o = self.options
+        spots = spawn_spots(self.layout, self.part, count, rng, o.position_jitter, o.yaw_spread)
+        new = [
+            spawn_part(
+                self.world,
+                self.part,
+                lying_pose(self.part, x, y, yaw),
+                lateral_friction=1.0,
+                sleep_threshold=0.05,
+            )
+            for x, y, yaw in spots
+        ]
+        self.bodies.extend(new)
+        for _ in range(int(0.3 / self.world.settings.control_dt)):
+            self.world.step()
+        return new
 
     @property
     def clock(self):  # type: ignore[no-untyped-def]
