@@ -234,6 +234,10 @@ def connect_ray(address: str | None, workers: int | None, timeout: float | None 
     if failure:
         first = str(failure[0]).strip().splitlines()
         why = first[0] if first else type(failure[0]).__name__
+        if "RAY_AUTH_MODE" not in os.environ:
+            # Ray >= 2.5x clusters started by `ray start` demand a token, but a driver given an
+            # explicit address only sends one when asked to; the refusal does not say so.
+            why += " (if the cluster uses token authentication: set RAY_AUTH_MODE=token)"
         raise UserError(f"--address {address}: cannot connect to a Ray cluster there: {why}")
     return True
 
@@ -567,7 +571,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
             where = "local Ray instance" if args.address is None else f"Ray cluster {args.address}"
             cluster = f"{where}, {cpus} CPUs"
             print(
-                f"{cluster}: {len(runnable) * args.trials} trials of {len(runnable)} parts",
+                f"{cluster}: {len(runnable) * args.trials} trials of {len(runnable)} "
+                + ("part" if len(runnable) == 1 else "parts"),
                 flush=True,
             )
             wall = run_sweep(rows, args.trials, args.seed, args.workers)

@@ -220,9 +220,28 @@ def test_failed_handshake_is_one_line_naming_the_address(monkeypatch: pytest.Mon
     monkeypatch.setattr(cell.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.setenv("RAY_AUTH_MODE", "token")
     with pytest.raises(UserError) as info:
         cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
     assert str(info.value) == (
         "--address 10.1.2.3:6379: cannot connect to a Ray cluster there: "
         "Failed to connect to Ray cluster at 10.1.2.3:6379"
     )
+
+
+def test_a_refused_handshake_hints_at_token_authentication(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Clusters from `ray start` want a token that a driver with an explicit address sends only
+    with RAY_AUTH_MODE=token; Ray's own refusal does not say so."""
+    import ray
+
+    def refuse(**kw: object) -> None:
+        raise ConnectionError("Failed to connect to Ray cluster at 10.1.2.3:6379")
+
+    monkeypatch.setattr(cell.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
+    with pytest.raises(UserError, match="set RAY_AUTH_MODE=token"):
+        cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
