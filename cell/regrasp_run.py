@@ -199,6 +199,32 @@ class GripperProbe:
 
 
 # ------------------------------------------------------------------------ regrasp trial
+#: m, horizontally, from the TCP back to the far side of the UR5's wrist links when the tool
+#: points forward and 20 deg down (the twin's UR5: TCP 0.1775 m past the flange, wrist 1 about
+#: 0.2 m further). Below about 40 deg the wrist hangs at the TCP's height, under the bin's wall.
+WRIST_BEHIND = 0.373
+LOW_WRIST_TILT = math.radians(40.0)
+
+
+def place_for_wrist(setup: TrialSetup, regrasp: Regrasp) -> tuple[float, float] | None:
+    """Where to stand the part so that the low wrist stays inside the bin (None: where it was
+    pinched is fine). Only a shallow pinch (long, wide parts) needs it: the wrist of a steep
+    one rides above the wall."""
+    if regrasp.tilt >= LOW_WRIST_TILT:
+        return None
+    x_min = setup.layout.bin_interior()[0]
+    u = regrasp.frame.u[:2]
+    need = x_min + WRIST_BEHIND * math.cos(regrasp.tilt) / math.cos(math.radians(20.0)) + 0.02
+    axis = regrasp.standing_axis
+    if axis[0] >= need or abs(u[0]) < 1e-6:
+        return None
+    shift = (need - axis[0]) / u[0]
+    x_max = setup.layout.bin_interior()[1]
+    if axis[0] + shift * u[0] + 0.5 * setup.part.outer > x_max:
+        return None
+    return (float(axis[0] + shift * u[0]), float(axis[1] + shift * u[1]))
+
+
 @dataclass
 class RegraspResult(TrialResult):
     """A :class:`TrialResult` of the baseline; ``grip_offset``: m of the pinch off centre."""
@@ -260,6 +286,11 @@ def run_regrasp_trial(
         t_end = world.clock.now() + setup.max_time
         frame = setup.frame()
         regrasp = Regrasp(frame, setup.part, params, dev, options)
+        if options is None or options.place_xy is None:
+            place = place_for_wrist(setup, regrasp)
+            if place is not None:
+                opts = dataclasses.replace(options or RegraspOptions(), place_xy=place)
+                regrasp = Regrasp(frame, setup.part, params, dev, opts)
         phases = [
             ("regrasp", regrasp),
             ("align", Align(regrasp.standing_frame, setup.part, params, dev)),

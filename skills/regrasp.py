@@ -76,6 +76,13 @@ class RegraspOptions:
     #: +1 or -1: the closing line along ``+-normal``. -1 keeps wrist 3 near 0 rad through the
     #: whole maneuver (+1 takes it to about -3.4 rad, nearer its +-2 pi limit).
     closing_sign: int = -1
+    #: N per finger of the pinch; None: ``hold_force``. The pads touch the round wall on a
+    #: narrow strip, which resists the part turning about the closing line only weakly: the
+    #: turn's angular acceleration (3 rad/s^2 at the shared 0.3 m/s^2 limit) must not spin it.
+    pinch_force: float | None = 40.0
+    #: (x, y) m, world: where to stand the part; None: where it was pinched. The part is carried
+    #: there at the lift height before it is turned (the wrist then swings in over the bin).
+    place_xy: tuple[float, float] | None = None
     tip_floor_clearance: float = 0.005  #: m, the lowest fingertip corner above the floor
     #: m from the part's centre towards the open end where the pads pinch; None: the least that
     #: keeps the TCP ``min_place_height`` above the floor when the part stands.
@@ -163,17 +170,23 @@ class Regrasp:
         lift_z = floor + max(swing + o.turn_clearance, o.min_place_height)
         lift_z = max(lift_z, self.grasp.position[2])
         lifted = Pose(np.array([*self.grasp.position[:2], lift_z]), rot)
+        # The TCP's place: the standing axis lands on place_xy (the turn moves it off the TCP).
+        xy = self.grasp.position[:2] if o.place_xy is None else (
+            np.asarray(o.place_xy, float) - rel_centre[:2]
+        )
+        carried = Pose(np.array([*xy, lift_z]), rot)
         turned_rot = turn @ rot
-        turned = Pose(lifted.position, turned_rot)
+        turned = Pose(carried.position, turned_rot)
         place_z = floor + bottom_below + o.place_gap
         self.place_z = floor + bottom_below  #: TCP height with the part standing on the floor
-        above_floor = Pose(np.array([*self.grasp.position[:2], place_z]), turned_rot)
+        above_floor = Pose(np.array([*xy, place_z]), turned_rot)
         down = Pose(
             above_floor.position - (o.place_gap + o.place_overshoot) * frame.up, turned_rot
         )
-        self.standing_axis: NDArray[np.float64] = (self.grasp.position + rel_centre)[:2].copy()
+        self.standing_axis: NDArray[np.float64] = (xy + rel_centre[:2]).copy()
         g = p.guard
         st: dict[str, Pose] = {}
+        pinch_force = p.hold_force if o.pinch_force is None else o.pinch_force
 
         self._contact = ContactMove(
             "set down on the floor",
@@ -187,7 +200,10 @@ class Regrasp:
 
         def carry() -> None:
             # One profile over lift, turn and descent: the arm does not stop at the waypoints.
-            arm.move_path([lifted, turned, above_floor], 2 * p.approach_speed, p.acceleration)
+            waypoints = [lifted, turned, above_floor]
+            if o.place_xy is not None:
+                waypoints.insert(1, carried)
+            arm.move_path(waypoints, 2 * p.approach_speed, p.acceleration)
 
         def floor_felt() -> str | None:
             if not self._contact.contact:
@@ -234,7 +250,7 @@ class Regrasp:
                 dev.grip(
                     "pinch across the diameter",
                     g,
-                    lambda: gripper.close(p.hold_force),
+                    lambda: gripper.close(pinch_force),
                     settle=0.3,
                 ),
                 check("part in the pinch", dev, g, pinched),
