@@ -5,35 +5,38 @@ takes the hole grasp on the standing part exactly as it does after the pivot's T
 Why a baseline: the paper's claim for the pivot is that it reaches the hole grasp with less
 motion than picking the part, turning it and regrasping it. The comparison is fair only if the
 baseline runs under the same limits -- the pivot's ``approach_speed`` (and twice it for moves
-through free space, as the pivot's own free moves), ``acceleration``, guards, grip force -- and
-ends in the same hole grasp taken by the same :class:`Align`.
+through free space and for carrying, as the pivot's own free moves), ``acceleration``, guards
+-- and ends in the same hole grasp taken by the same :class:`Align`.
 
 Geometry (the lying part's :class:`PivotFrame`: axis ``u`` towards the open end, ``normal =
 up x u``):
 
-1. fingers straight down (tool ``z = -up``), closing line ``x`` along ``+normal`` (tool ``y =
-   u``), the jaws open by ``wall_gap`` on each side of the outer diameter; the TCP on the part's
-   axis ``grip_offset`` from its centre towards the open end (the pads on the outer wall at its
-   widest, fingertips kept ``floor_clearance`` off the floor); go down, pinch with
-   ``hold_force``;
+1. the closing line along ``closing_sign * normal``, the fingers down but leaning back towards
+   the robot by ``pinch_tilt`` about the closing line (the pads still lie flat on the sides of
+   the wall, so it is the same pinch across the outer diameter), the jaws open by ``wall_gap``
+   a side; the TCP on the part's axis at its centre (``grip_offset``), at the height of the
+   widest chord, the lowest fingertip corner ``tip_floor_clearance`` off the floor; approach
+   along the fingers, pinch with ``pinch_force``;
 2. one path, no stop between its waypoints: lift until the part can swing clear of the floor,
-   turn the tool by 90 deg about ``-normal`` through the TCP -- the only turn that brings ``u``
-   to ``up`` (open end up) with the pinch line kept horizontal; the fingers end pointing along
-   ``+u``, away from the robot (the UR5's wrist pitches forward, the pose it reaches in; the
-   other way round the wrist would have to fold back over the arm) -- and down until the part's
-   bottom is ``place_gap`` above the floor;
+   (carry it to ``place_xy`` if given), turn the tool by 90 deg about ``-normal`` through the
+   TCP -- the short way that brings ``u`` to ``up``, open end up -- and go down until the
+   part's bottom is ``place_gap`` above the floor;
 3. zero the wrist sensor (the tool's own weight now pulls sideways in the tool frame) and go
-   down at half the approach speed until the floor pushes back ``contact_force`` (a guarded
-   contact move; arriving ``place_overshoot`` below the floor without feeling it fails);
+   down at half the approach speed (Align's descent speed) until the floor pushes back
+   ``contact_force`` (a guarded contact move; arriving ``place_overshoot`` below the floor
+   without feeling it fails);
 4. open by ``wall_gap`` a side, back the fingers off the part along the tool axis, rise and
    turn fingers-down to just below where Align's wrist camera will look from (Align first
    draws the fingers back ``approach_distance``, which lands on that view), zero the sensor
    again (nothing held, fingers down: the state Align's guards assume).
 
-Why ``grip_offset``: standing, the part is held at the height of the pinch with the tool
-horizontal, and the wrist sensor (75 mm across) hangs 37.5 mm below the tool axis; pinched at
-its centre a 68 mm bushing would put the sensor into the floor. The pinch moves just far enough
-towards the open end to keep the TCP ``min_place_height`` above the floor.
+Why the lean: standing, the tool's axis is the pinch's turned by 90 deg, i.e. ``pinch_tilt``
+below horizontal, pointing away from the robot. With a horizontal tool (no lean) the UR5's
+wrist links hang at the TCP's height, below the floor for a bushing pinched at its centre; at
+55 deg they ride 0.1 m higher, above the bin's 80 mm wall, and every joint stays well inside
++-2 pi (wrist 3 near 0 rad with ``closing_sign = -1``). The lean is limited by the gripper body,
+which must clear the lying part: a long, wide part (the cookie can) gets 20 deg, and then its
+wrist is low and must stay inside the bin (``place_xy``, chosen by the trial runner).
 
 After SUCCESS :meth:`Regrasp.standing_frame` is the frame to give :class:`Align`: its predicted
 axis is where the TCP set the part down.
