@@ -32,6 +32,7 @@ import sys
 import time
 import traceback
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -111,7 +112,8 @@ def abort_key(reason: str) -> str:
     abort``."""
     leaf = reason.split(":", 1)[0].strip() if ":" in reason else ""
     kinds = (
-        ("force-torque sensor lost", "force-torque sensor lost (link)"),
+        ("link loss", "force-torque link lost"),
+        ("force-torque sensor lost", "force-torque link lost"),
         ("force-torque abort", "force-torque abort"),
         ("force-torque guard", "force-torque guard"),
         ("protective stop", "protective stop"),
@@ -124,7 +126,8 @@ def abort_key(reason: str) -> str:
     low = reason.lower()
     for needle, kind in kinds:
         if needle in low:
-            return f"{leaf}: {kind}" if leaf and leaf not in kind else kind
+            prefix = bool(leaf) and "force-torque" not in leaf and leaf not in kind
+            return f"{leaf}: {kind}" if prefix else kind
     text = re.sub(r"-?\d+(\.\d+)?", "#", reason)
     return text[:100]
 
@@ -140,7 +143,11 @@ class Soak:
         fault_seed: int,
         cycles: int,
         quiet: bool = False,
+        on_twin: Callable[[Any], None] | None = None,
     ) -> None:
+        """``on_twin(injector)`` is called for each new twin, after its devices are wrapped
+        (tests force a fault at a known moment with it)."""
+        self.on_twin = on_twin
         self.first_prep = prep
         self.config, self.doc = prep.config, prep.doc
         self.rates, self.scene_seed, self.fault_seed = rates, scene_seed, fault_seed
@@ -185,9 +192,11 @@ class Soak:
         seed = self.scene_seed + 1000 * self.twins
         self.backend = open_backend(prep, seed=seed)
         self.injector = twin_injector(self.backend, self.rates, self.fault_seed + 7919 * self.twins)
-        self.backend.wrap_devices(self.injector.wrap)
+        prep.ctx.devices = self.backend.wrap_devices(self.injector.wrap)
         self.twins += 1
         self.spawned += len(self.backend.bodies)
+        if self.on_twin is not None:
+            self.on_twin(self.injector)
         self.filled, self.failures = set(), {}
 
     def _retire_twin(self) -> None:

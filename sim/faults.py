@@ -151,6 +151,7 @@ class FaultInjector:
         #: Every fault that took effect: ``{"fault", "t", "step", ...}``.
         self.log: list[dict[str, Any]] = []
         self.step = 0
+        self._forced: Counter[str] = Counter()
         self.arm: FaultyArm | None = None
         self.gripper: FaultyGripper | None = None
         self.ft: FaultyFT | None = None
@@ -185,10 +186,19 @@ class FaultInjector:
             self.arm.protective = None
 
     # -- drawing ---------------------------------------------------------------------------
+    def force(self, name: str, count: int = 1) -> None:
+        """The next ``count`` opportunities of ``name`` hit whatever its rate (for tests that
+        need one fault at a known moment)."""
+        check_rates({name: 0.0})
+        self._forced[name] += count
+
     def draw(self, name: str) -> bool:
         """One opportunity for ``name``: True when the fault happens (one uniform draw each)."""
         self.opportunities[name] += 1
         hit = bool(self.rng.random() < self.rates[name])
+        if self._forced[name] > 0:
+            self._forced[name] -= 1
+            hit = True
         if hit:
             self.drawn[name] += 1
         return hit
