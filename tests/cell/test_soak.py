@@ -1,0 +1,172 @@
+"""`cell soak` in the twin: the tree's answer to single injected faults, the person between runs,
+every part accounted from the simulated state, the faults configuration, and the CLI end to end."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from cell.config import config_from_text, load_config
+from trees.yaml_lines import ConfigError
+
+CONFIG = """\
+sim:
+  seed: 0
+  parts_in_bin: {parts}
+workflow:
+  machining_time_s: 0.5
+log:
+  tick_log: null
+  state_file: null
+  journal: null
+"""
+
+
+def _soak(cycles: int, on_twin: Callable[[Any], None], parts: int = 2) -> dict[str, Any]:
+    from cell.assemble import prepare
+    from cell.soak_cmd import Soak
+    from sim.faults import no_faults
+
+    config, doc = config_from_text(CONFIG.format(parts=parts))
+    prep = prepare(config, doc)
+    return Soak(prep, no_faults(), 0, 0, cycles, quiet=True, on_twin=on_twin).run()
+
+
+def _force(name: str) -> Callable[[Any], None]:
+    done = {"n": 0}
+
+    def on_twin(injector: Any) -> None:
+        if done["n"] == 0:
+            injector.force(name)
+        done["n"] += 1
+
+    return on_twin
+
+
+def _accounted(r: dict[str, Any]) -> None:
+    found = sum(r["parts"].values()) + sum(r["removed_by_operator"].values())
+    assert found + r["shipped"]["parts"] == r["spawned"] and r["unaccounted"] == 0
+
+
+def test_a_missed_grasp_is_put_back_and_retried() -> None:
+    r = _soak(1, _force("missed_grasp"))
+    assert r["faults"]["injected"]["missed_grasp"] == 1
+    assert any("closed on nothing" in k or "missed" in k for k in r["aborts_by_reason"])
+    assert r["cycles_done"] == 1 and r["judged_ok"].get("packed") == 1  # the retry packed it
+    assert r["unhandled_exceptions"] == 0 and r["operator_interventions"] == 0
+    _accounted(r)
+
+
+def test_a_lost_camera_frame_fails_the_look_and_the_retry_goes_on() -> None:
+    r = _soak(1, _force("camera_lost"))
+    assert r["faults"]["injected"]["camera_lost"] == 1
+    assert r["aborts_by_reason"].get("look: camera: no frame") == 1
+    assert r["cycles_done"] == 1 and r["unhandled_exceptions"] == 0
+    _accounted(r)
+
+
+def test_a_part_dropped_in_transit_falls_and_the_person_clears_it() -> None:
+    r = _soak(2, _force("drop_in_transit"), parts=2)
+    assert r["faults"]["injected"]["drop_in_transit"] == 1
+    assert r["stops_by_reason"], r["aborts_by_reason"]  # the cell stopped for a person
+    # The part fell out of the cell (the floor, or the machine's top): never into the box.
+    assert r["removed_by_operator"]["on_floor"] + r["removed_by_operator"]["in_slot"] >= 1
+    assert r["operator_interventions"] >= 1 and r["cycles_attempted"] == 2
+    assert r["cycles_done"] == 1  # after the reset the cell goes on and packs the other part
+    _accounted(r)
+
+
+def test_an_exception_escaping_the_tree_is_counted_and_a_fresh_twin_goes_on() -> None:
+    calls = {"twins": 0}
+
+    def on_twin(injector: Any) -> None:
+        calls["twins"] += 1
+        if calls["twins"] == 1:
+
+            def broken(*_: Any, **__: Any) -> None:
+                raise RuntimeError("driver bug")
+
+            injector.arm.inner.move_to = broken
+
+    r = _soak(1, on_twin, parts=1)
+    assert r["unhandled_exceptions"] == 1
+    assert "RuntimeError: driver bug" in r["exceptions"][0]["error"]
+    assert any("driver bug" in line for line in r["exceptions"][0]["traceback"])
+    assert r["twins"] == 2 and r["cycles_done"] == 1
+    _accounted(r)
+
+
+# ------------------------------------------------------------------------- configuration
+def test_faults_section_validates_names_and_rates(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("faults:\n  enabled: true\n  rates:\n    gremlins: 0.1\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(bad)
+    text = str(exc.value)
+    assert f"{bad}:4: faults.rates.gremlins: unknown key" in text and "missed_grasp" in text
+    bad.write_text("faults:\n  rates:\n    ft_spike: 1.5\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml:3: faults.rates.ft_spike: .*1.5"):
+        load_config(bad)
+    bad.write_text("faults:\n  rates:\n    ft_spike: -0.1\n")
+    with pytest.raises(ConfigError, match="faults.rates.ft_spike"):
+        load_config(bad)
+    config, _ = config_from_text("faults:\n  enabled: true\n  seed: 4\n  rates: {ft_spike: 1}\n")
+    assert config.faults.enabled and config.faults.seed == 4 and config.faults.rates.ft_spike == 1
+
+
+def test_cli_refuses_a_bad_faults_section(tmp_path: Path) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text("faults:\n  rates:\n    camera_lost: 1.5\n")
+    r = subprocess.run(
+        [sys.executable, "-m", "cell.cli", "soak", "--config", str(cfg), "--cycles", "1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2
+    assert "cell soak: error:" in r.stderr and "faults.rates.camera_lost" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+# ------------------------------------------------------------------------------ the CLI
+def test_cell_soak_two_cycles_end_to_end(tmp_path: Path) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(CONFIG.format(parts=2))
+    out = tmp_path / "soak.json"
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cell.cli",
+            "soak",
+            "--config",
+            str(cfg),
+            "--cycles",
+            "2",
+            "--faults",
+            "default",
+            "--seed",
+            "0",
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode in (0, 1), r.stderr
+    s = json.loads(out.read_text())
+    assert s["cycles"] == 2 and s["cycles_attempted"] >= 2
+    assert set(s["parts"]) == {"in_bin", "in_hand", "in_slot", "packed", "on_floor"}
+    assert s["unhandled_exceptions"] == len(s["exceptions"])
+    assert isinstance(s["aborts_by_reason"], dict)
+    assert s["faults"]["rates"]["missed_grasp"] == 0.03  # --faults default
+    assert sum(s["faults"]["opportunities"].values()) > 0
+    _accounted(s)
+    assert r.returncode == (0 if s["unhandled_exceptions"] == 0 else 1)
