@@ -408,56 +408,94 @@ def markdown_table(records: list[dict[str, Any]], header: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def spread(xs: list[float], step: float) -> list[float]:
+    """Positions at least ``step`` apart, each group of crowded points centred on its own mean
+    and kept in order: equal values (bushing and bottle share a plan, many rates are 100 %)
+    stay visible side by side, and nothing moves further than its group needs."""
+    order = sorted(range(len(xs)), key=lambda i: xs[i])
+    groups = [[i] for i in order]
+
+    def place(group: list[int]) -> list[float]:
+        centre = sum(xs[i] for i in group) / len(group)
+        return [centre + (k - 0.5 * (len(group) - 1)) * step for k in range(len(group))]
+
+    merged = True
+    while merged:
+        merged = False
+        for g in range(len(groups) - 1):
+            if place(groups[g])[-1] + step > place(groups[g + 1])[0] + 1e-12:
+                groups[g : g + 2] = [groups[g] + groups[g + 1]]
+                merged = True
+                break
+    out = [0.0] * len(xs)
+    for group in groups:
+        for i, x in zip(group, place(group), strict=True):
+            out[i] = x
+    return out
+
+
 def plot_success(path: Path, records: list[dict[str, Any]], title: str) -> Path:
     """Success rate (Wilson 95 % bars) against l_a and against alpha, one point per part, the
     paper's measurements as open markers (its l_a slid during the tilt for three parts: drawn as
-    a line from the grasp value to the final one)."""
+    an arrow from the grasp value to the final one)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    fig, axes = plt.subplots(1, 2, figsize=(11.5, 4.9), dpi=120, sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(11.5, 5.0), dpi=120, sharey=True)
     colors = plt.get_cmap("tab10")(np.arange(len(records)) % 10)
-    markers = "osD^vP*Xh<>"
-    n = len(records)
-    # Several parts share a plan (bushing and bottle) or a rate (100 %): each part is nudged
-    # sideways by its own small step, and the paper's point sits right of the twin's.
-    panels = ((axes[0], "l_a", 0.006, 0.01), (axes[1], "alpha_deg", 0.3, 0.6))
+    markers = "osD^vPXh<>p"
     handles = []
+    # (panel, x, x_end, rate %, lo %, hi %, part index, paper?) for every point to draw
+    points: dict[str, list[tuple[float, float, float, float, float, int, bool]]] = {
+        "l_a": [],
+        "alpha_deg": [],
+    }
     for i, r in enumerate(records):
-        col, mk = colors[i], markers[i % len(markers)]
-        nudge = i - 0.5 * (n - 1)
         label = r["part"] + ("  (refused: not run)" if r["status"] == "refused" else "")
-        handles.append(plt.Line2D([], [], color=col, marker=mk, ls="", markersize=7, label=label))
+        handles.append(
+            plt.Line2D([], [], color=colors[i], marker=markers[i % len(markers)], ls="", ms=7,
+                       label=label)
+        )  # fmt: skip
+        if r["status"] == "run":
+            bar = (100 * r["rate"], 100 * r["wilson_lo"], 100 * r["wilson_hi"])
+            points["l_a"].append((r["l_a"], r["l_a"], *bar, i, False))
+            points["alpha_deg"].append((r["alpha_deg"], r["alpha_deg"], *bar, i, False))
         paper_k = _paper_success(r["paper_success"])
-        la_paper = _paper_la(r["paper_l_a"])
-        for ax, key, step, side in panels:
-            if r["status"] == "run":
-                x = r[key] + nudge * step - side
-                y = 100 * r["rate"]
-                err = [[y - 100 * r["wilson_lo"]], [100 * r["wilson_hi"] - y]]
-                ax.errorbar(x, y, yerr=err, color=col, marker=mk, ms=7, capsize=4, lw=1.8, zorder=3)
-            if paper_k is None:
-                continue
-            if key == "l_a":
-                if la_paper is None:
-                    continue
-                xp, x_end = (v + nudge * step + side for v in la_paper)
-            else:
-                if r["paper_alpha_deg"] is None:
-                    continue
-                xp = x_end = r["paper_alpha_deg"] + nudge * step + side
-            yp = 100 * paper_k[0] / paper_k[1]
-            perr = [[yp - 100 * r["paper_wilson_lo"]], [100 * r["paper_wilson_hi"] - yp]]
+        if paper_k is None:
+            continue
+        bar = (
+            100 * paper_k[0] / paper_k[1],
+            100 * r["paper_wilson_lo"],
+            100 * r["paper_wilson_hi"],
+        )
+        la = _paper_la(r["paper_l_a"])
+        if la is not None:
+            points["l_a"].append((la[0], la[1], *bar, i, True))
+        if r["paper_alpha_deg"] is not None:
+            alpha = r["paper_alpha_deg"]
+            points["alpha_deg"].append((alpha, alpha, *bar, i, True))
+    moved = {}
+    for ax, key, step in ((axes[0], "l_a", 0.02), (axes[1], "alpha_deg", 1.1)):
+        pts = points[key]
+        xs = spread([p[0] for p in pts], step)
+        moved[key] = max((abs(x - p[0]) for x, p in zip(xs, pts, strict=True)), default=0.0)
+        for x, (x0, x_end, y, lo, hi, i, paper) in zip(xs, pts, strict=True):
+            col, mk = colors[i], markers[i % len(markers)]
+            style = (
+                {"ms": 8, "mfc": "white", "mew": 1.6, "capsize": 3, "lw": 0.9, "alpha": 0.85}
+                if paper
+                else {"ms": 7, "capsize": 4, "lw": 1.8}
+            )
             ax.errorbar(
-                xp, yp, yerr=perr, color=col, marker=mk, ms=8, mfc="white", mew=1.6,
-                capsize=3, lw=0.9, ls=":", alpha=0.85, zorder=4,
+                x, y, yerr=[[y - lo], [hi - y]], color=col, marker=mk, ls="",
+                zorder=4 if paper else 3, **style,
             )  # fmt: skip
-            if x_end != xp:
+            if x_end != x0:
                 ax.annotate(
-                    "", xy=(x_end, yp), xytext=(xp, yp),
+                    "", xy=(x_end + x - x0, y), xytext=(x, y),
                     arrowprops={"arrowstyle": "->", "color": col, "lw": 1.2, "alpha": 0.85},
                 )  # fmt: skip
     axes[0].set_xlabel("$l_a$ (grasp distance / part length)")
@@ -485,8 +523,8 @@ def plot_success(path: Path, records: list[dict[str, Any]], title: str) -> Path:
     fig.text(
         0.01,
         0.01,
-        "Points are set apart sideways (up to about 0.03 in $l_a$, 1.5 deg in alpha) so that "
-        "equal values stay visible; the paper's right of the twin's.",
+        "Crowded points are set apart sideways so that equal values stay visible (by at most "
+        f"{moved['l_a']:.3f} in $l_a$ and {moved['alpha_deg']:.1f} deg in alpha here).",
         fontsize=7,
         color="0.35",
     )

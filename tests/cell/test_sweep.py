@@ -245,3 +245,12 @@ def test_a_refused_handshake_hints_at_token_authentication(
     monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
     with pytest.raises(UserError, match="set RAY_AUTH_MODE=token"):
         cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
+
+
+def test_spread_keeps_crowded_points_apart_in_order_around_their_mean() -> None:
+    xs = [0.9, 0.5, 0.9, 0.9, 0.2]
+    out = cell.sweep_cmd.spread(xs, 0.02)
+    assert out[1] == 0.5 and out[4] == 0.2  # alone: not moved
+    crowd = [out[0], out[2], out[3]]
+    assert crowd == sorted(crowd) and sum(crowd) / 3 == pytest.approx(0.9)
+    assert min(b - a for a, b in zip(crowd, crowd[1:], strict=False)) == pytest.approx(0.02)
