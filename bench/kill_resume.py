@@ -1,6 +1,6 @@
 """Kill the simulated cell with SIGKILL at random moments and resume it, again and again.
 
-    python bench/kill_resume.py [--kills 50] [--parts 4] [--seed 0] [--out DIR]
+    python bench/kill_resume.py [--kills 50] [--parts 8] [--seed 0] [--out DIR]
 
 Each round starts `cell sim --resume` (the first without --resume), lets it run a random
 0.5-8 s of wall time (start-up included, so some kills land before the tree runs, some in the
@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cell.journal import Journal, JournalError, Resume  # noqa: E402
 
 CONFIG = """\
+cell: {{layout: {{bin_inner_size: [0.50, 0.44]}}}}
 sim: {{seed: {seed}, parts_in_bin: {parts}}}
 workflow: {{machining_time_s: 1, cycles: {parts}}}
 log: {{tick_log: {out}/ticks.jsonl, state_file: {out}/state.json, journal: {out}/journal.sqlite}}
@@ -36,7 +37,7 @@ log: {{tick_log: {out}/ticks.jsonl, state_file: {out}/state.json, journal: {out}
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kills", type=int, default=50)
-    ap.add_argument("--parts", type=int, default=4)
+    ap.add_argument("--parts", type=int, default=8, help="parts in the bin (at most 10)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path("out/kill_resume"))
     args = ap.parse_args()
@@ -56,7 +57,7 @@ def main() -> int:
         )
         try:
             proc.wait(timeout=rng.uniform(0.5, 8.0))
-            finished_early += 1  # it ran to the end before the kill: start over is fine
+            finished_early += 1  # it ran to the end (or had nothing left) before the kill
         except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGKILL)
             proc.wait()
@@ -73,8 +74,9 @@ def main() -> int:
         return 1
     kinds = [e["kind"] for e in events]
     parts = json.loads(final.read_text())["parts"] if final.exists() else None
-    print(f"{args.kills} SIGKILLs in {time.monotonic() - t0:.0f} s wall, {state.runs} runs, "
-          f"{finished_early} ended before their kill; final run exit {r.returncode}"
+    print(f"{args.kills - finished_early} SIGKILLs landed ({finished_early} runs ended before "
+          f"theirs) in {time.monotonic() - t0:.0f} s wall, {state.runs} runs journaled; final "
+          f"run exit {r.returncode}"
           + ("" if final.exists() else f" ({r.stdout.strip().splitlines()[-1:]})"))
     print(f"journal: {len(events)} events, fed {kinds.count('fed')}, packed "
           f"{kinds.count('packed')}, returned to the bin {kinds.count('returned_to_bin')}, "
