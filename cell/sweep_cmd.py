@@ -65,11 +65,14 @@ def add_parser(sub: Any) -> None:
         metavar="NAME",
         help="catalogue parts, in table order (--part may also be repeated)",
     )
-    p.add_argument("--trials", type=int, required=True, help="trials per part (N >= 1)")
+    p.add_argument(
+        "--trials", type=int, required=True, metavar="N", help="trials per part (N >= 1)"
+    )
     p.add_argument(
         "--workers",
         type=int,
         default=None,
+        metavar="K",
         help="trials run at once: the local Ray instance's CPUs (default: all cores), or at "
         "most this many tasks in flight on a cluster (default: as many as it schedules)",
     )
@@ -80,15 +83,23 @@ def add_parser(sub: Any) -> None:
         help="an existing Ray cluster's address (host:port of its head, as `ray start --head` "
         "prints); default: start a local Ray instance for this sweep",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of trial 0 of every part (0)")
+    p.add_argument(
+        "--seed", type=int, default=0, metavar="S", help="seed of trial 0 of every part (0)"
+    )
     p.add_argument(
         "--nominal",
         action="store_true",
         help="give the skills the part's nominal pose instead of looking with the wrist camera",
     )
-    p.add_argument("--out", type=Path, required=True, help="directory for the outputs")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
-    p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
+    p.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="directory for the outputs"
+    )
+    p.add_argument(
+        "--cell", type=Path, default=None, metavar="FILE", help="cell layout YAML (default layout)"
+    )
+    p.add_argument(
+        "--catalogue", type=Path, default=None, metavar="FILE", help="part catalogue YAML"
+    )
     p.set_defaults(func=cmd_sweep)
 
 
