@@ -213,6 +213,11 @@ def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) ->
             backend = SimCellBackend(prep.layout, prep.part, options, resume=resume)
         except ValueError as exc:
             raise prep.doc.error(("sim", "parts_in_bin"), str(exc).split(": ", 1)[-1]) from None
+        if config.faults.enabled:  # the twin meets the configured faults behind its devices
+            from sim.faults import twin_injector
+
+            injector = twin_injector(backend, config.faults.rates.model_dump(), config.faults.seed)
+            backend.wrap_devices(injector.wrap)
     prep.ctx.devices = backend.devices  # type: ignore[attr-defined]
     prep.ctx.machine = backend.machine  # type: ignore[attr-defined]
     prep.state.on_event.append(backend.judge)

@@ -20,7 +20,7 @@ from drivers.clock import Clock
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
-from skills.status import RUNNING, Status, StepResult
+from skills.status import RUNNING, SkillInputError, Status, StepResult
 
 
 @dataclass(frozen=True)
@@ -62,9 +62,10 @@ class GuardedMotion:
     def tick(self) -> StepResult:
         try:
             return self._tick()
-        except (DeviceError, TimeoutError) as exc:
-            # A device that stopped answering (a lost link, a stale FT stream, no camera frame):
-            # the motion cannot be guarded or finished. Stop the arm and say which device.
+        except (DeviceError, TimeoutError, SkillInputError) as exc:
+            # A device that stopped answering (a lost link, a stale FT stream, no camera frame,
+            # a frame with no valid depth): the step cannot be guarded or finished. Stop the arm
+            # and say why; the tree above decides whether to retry.
             try:
                 self.arm.stop()
             except DeviceError:

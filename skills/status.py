@@ -25,3 +25,9 @@ class StepResult:
 
 
 RUNNING = StepResult(Status.RUNNING)
+
+
+class SkillInputError(ValueError):
+    """What a skill was given cannot be used (a depth frame with no valid pixel, a frame of the
+    wrong shape). A guarded step that meets one fails with the reason instead of crashing the
+    tree: on a running cell a bad frame is an event to retry, not a bug."""

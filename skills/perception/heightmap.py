@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
+from skills.status import SkillInputError
 
 _UP = np.array([0.0, 0.0, 1.0])
 
@@ -33,7 +34,7 @@ def dot_last(a: NDArray[np.floating], w: NDArray[np.floating] | tuple[float, ...
     return out
 
 
-class PerceptionInputError(ValueError):
+class PerceptionInputError(SkillInputError):
     """A frame, intrinsics or model that perception cannot work with (named in the message)."""
 
 

@@ -170,7 +170,16 @@ def test_a_tree_file_is_read_relative_to_the_config_and_its_errors_name_it(tmp_p
 
 def test_schema_covers_every_section_and_the_registry_is_documented() -> None:
     s = schema()
-    assert set(s["properties"]) == {"cell", "sim", "devices", "workflow", "safety", "log", "tree"}
+    assert set(s["properties"]) == {
+        "cell",
+        "sim",
+        "devices",
+        "workflow",
+        "safety",
+        "log",
+        "tree",
+        "faults",
+    }
     readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     for name in REGISTRY:
         assert f"`{name}`" in readme, f"behaviour type {name} is not in the README"
