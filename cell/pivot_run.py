@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -149,14 +150,25 @@ class TrialResult:
         return dataclasses.asdict(self)
 
 
-def run_trial(
-    setup: TrialSetup,
-    seed: int,
-    on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
-    frame_every: int = 6,
-    close_gripper_anyway: bool = True,
-) -> TrialResult:
-    """One perturbed trial, judged from the simulated state."""
+@dataclass
+class TrialWorld:
+    """A trial's world, built and perturbed: what both the pivot and the regrasp trials use."""
+
+    world: SimWorld
+    cell: Any
+    robot: SimRobot
+    body: Any  #: the part's body
+    params: PivotParams
+    dev: Devices
+    true_pose: dict[str, float]
+    frictions: dict[str, float]
+    mass: float
+    wall0: float
+
+
+def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
+    """Draw the trial's perturbation from ``seed`` (always in the same order, so every method
+    meets the same part) and build the world; the caller closes ``world``."""
     wall0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     pert = setup.perturbation
@@ -185,7 +197,6 @@ def run_trial(
         for _ in range(int(0.3 / world.settings.control_dt)):  # let the part settle
             world.step()
         robot.ft.bias()
-
         assert setup.plan.l_a is not None and setup.plan.alpha is not None
         params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
         camera = SimCamera(
@@ -194,6 +205,74 @@ def run_trial(
             tool_T_camera=setup.layout.tool_T_camera(),  # the configured (calibrated) mount
         )
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
+    except Exception:
+        world.close()
+        raise
+    return TrialWorld(
+        world,
+        cell,
+        robot,
+        body,
+        params,
+        dev,
+        {"x": x, "y": y, "yaw": yaw},
+        {"S": mu_s, "H": mu_h, "G": mu_g},
+        true_part.mass,
+        wall0,
+    )
+
+
+def judge_trial(
+    tw: TrialWorld,
+    seed: int,
+    failure: str | None,
+    phase: str,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
+    frame_every: int = 6,
+) -> dict[str, Any]:
+    """Hold still, then judge the hole grasp from the simulated state: the fields of a
+    :class:`TrialResult` (the caller adds its own)."""
+    world, robot = tw.world, tw.robot
+    for _ in range(int(0.3 / world.settings.control_dt)):  # hold still, then judge
+        world.step()
+        if on_frame is not None and world.steps % frame_every == 0:
+            on_frame(world, robot)
+    tips = {name: robot.fingertip(name) for name in ("finger_a", "finger_b")}
+    verdict = judge(
+        world,
+        tw.body,
+        tw.cell.floor,
+        robot.body_id,
+        {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
+        tips,
+    )
+    success = failure is None and verdict.success
+    return {
+        "seed": seed,
+        "success": success,
+        "failure": None if success else (failure or verdict.failure),
+        "phase": phase,
+        "tilt_deg": verdict.tilt_deg,
+        "height_m": verdict.height_m,
+        "sim_time": world.clock.now(),
+        "wall_time": time.perf_counter() - tw.wall0,
+        "true_pose": tw.true_pose,
+        "frictions": tw.frictions,
+        "mass": tw.mass,
+    }
+
+
+def run_trial(
+    setup: TrialSetup,
+    seed: int,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
+    frame_every: int = 6,
+    close_gripper_anyway: bool = True,
+) -> TrialResult:
+    """One perturbed trial, judged from the simulated state."""
+    tw = open_trial_world(setup, seed)
+    world, robot, params, dev = tw.world, tw.robot, tw.params, tw.dev
+    try:
         failure: str | None = None
         phase_name = "done"
         t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
@@ -228,34 +307,8 @@ def run_trial(
                 break
         else:
             phase_name = "done"
-        for _ in range(int(0.3 / world.settings.control_dt)):  # hold still, then judge
-            world.step()
-            if on_frame is not None and world.steps % frame_every == 0:
-                on_frame(world, robot)
-        tips = {name: robot.fingertip(name) for name in ("finger_a", "finger_b")}
-        verdict = judge(
-            world,
-            body,
-            cell.floor,
-            robot.body_id,
-            {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
-            tips,
-        )
-        success = failure is None and verdict.success
-        return TrialResult(
-            seed=seed,
-            success=success,
-            failure=None if success else (failure or verdict.failure),
-            phase=phase_name,
-            tilt_deg=verdict.tilt_deg,
-            height_m=verdict.height_m,
-            sim_time=world.clock.now(),
-            wall_time=time.perf_counter() - wall0,
-            true_pose={"x": x, "y": y, "yaw": yaw},
-            frictions={"S": mu_s, "H": mu_h, "G": mu_g},
-            mass=true_part.mass,
-            perceived_pose=seen or None,
-        )
+        fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
+        return TrialResult(**fields, perceived_pose=seen or None)
     finally:
         world.close()
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -34,13 +33,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cell.pivot_run import TrialResult, TrialSetup, _run_skill
+from cell.pivot_run import (
+    TrialResult,
+    TrialSetup,
+    _run_skill,
+    judge_trial,
+    open_trial_world,
+)
 from drivers.arm import MotionState
 from drivers.pose import Pose
-from sim.camera import SimCamera
-from sim.cell_layout import build_cell
-from sim.judge import judge
-from sim.part_body import lying_pose, spawn_part
 from sim.robot import SimRobot
 from sim.robot_model import (
     FINGER_LENGTH,
@@ -51,8 +52,7 @@ from sim.robot_model import (
     GRIPPER_BODY_SIZE,
 )
 from sim.world import SimWorld
-from skills.motion import Devices
-from skills.pivot import Align, PivotParams
+from skills.pivot import Align
 from skills.regrasp import Regrasp, RegraspOptions
 
 VOXEL = 0.005  #: m, edge of the swept-volume grid's voxels
@@ -245,44 +245,9 @@ def run_regrasp_trial(
     order from ``numpy.random.default_rng(seed)``; the skills get the nominal pose (the
     comparison is of manipulation, not perception: ``setup.perceive`` is ignored).
     """
-    wall0 = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    pert = setup.perturbation
-
-    def jitter(value: float, rel: float) -> float:
-        return value * (1.0 + rng.uniform(-rel, rel))
-
-    mu_s = jitter(setup.frictions.mu_s, pert.friction)
-    mu_h = jitter(setup.frictions.mu_h, pert.friction)
-    mu_g = jitter(setup.frictions.mu_g, pert.friction)
-    if setup.mu_ground is not None:
-        mu_g = setup.mu_ground
-    true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
-    nominal = setup.nominal_center()
-    x = nominal[0] + rng.uniform(-pert.position, pert.position)
-    y = nominal[1] + rng.uniform(-pert.position, pert.position)
-    yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
-
-    world = SimWorld(seed=seed, settings=setup.physics)
+    tw = open_trial_world(setup, seed)
+    world, robot, params, dev = tw.world, tw.robot, tw.params, tw.dev
     try:
-        cell = build_cell(world, setup.layout, floor_friction=mu_g)
-        robot = SimRobot(world)
-        # finger_a (tool +x) ends on the outer wall in the hole grasp, finger_b in the hole: the
-        # same finger frictions as the pivot's S and H fingers.
-        robot.gripper.set_finger_friction(mu_s, mu_h)
-        body = spawn_part(world, true_part, lying_pose(true_part, x, y, yaw), lateral_friction=1.0)
-        for _ in range(int(0.3 / world.settings.control_dt)):  # let the part settle
-            world.step()
-        robot.ft.bias()
-
-        assert setup.plan.l_a is not None and setup.plan.alpha is not None
-        params = PivotParams(l_a=setup.plan.l_a, alpha=setup.plan.alpha, **setup.params)
-        camera = SimCamera(
-            world,
-            lambda: robot.world_pose(robot.arm.tool_pose()),
-            tool_T_camera=setup.layout.tool_T_camera(),
-        )
-        dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
         t_end = world.clock.now() + setup.max_time
         frame = setup.frame()
         regrasp = Regrasp(frame, setup.part, params, dev, options)
@@ -303,35 +268,8 @@ def run_regrasp_trial(
                 break
         else:
             phase_name = "done"
-        for _ in range(int(0.3 / world.settings.control_dt)):  # hold still, then judge
-            world.step()
-            if on_frame is not None and world.steps % frame_every == 0:
-                on_frame(world, robot)
-        tips = {name: robot.fingertip(name) for name in ("finger_a", "finger_b")}
-        verdict = judge(
-            world,
-            body,
-            cell.floor,
-            robot.body_id,
-            {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
-            tips,
-        )
-        success = failure is None and verdict.success
-        return RegraspResult(
-            seed=seed,
-            success=success,
-            failure=None if success else (failure or verdict.failure),
-            phase=phase_name,
-            tilt_deg=verdict.tilt_deg,
-            height_m=verdict.height_m,
-            sim_time=world.clock.now(),
-            wall_time=time.perf_counter() - wall0,
-            true_pose={"x": x, "y": y, "yaw": yaw},
-            frictions={"S": mu_s, "H": mu_h, "G": mu_g},
-            mass=true_part.mass,
-            perceived_pose=None,
-            grip_offset=regrasp.grip_offset,
-        )
+        fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
+        return RegraspResult(**fields, perceived_pose=None, grip_offset=regrasp.grip_offset)
     finally:
         world.close()
 
