@@ -120,17 +120,7 @@ class SimCellBackend:
             if resume is not None:
                 spots = self._rebuild(resume, spots)
             for x, y, yaw in spots:
-                # Resting parts may sleep: without it the solver's jitter creeps a packed part
-                # about 1 mm a minute, which over ten cycles would open the box's gaps.
-                self.bodies.append(
-                    spawn_part(
-                        world,
-                        part,
-                        lying_pose(part, x, y, yaw),
-                        lateral_friction=1.0,
-                        sleep_threshold=0.05,
-                    )
-                )
+                self.bodies.append(self._spawn(lying_pose(part, x, y, yaw)))
             for _ in range(int(0.3 / world.settings.control_dt)):  # let the parts settle
                 world.step()
             robot.ft.bias()
@@ -152,7 +142,7 @@ class SimCellBackend:
         """Spawn what left the bin where the journal says it is; the bin's spots still full."""
         from sim.part_body import upright_pose
 
-        world, layout, part = self.world, self.layout, self.part
+        layout, part = self.layout, self.part
         taken = list(resume.picked_from)
         if resume.in_hand and taken:
             taken.pop()  # the part in the hand at the crash is back in the bin
@@ -164,28 +154,18 @@ class SimCellBackend:
         places = layout.packing_places(part.outer)
         for i in resume.filled:
             px, py, pz = places[i]
-            self._packed_at_start.append(
-                spawn_part(
-                    world,
-                    part,
-                    upright_pose(part, px, py, pz),
-                    lateral_friction=1.0,
-                    sleep_threshold=0.05,
-                )
-            )
+            self._packed_at_start.append(self._spawn(upright_pose(part, px, py, pz)))
         self.bodies.extend(self._packed_at_start)
         if resume.slot != "empty":
             sx, sy, sz = layout.slot_center
-            self.bodies.append(
-                spawn_part(
-                    world,
-                    part,
-                    upright_pose(part, sx, sy, sz),
-                    lateral_friction=1.0,
-                    sleep_threshold=0.05,
-                )
-            )
+            self.bodies.append(self._spawn(upright_pose(part, sx, sy, sz)))
         return left
+
+    def _spawn(self, pose: Any) -> PartBody:
+        """A part of the cell's kind at ``pose``. Resting parts may sleep: without it the
+        solver's jitter creeps a packed part about 1 mm a minute, which over ten cycles would
+        open the box's gaps."""
+        return spawn_part(self.world, self.part, pose, lateral_friction=1.0, sleep_threshold=0.05)
 
     def account(self) -> dict[str, int]:
         """Where every part is now, from the simulated state: in the bin, in the hand, in the
@@ -245,16 +225,7 @@ class SimCellBackend:
         rng = np.random.default_rng(seed)
         o = self.options
         spots = spawn_spots(self.layout, self.part, count, rng, o.position_jitter, o.yaw_spread)
-        new = [
-            spawn_part(
-                self.world,
-                self.part,
-                lying_pose(self.part, x, y, yaw),
-                lateral_friction=1.0,
-                sleep_threshold=0.05,
-            )
-            for x, y, yaw in spots
-        ]
+        new = [self._spawn(lying_pose(self.part, x, y, yaw)) for x, y, yaw in spots]
         self.bodies.extend(new)
         for _ in range(int(0.3 / self.world.settings.control_dt)):
             self.world.step()
