@@ -10,8 +10,8 @@ cycles, and whether any part is ever lost track of. It runs the tree of ``cell s
 in runs of at most the free box places, and between runs plays the person at the cell:
 
 * the bin is empty: tip in ``sim.parts_in_bin`` new parts;
-* the box is full (or holds a part the tree did not record): ship it (its parts are counted as
-  ``shipped``) and put in an empty one;
+* the box is full, holds a part the tree did not record, or blocked a packing: ship it (its
+  parts are counted as ``shipped``) and put in an empty one;
 * after every run: take out the parts in the hand, in the slot and on the floor (recorded in
   ``removed_by_operator`` by where they were, never moved into the box), open the jaws and jog
   the arm home, clear every pending fault (a reset);
@@ -312,7 +312,11 @@ class Soak:
                 self.removed[place] += 1
                 acted = True
         in_box = [b for b, place in where if place == "packed"]
-        if len(self.filled) >= self.places or len(in_box) != len(self.filled):
+        # A packing that stopped because the box was in the way (a packed part pushed out of
+        # its place by an earlier abort): the person sees a box that needs sorting and ships
+        # it, as for a full one; otherwise every later packing would stop at the same spot.
+        blocked = "clear way down" in (info.get("stop_reason") or "")
+        if len(self.filled) >= self.places or len(in_box) != len(self.filled) or blocked:
             for body in in_box:
                 backend.remove_part(body)
             self.shipped += len(in_box)
