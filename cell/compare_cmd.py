@@ -176,23 +176,11 @@ def format_table(summary: dict[str, Any]) -> str:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     from cell.cli import UserError, _write_json
-    from cell.pivot_cmd import PivotInputError, build_setup
+    from cell.pivot_cmd import PivotInputError, build_setup, pivot_args
     from sim.robot_model import FINGER_TRAVEL
     from skills.pivot import PivotParams
 
-    ns = argparse.Namespace(
-        trials=args.trials,
-        jobs=1,
-        mu_ground=None,
-        record=None,
-        catalogue=args.catalogue,
-        part=args.part,
-        cell=args.cell,
-        force=False,
-        la=None,
-        alpha=None,
-        nominal=True,
-    )
+    ns = pivot_args(args.part, args.trials, args.catalogue, args.cell, nominal=True)
     try:
         setup, _plan, _forced = build_setup(ns)
     except PivotInputError as exc:

@@ -92,6 +92,17 @@ def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
     return run_trial(setup, seed)
 
 
+def pivot_args(
+    part: str, trials: int, catalogue: Path | None, cell: Path | None, nominal: bool
+) -> argparse.Namespace:
+    """The arguments ``cell pivot`` would get for one part, so other commands (sweep, compare)
+    reuse its checks and setup unchanged: one source of truth for what a trial is."""
+    return argparse.Namespace(
+        part=part, trials=trials, jobs=1, mu_ground=None, record=None, catalogue=catalogue,
+        cell=cell, nominal=nominal, force=False, la=None, alpha=None,
+    )
+
+
 def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     """Everything checked, nothing simulated: the trial setup, the plan, whether forced."""
     from cell.pivot_run import TrialSetup

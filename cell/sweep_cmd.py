@@ -119,21 +119,9 @@ class PartSweep:
 
 
 def _pivot_namespace(args: argparse.Namespace, part: str) -> argparse.Namespace:
-    """The arguments ``cell pivot`` would get for this part, so its checks and setup are reused
-    unchanged (one source of truth for what a trial is)."""
-    return argparse.Namespace(
-        part=part,
-        trials=args.trials,
-        jobs=1,
-        mu_ground=None,
-        record=None,
-        catalogue=args.catalogue,
-        cell=args.cell,
-        nominal=args.nominal,
-        force=False,
-        la=None,
-        alpha=None,
-    )
+    from cell.pivot_cmd import pivot_args
+
+    return pivot_args(part, args.trials, args.catalogue, args.cell, args.nominal)
 
 
 def prepare(args: argparse.Namespace) -> list[PartSweep]:
