@@ -27,6 +27,7 @@ spawned less those found anywhere (in a twin, removed by the person, or shipped)
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import sys
 import time
@@ -39,6 +40,9 @@ from typing import Any
 from trees.yaml_lines import ConfigError
 
 PLACES = ("in_bin", "in_hand", "in_slot", "packed", "on_floor")
+#: Seed distance between shards of a ``--workers`` soak: far beyond the seeds one shard draws
+#: (scene seed + 1000 per twin + 7 per refill; fault seed + 7919 per twin).
+SHARD_SEED_STEP = 10_000_019
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -63,6 +67,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--seed", type=int, default=None, help="seed of the bin scenes and the faults"
     )
     p.add_argument("--json", type=Path, default=None, help="write the results as JSON")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="split the cycles into this many shards, each its own cell (twin) in its own "
+        "process; shard k seeds its scenes and faults with S + %d*k, so shard 0 is the serial "
+        "run (default: 1)" % SHARD_SEED_STEP,
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=cmd_soak)
 
@@ -92,10 +104,16 @@ def cmd_soak(args: argparse.Namespace) -> int:
         rates = no_faults()
     else:
         rates = config.faults.rates.model_dump()
+    if args.workers < 1:
+        raise UserError(f"--workers: must be >= 1, got {args.workers}")
     scene_seed = config.sim.seed if args.seed is None else args.seed
     fault_seed = config.faults.seed if args.seed is None else args.seed
-    soak = Soak(prep, rates, scene_seed, fault_seed, args.cycles, quiet=args.quiet)
-    result = soak.run()
+    if args.workers == 1:
+        result = Soak(prep, rates, scene_seed, fault_seed, args.cycles, quiet=args.quiet).run()
+    else:
+        result = run_shards(
+            args.config, rates, scene_seed, fault_seed, args.cycles, args.workers, args.quiet
+        )
     _print(result)
     if args.json is not None:
         _write_json(args.json, result)
@@ -144,15 +162,18 @@ class Soak:
         cycles: int,
         quiet: bool = False,
         on_twin: Callable[[Any], None] | None = None,
+        label: str = "",
     ) -> None:
         """``on_twin(injector)`` is called for each new twin, after its devices are wrapped
         (tests force a fault at a known moment with it)."""
         self.on_twin = on_twin
+        self.label = f"{label} " if label else ""
         self.first_prep = prep
         self.config, self.doc = prep.config, prep.doc
         self.rates, self.scene_seed, self.fault_seed = rates, scene_seed, fault_seed
         self.cycles, self.quiet = cycles, quiet
         self.places = len(prep.geometry.tray_places)
+        self.place_xy = [tuple(map(float, pl[:2])) for pl in prep.geometry.tray_places]
         self.backend: Any = None
         self.injector: Any = None
         self.twins = 0
@@ -315,8 +336,9 @@ class Soak:
         # A packing that stopped because the box was in the way (a packed part pushed out of
         # its place by an earlier abort): the person sees a box that needs sorting and ships
         # it, as for a full one; otherwise every later packing would stop at the same spot.
-        blocked = "clear way down" in (info.get("stop_reason") or "")
-        if len(self.filled) >= self.places or len(in_box) != len(self.filled) or blocked:
+        reason = info.get("stop_reason") or ""
+        blocked = any(k in reason for k in ("clear way down", "+x contact", "+y contact"))
+        if len(self.filled) >= self.places or blocked or not self._box_in_order(in_box):
             for body in in_box:
                 backend.remove_part(body)
             self.shipped += len(in_box)
@@ -343,6 +365,29 @@ class Soak:
         if info["status"] != "success" or acted:
             self.interventions += 1
         self._reset_robot()
+
+    #: How far (m) a packed part may stand from its place's centre, and how far from upright
+    #: (rad), before the person sees a box out of order. The pushes pack to within about 2.6 mm.
+    PLACE_TOLERANCE = 0.004
+    UPRIGHT_TOLERANCE = math.radians(10.0)
+
+    def _box_in_order(self, in_box: list[Any]) -> bool:
+        """Whether the box holds exactly the places the cell recorded as filled, each part
+        upright on its own place. A part an abort pushed off its place, or one the cell did not
+        record, makes the cell's next packing push against a neighbour that is not where it
+        should be -- a person ships such a box (as a full one) rather than let it stop every
+        later packing."""
+        if len(in_box) != len(self.filled):
+            return False
+        seen: set[int] = set()
+        for body in in_box:
+            xy = body.pose().position[:2]
+            k = min(range(self.places), key=lambda i: math.dist(self.place_xy[i], xy))
+            off = math.dist(self.place_xy[k], xy)
+            if off > self.PLACE_TOLERANCE or body.tilt() < math.pi / 2 - self.UPRIGHT_TOLERANCE:
+                return False
+            seen.add(k)
+        return seen == self.filled
 
     def false_empty_in_a_row(self, info: dict[str, Any]) -> int:
         """Runs in a row that ended on an empty bin that was not (the person gives up on 3)."""
@@ -453,10 +498,119 @@ class Soak:
             return
         stop = f"  stop: {info['stop_reason']}" if info.get("stop_reason") else ""
         sys.stderr.write(
-            f"  run {len(self.runs):3d}: {info['status']:<9s} +{info['cycles_done']} done "
+            f"  {self.label}run {len(self.runs):3d}: {info['status']:<9s} +{info['cycles_done']} done "
             f"+{info['cycles_failed']} failed  ({self.attempted}/{self.cycles} cycles, "
             f"wall {info['wall_s']:.0f} s){stop}\n"
         )
+
+
+# ------------------------------------------------------------------------------ shards
+def _shard(
+    config_path: Path | None,
+    rates: dict[str, float],
+    scene_seed: int,
+    fault_seed: int,
+    cycles: int,
+    label: str,
+    quiet: bool,
+) -> dict[str, Any]:
+    """One shard in a worker process: its own configuration load, twin and person."""
+    from cell.cell_cmds import _load
+
+    return Soak(_load(config_path), rates, scene_seed, fault_seed, cycles, quiet, label=label).run()
+
+
+def run_shards(
+    config_path: Path | None,
+    rates: dict[str, float],
+    scene_seed: int,
+    fault_seed: int,
+    cycles: int,
+    workers: int,
+    quiet: bool = False,
+) -> dict[str, Any]:
+    """Why shards: the twin steps its physics on one core (about 10 s of wall per cycle), so a
+    1000-cycle soak in one process takes hours; shards are independent cells (each with its own
+    bin, box and person) whose reports add up. Each shard still runs hundreds of cycles in one
+    process, which is what finds state that drifts or leaks over a long run."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    workers = min(workers, cycles)
+    share = [cycles // workers + (1 if k < cycles % workers else 0) for k in range(workers)]
+    wall0 = time.perf_counter()
+    ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: no PyBullet state forked
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [
+            pool.submit(
+                _shard,
+                config_path,
+                rates,
+                scene_seed + SHARD_SEED_STEP * k,
+                fault_seed + SHARD_SEED_STEP * k,
+                n,
+                f"shard {k}",
+                quiet,
+            )
+            for k, n in enumerate(share)
+        ]
+        reports = [f.result() for f in futures]
+    return merge_reports(reports, time.perf_counter() - wall0)
+
+
+def merge_reports(reports: list[dict[str, Any]], wall: float) -> dict[str, Any]:
+    """The shards' reports added up into one of the same form, with each shard's own figures
+    under ``shards``."""
+    first = reports[0]
+    sums = (
+        "cycles", "cycles_attempted", "cycles_done", "unhandled_exceptions", "spawned",
+        "unaccounted", "operator_interventions", "false_bin_empty", "bin_refills", "twins",
+    )
+    out: dict[str, Any] = {k: sum(int(r[k]) for r in reports) for k in sums}
+
+    def add(key: str) -> dict[str, int]:
+        c: Counter[str] = Counter()
+        for r in reports:
+            c.update(r[key])
+        return dict(c.most_common())
+
+    out["exceptions"] = [dict(e, shard=k) for k, r in enumerate(reports) for e in r["exceptions"]]
+    out["parts"] = {k: sum(r["parts"][k] for r in reports) for k in PLACES}
+    out["removed_by_operator"] = {
+        k: sum(r["removed_by_operator"][k] for r in reports) for k in first["removed_by_operator"]
+    }
+    out["shipped"] = {
+        k: sum(r["shipped"][k] for r in reports) for k in ("boxes", "parts")
+    }
+    for key in ("aborts_by_reason", "stops_by_reason", "events", "judged_ok"):
+        out[key] = add(key)
+    out["runs"] = [dict(run, shard=k) for k, r in enumerate(reports) for run in r["runs"]]
+    faults: dict[str, Any] = {
+        "seed": [r["faults"]["seed"] for r in reports],
+        "rates": first["faults"]["rates"],
+    }
+    for k in ("opportunities", "drawn", "injected"):
+        c: Counter[str] = Counter()
+        for r in reports:
+            c.update(r["faults"][k])
+        faults[k] = dict(c)
+    out["faults"] = faults
+    out["seed"] = first["seed"]
+    out["sim_time_s"] = round(sum(r["sim_time_s"] for r in reports), 1)
+    out["wall_s"] = round(wall, 1)
+    out["wall_s_per_cycle"] = round(wall / max(1, out["cycles_attempted"]), 2)
+    out["interrupted"] = any(r["interrupted"] for r in reports)
+    out["shards"] = [
+        {
+            "seed": r["seed"],
+            "fault_seed": r["faults"]["seed"],
+            **{k: r[k] for k in ("cycles", "cycles_attempted", "cycles_done",
+                                 "unhandled_exceptions", "unaccounted", "wall_s")},
+            "stops": sum(r["stops_by_reason"].values()),
+        }
+        for r in reports
+    ]
+    return out
 
 
 def _print(r: dict[str, Any]) -> None:
@@ -481,4 +635,4 @@ def _print(r: dict[str, Any]) -> None:
         print(f"{k:<{width}}  {v}")
 
 
-__all__ = ["Soak", "abort_key", "add_parser", "cmd_soak"]
+__all__ = ["Soak", "abort_key", "add_parser", "cmd_soak", "merge_reports", "run_shards"]
