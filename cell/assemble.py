@@ -171,6 +171,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,
             cycles=config.workflow.cycles,
+            ft_link_grace=s.ft_link_grace_s,
         ),
         default_guard=Guard(s.ft_abort_force_n, s.ft_abort_torque_nm, s.default_timeout_s),
         catalogue=[part],

@@ -147,6 +147,14 @@ class SafetySection(_Section):
     ft_abort_force_n: float = Field(80.0, gt=0.0, le=300.0)
     ft_abort_torque_nm: float = Field(8.0, gt=0.0, le=50.0)
     default_timeout_s: float = Field(30.0, gt=0.0, le=600.0)
+    ft_link_grace_s: float = Field(
+        0.5,
+        ge=0.0,
+        le=5.0,
+        description="a lost force-torque stream stops every motion at once; if it is back "
+        "within this time the cell goes on (retries), else it stops for a person (0: stop at "
+        "once)",
+    )
 
 
 class LogSection(_Section):

@@ -131,6 +131,7 @@ def abort_key(reason: str) -> str:
     leaf = reason.split(":", 1)[0].strip() if ":" in reason else ""
     kinds = (
         ("link loss", "force-torque link lost"),
+        ("link lost", "force-torque link lost"),
         ("force-torque sensor lost", "force-torque link lost"),
         ("force-torque abort", "force-torque abort"),
         ("force-torque guard", "force-torque guard"),

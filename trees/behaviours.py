@@ -25,6 +25,7 @@ import numpy as np
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
+from drivers.health import DeviceError
 from drivers.pose import Pose
 from skills.motion import Guard, Sequence
 from skills.perception.bin_parts import Detection
@@ -377,6 +378,36 @@ class SlotHolds(Behaviour):
         slot = self.ctx.slot_state
         held = slot in ("fed", "machined") if self.state == "fed" else slot == "machined"
         self.feedback_message = f"slot: {slot}"
+        return Status.SUCCESS if held else Status.FAILURE
+
+
+class HoldingPart(Behaviour):
+    """Condition: SUCCESS while the gripper holds something and reports no fault.
+
+    Why: it gates a retry of a step that starts with the part in the hand (feed the slot, pack
+    in the box). After a transient fault (a force-torque spike, a timeout) the part is usually
+    still held, and the step can start afresh from where the arm stopped -- its first move goes
+    straight up. With an empty hand, or a gripper in fault, a retry could only do harm: the
+    condition fails and the failure goes up to the person."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+
+    def update(self) -> Status:
+        gripper = self.ctx.devices.gripper
+        try:
+            fault = gripper.fault()
+            held = gripper.object_detected()
+        except DeviceError as exc:
+            self.feedback_message = f"gripper unreadable: {exc}"
+            return Status.FAILURE
+        if fault:
+            self.feedback_message = f"gripper fault: {fault}"
+            return Status.FAILURE
+        self.feedback_message = "holding the part" if held else "the hand is empty"
         return Status.SUCCESS if held else Status.FAILURE
 
 

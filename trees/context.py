@@ -59,6 +59,8 @@ class WorkflowLimits:
     max_failures_per_part: int = 2
     max_failed_cycles: int = 3
     cycles: int = 10
+    #: s a lost force-torque stream may stay lost before the cell stops (0: stop at once).
+    ft_link_grace: float = 0.0
     cycles_done: int = 0  #: cycles a resumed cell had already done
 
 

@@ -32,9 +32,19 @@ class _CheckFirst(Decorator):
     def on_trip(self, reason: str) -> None:
         """Called once when :meth:`check` trips, after the child was stopped."""
 
+    def hold(self) -> str | None:
+        """Why the child must not start yet (it is not ticked, this stays RUNNING), or None."""
+        return None
+
     def tick(self) -> Iterator[Behaviour]:
         if self.status != Status.RUNNING:
             self.initialise()
+        waiting = self.hold()
+        if waiting is not None:
+            self.status = Status.RUNNING
+            self.feedback_message = waiting
+            yield self
+            return
         reason = self.check()
         if reason is not None:
             self.feedback_message = reason
@@ -66,14 +76,51 @@ class FTGuard(_CheckFirst):
     ) -> None:
         super().__init__(name=name, child=child)
         self.ctx, self.max_force, self.max_torque = ctx, max_force, max_torque
+        self._over_since: float | None = None
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key=WRENCH_KEY, access=common.Access.READ)
 
-    def check(self) -> str | None:
+    #: s a motion about to start waits for a wrench over the limits to fall back (a spike of a
+    #: few samples) before the guard trips it without a start.
+    SETTLE_S = 0.5
+
+    def hold(self) -> str | None:
+        """A motion does not start while the stream is lost (it waits for the link; the
+        sampler stops the cell if the link stays lost past its grace), nor, for up to
+        :attr:`SETTLE_S`, while the wrench reads over the limits: a recovery right after a spike
+        (put back, a retry) would otherwise be failed by the same spike. One already running
+        is failed by :meth:`check` instead."""
+        if self.decorated.status == Status.RUNNING:
+            self._over_since = None
+            return None
         try:
-            w = np.asarray(self.bb.get(WRENCH_KEY), float)
+            raw = self.bb.get(WRENCH_KEY)
         except KeyError:
             return None
+        if raw is None:
+            return f"{self.decorated.name}: waiting for the force-torque link"
+        w = np.asarray(raw, float)
+        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
+        if f2 <= self.max_force * self.max_force and t2 <= self.max_torque * self.max_torque:
+            self._over_since = None
+            return None
+        now = self.ctx.devices.clock.now()
+        if self._over_since is None:
+            self._over_since = now
+        if now - self._over_since < self.SETTLE_S:
+            return f"{self.decorated.name}: waiting for the wrench to settle (|F| {f2**0.5:.1f} N)"
+        self._over_since = None
+        return None  # still over the limits: check() fails the motion before it starts
+
+    def check(self) -> str | None:
+        try:
+            raw = self.bb.get(WRENCH_KEY)
+        except KeyError:
+            return None
+        if raw is None:  # the sampler lost the stream: nothing moves unwatched
+            return f"{self.decorated.name}: force-torque link lost: no wrench; arm stopped"
+        w = np.asarray(raw, float)
         # Squared magnitudes against squared limits: this runs every tick on every active guard.
         f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
         t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
@@ -126,16 +173,32 @@ class Retry(Decorator):
     stop.
     """
 
-    def __init__(self, name: str, child: Behaviour, ctx: CellContext, attempts: int) -> None:
+    def __init__(
+        self, name: str, child: Behaviour, ctx: CellContext, attempts: int, pause_s: float = 0.0
+    ) -> None:
+        """``pause_s``: seconds (the cell's clock) to wait before each new attempt. Why: a
+        retry on the next tick meets the same transient that failed the last one -- a force
+        spike of a few samples re-trips the guard before the motion starts; a gripper's fault
+        code lasts a second or two."""
         super().__init__(name=name, child=child)
-        self.ctx, self.attempts = ctx, attempts
+        self.ctx, self.attempts, self.pause_s = ctx, attempts, pause_s
         self.failures = 0
         self.last_reason = ""
+        self._resume_at: float | None = None
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
 
     def initialise(self) -> None:
         self.failures = 0
+        self._resume_at = None
+
+    def tick(self) -> Iterator[Behaviour]:
+        if self.status == Status.RUNNING and self._resume_at is not None:
+            if self.ctx.devices.clock.now() < self._resume_at:
+                yield self  # pausing: the child is not ticked, nothing moves
+                return
+            self._resume_at = None
+        yield from super().tick()
 
     def update(self) -> Status:
         status = self.decorated.status
@@ -151,6 +214,8 @@ class Retry(Decorator):
             self.feedback_message = (
                 f"attempt {self.failures} of {self.attempts} failed ({self.last_reason}); retrying"
             )
+            if self.pause_s > 0:
+                self._resume_at = self.ctx.devices.clock.now() + self.pause_s
             return Status.RUNNING  # the child restarts (initialise()) on its next tick
         if status != Status.RUNNING:
             self.feedback_message = f"attempt {self.failures + 1} of {self.attempts}: {status.name}"
@@ -229,7 +294,12 @@ class Cycles(Decorator):
 
 class FTSampler(Behaviour):
     """Reads the force-torque sensor once per tick for every guard (the only writer of
-    ``/ft/wrench``); never ends."""
+    ``/ft/wrench``); never ends.
+
+    A lost stream (a dead or stale sensor) writes ``None``: every guard then fails its motion at
+    once (the arm stops), so nothing moves unwatched. A link that comes back within
+    ``ctx.limits.ft_link_grace`` seconds is a transient -- the retries above carry on; one lost
+    longer stops the cell (the parallel above fails, halting every running leaf)."""
 
     def __init__(self, name: str, ctx: CellContext) -> None:
         super().__init__(name=name)
@@ -237,17 +307,32 @@ class FTSampler(Behaviour):
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key=WRENCH_KEY, access=common.Access.WRITE)
         self.feedback_message = f"sampling the wrench into {WRENCH_KEY}"
+        self._lost_since: float | None = None
 
     def update(self) -> Status:
         try:
-            self.bb.set(WRENCH_KEY, self.ctx.devices.ft.wrench())
+            wrench = self.ctx.devices.ft.wrench()
         except DeviceError as exc:
-            # No guard can trust a dead or stale stream: the whole tree stops (the parallel
-            # above fails, halting every running leaf, which stops the arm).
-            self.feedback_message = f"force-torque sensor lost: {exc}"
-            self.ctx.events.abort(self.feedback_message)
-            self.ctx.events.stop(self.feedback_message)
-            return Status.FAILURE
+            now = self.ctx.devices.clock.now()
+            why = f"force-torque sensor lost: {exc}"
+            if self._lost_since is None:
+                self._lost_since = now
+                self.ctx.devices.arm.stop()
+                self.ctx.events.abort(f"{why}; arm stopped")
+            self.bb.set(WRENCH_KEY, None)
+            lost = now - self._lost_since
+            if lost >= self.ctx.limits.ft_link_grace:
+                if self.ctx.limits.ft_link_grace > 0:
+                    why = f"{why} (lost for {lost:.2f} s)"
+                self.feedback_message = why
+                self.ctx.events.stop(why)
+                return Status.FAILURE
+            self.feedback_message = f"{why}; waiting {lost:.2f} s so far"
+            return Status.RUNNING
+        if self._lost_since is not None:
+            self._lost_since = None
+            self.feedback_message = f"sampling the wrench into {WRENCH_KEY} (link back)"
+        self.bb.set(WRENCH_KEY, wrench)
         return Status.RUNNING
 
 

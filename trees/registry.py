@@ -58,7 +58,12 @@ REGISTRY: dict[str, NodeType] = {
     "retry": NodeType(
         "decorator",
         "runs the child again after a failure",
-        {"attempts": Param(int, required=True, low=1, high=100, doc="runs in all")},
+        {
+            "attempts": Param(int, required=True, low=1, high=100, doc="runs in all"),
+            "pause_s": Param(
+                float, low=0.0, high=60.0, doc="wait before each new attempt (s); default 0"
+            ),
+        },
     ),
     "timeout": NodeType(
         "decorator",
@@ -102,6 +107,12 @@ REGISTRY: dict[str, NodeType] = {
     ),
     "slot_holds_part": NodeType(
         "leaf", "condition: the slot holds a part (fed or machined)", {}, lv.SlotHolds
+    ),
+    "holding_part": NodeType(
+        "leaf",
+        "condition: the gripper holds something and reports no fault (gates a retry)",
+        {},
+        lv.HoldingPart,
     ),
     "slot_machined": NodeType(
         "leaf", "condition: the part in the slot is machined", {}, lv.SlotMachined
@@ -211,7 +222,7 @@ class TreeBuilder:
     ) -> Behaviour:
         ctx = self.ctx
         if kind == "retry":
-            return Retry(name, child, ctx, params["attempts"])
+            return Retry(name, child, ctx, params["attempts"], params.get("pause_s", 0.0))
         if kind == "timeout":
             return Timeout(name, child, ctx, params["seconds"])
         if kind == "ft_guard":

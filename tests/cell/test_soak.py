@@ -206,3 +206,77 @@ def test_a_missed_grasp_in_the_slot_is_retried_not_a_stop() -> None:
     assert any("closed on nothing" in a["reason"] for a in prep.state.aborts)
     assert result.status == "success" and prep.state.stop_reason is None
     assert parts["packed"] == 1
+
+
+def _one_cycle_with(
+    fault: str, after_event: str, in_leaf: str = ""
+) -> tuple[Any, Any, dict[str, int], Any]:
+    """One cycle of the shipped tree in a fresh twin with ``fault`` forced at the first chance
+    after the workflow event ``after_event`` (and, given ``in_leaf``, once the running leaf's
+    name is that): (result, state, parts, injector)."""
+    from cell.assemble import open_backend, prepare
+    from cell.runner import TickLog, TickLoop
+    from sim.faults import no_faults, twin_injector
+
+    config, doc = config_from_text(CONFIG.format(parts=1))
+    prep = prepare(config, doc)
+    backend = open_backend(prep)
+    injector = twin_injector(backend, no_faults(), 0)
+    backend.wrap_devices(injector.wrap)
+    prep.ctx.devices = backend.devices
+    prep.ctx.limits.cycles = 1
+    forced = {"done": False}
+
+    def on_tick(tick: int) -> None:
+        if forced["done"] or not any(e["kind"] == after_event for e in prep.state.events):
+            return
+        tip = prep.root.tip()
+        if not in_leaf or (tip is not None and tip.name == in_leaf):
+            injector.force(fault)
+            forced["done"] = True
+
+    loop = TickLoop(
+        prep.root, backend, prep.state, TickLog(None), 125.0, wrench=lambda: None, on_tick=on_tick
+    )
+    try:
+        result = loop.run(300.0)
+        parts = backend.account()
+    finally:
+        backend.close()
+    assert forced["done"]
+    return result, prep.state, parts, injector
+
+
+def test_an_ft_spike_while_packing_is_retried_with_the_part_held_not_a_stop() -> None:
+    """A spike on the way to the box aborts that motion with the part still in the hole grasp:
+    the shipped tree checks the part is held and packs again instead of calling a person."""
+    result, state, parts, injector = _one_cycle_with(
+        "ft_spike", "picked_from_slot", in_leaf="pack in box"
+    )
+    assert injector.injected["ft_spike"] == 1
+    spikes = [a["reason"] for a in state.aborts if "force-torque abort" in a["reason"]]
+    assert spikes and spikes[0].startswith("pack in box"), state.aborts
+    assert result.status == "success" and state.stop_reason is None
+    assert parts["packed"] == 1 and parts["in_hand"] == 0
+
+
+def test_a_part_dropped_on_the_way_to_the_box_is_not_packed_again() -> None:
+    """With the hand empty the retry's condition fails: the cell stops for a person rather than
+    run the packing with nothing held."""
+    result, state, parts, injector = _one_cycle_with("drop_in_transit", "picked_from_slot")
+    assert injector.injected["drop_in_transit"] == 1
+    assert result.status == "failure"
+    assert state.stop_reason and "part lost between the slot and the box" in state.stop_reason
+    assert parts["packed"] == 0
+
+
+def test_a_short_ft_link_loss_while_packing_is_waited_out_not_a_stop() -> None:
+    """The FT stream drops for 5-50 samples during the packing: the motion is stopped at once,
+    the retry waits for the link and packs; the cell does not stop (safety.ft_link_grace_s)."""
+    result, state, parts, injector = _one_cycle_with(
+        "link_lost", "picked_from_slot", in_leaf="pack in box"
+    )
+    assert injector.injected["link_lost"] == 1
+    assert any("force-torque sensor lost" in a["reason"] for a in state.aborts), state.aborts
+    assert result.status == "success" and state.stop_reason is None
+    assert parts["packed"] == 1 and parts["in_hand"] == 0

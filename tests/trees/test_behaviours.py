@@ -116,6 +116,38 @@ def test_retry_counts_attempts_and_gives_up_after_the_limit(ctx) -> None:
     assert "failure 3" in retry.feedback_message
 
 
+def test_retry_pauses_on_the_cell_clock_before_the_next_attempt(ctx) -> None:
+    flaky = _FailsNTimes(1)
+    retry = Retry("retry", flaky, ctx, attempts=2, pause_s=1.0)
+    clock = ctx.devices.clock
+    retry.tick_once()
+    assert retry.status == Status.RUNNING and flaky.runs == 1 and "retrying" in (
+        retry.feedback_message
+    )
+    for _ in range(5):  # ticks within the pause: the child is not restarted
+        clock.t += 0.19
+        retry.tick_once()
+    assert retry.status == Status.RUNNING and flaky.runs == 1
+    clock.t += 0.1
+    retry.tick_once()
+    assert retry.status == Status.SUCCESS and flaky.runs == 2
+
+
+def test_holding_part_fails_on_an_empty_hand_or_a_gripper_fault(ctx) -> None:
+    gripper = ctx.devices.gripper
+    node = lv.HoldingPart("held", ctx)
+    gripper.closed_on, gripper._moving = 0.003, False
+    node.tick_once()
+    assert node.status == Status.SUCCESS
+    gripper.closed_on = None
+    node.tick_once()
+    assert node.status == Status.FAILURE and "empty" in node.feedback_message
+    gripper.closed_on = 0.003
+    gripper.fault = lambda: "0x0B"  # type: ignore[method-assign]
+    node.tick_once()
+    assert node.status == Status.FAILURE and "0x0B" in node.feedback_message
+
+
 def test_stop_on_failure_stops_the_cell_with_the_reason(ctx) -> None:
     node = StopOnFailure("s", _FailsNTimes(1), ctx, reason="part lost")
     node.tick_once()
@@ -223,5 +255,90 @@ def test_a_dead_ft_stream_stops_the_tree_and_the_arm(ctx) -> None:
     object.__setattr__(ctx.devices, "ft", DeadFT())
     root.tick_once()
     assert root.status == Status.FAILURE
-    assert leaf.status == Status.INVALID and ctx.devices.arm.stops > stops
+    # The sampler stops the arm itself (the leaf then fails), or the parallel halts the leaf.
+    assert leaf.status in (Status.FAILURE, Status.INVALID) and ctx.devices.arm.stops > stops
     assert "0.20 s old" in ctx.events.stopped
+
+
+def test_a_short_ft_link_loss_fails_the_motion_then_the_tree_goes_on(ctx) -> None:
+    """Within ``ft_link_grace`` the sampler keeps the tree alive, but no guarded motion runs
+    without a wrench; a loss longer than the grace stops the cell."""
+    from drivers.health import DeviceError
+
+    real = ctx.devices.ft
+    lost = {"on": False}
+
+    class FlakyFT:
+        def wrench(self):  # type: ignore[no-untyped-def]
+            if lost["on"]:
+                raise DeviceError("FT300", "/dev/ttyUSB1", "no sample")
+            return real.wrench()
+
+    object.__setattr__(ctx.devices, "ft", FlakyFT())
+    ctx.limits.ft_link_grace = 0.5
+    ctx.devices.arm.ticks_per_move = 100
+    guard = FTGuard("guard", lv.GoHome("home", ctx), ctx, max_force=50.0, max_torque=5.0)
+    sampler = FTSampler("ft", ctx)
+    root = py_trees.composites.Parallel(
+        "root",
+        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[guard]),
+        children=[sampler, guard],
+    )
+    root.tick_once()
+    assert guard.status == Status.RUNNING
+    stops = ctx.devices.arm.stops
+    lost["on"] = True
+    root.tick_once()
+    assert root.status == Status.FAILURE  # the guarded motion failed at once ...
+    assert guard.status == Status.FAILURE and "link lost" in guard.feedback_message
+    assert ctx.events.stopped is None  # ... the cell did not stop
+    assert ctx.devices.arm.stops > stops
+    # A motion that has not started waits for the link instead of failing.
+    waiting = FTGuard("guard2", lv.GoHome("home2", ctx), ctx, max_force=50.0, max_torque=5.0)
+    sampler.tick_once()
+    commands = len(ctx.devices.arm.commands)
+    waiting.tick_once()
+    assert waiting.status == Status.RUNNING and "waiting for the force-torque link" in (
+        waiting.feedback_message
+    )
+    assert len(ctx.devices.arm.commands) == commands  # nothing was commanded
+    ctx.devices.clock.t += 0.3
+    lost["on"] = False
+    sampler.tick_once()
+    assert sampler.status == Status.RUNNING and "link back" in sampler.feedback_message
+    waiting.tick_once()
+    assert waiting.decorated.status == Status.RUNNING  # started once the wrench was back
+    assert len(ctx.devices.arm.commands) == commands + 1
+    lost["on"] = True
+    sampler.tick_once()
+    ctx.devices.clock.t += 0.6
+    sampler.tick_once()
+    assert sampler.status == Status.FAILURE
+    assert ctx.events.stopped and "lost for 0.60 s" in ctx.events.stopped
+
+
+def test_a_motion_waits_for_a_spike_to_pass_before_it_starts_and_trips_if_it_stays(ctx) -> None:
+    root_ft = ctx.devices.ft
+    sampler = FTSampler("ft", ctx)
+    guard = FTGuard("guard", lv.GoHome("home", ctx), ctx, max_force=50.0, max_torque=5.0)
+    root_ft.value = np.array([0.0, 0.0, 200.0, 0, 0, 0])  # a spike as the motion would start
+    sampler.tick_once()
+    guard.tick_once()
+    assert guard.status == Status.RUNNING and "settle" in guard.feedback_message
+    assert not ctx.devices.arm.commands  # nothing commanded into a spike
+    root_ft.value = np.zeros(6)
+    ctx.devices.clock.t += 0.02
+    sampler.tick_once()
+    guard.tick_once()
+    assert guard.decorated.status == Status.RUNNING and ctx.devices.arm.commands
+
+    ctx.devices.arm.commands.clear()
+    stuck = FTGuard("guard2", lv.GoHome("home2", ctx), ctx, max_force=50.0, max_torque=5.0)
+    root_ft.value = np.array([0.0, 0.0, 200.0, 0, 0, 0])  # a load that does not go away
+    sampler.tick_once()
+    stuck.tick_once()
+    assert stuck.status == Status.RUNNING
+    ctx.devices.clock.t += FTGuard.SETTLE_S + 0.01
+    stuck.tick_once()
+    assert stuck.status == Status.FAILURE and "force-torque abort" in stuck.feedback_message
+    assert not ctx.devices.arm.commands
