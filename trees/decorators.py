@@ -184,6 +184,7 @@ class Retry(Decorator):
         self.ctx, self.attempts, self.pause_s = ctx, attempts, pause_s
         self.failures = 0
         self.last_reason = ""
+        self.first_reason = ""
         self._resume_at: float | None = None
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
@@ -205,6 +206,8 @@ class Retry(Decorator):
         if status == Status.FAILURE:
             self.failures += 1
             self.last_reason = _deepest_feedback(self.decorated)
+            if self.failures == 1:
+                self.first_reason = self.last_reason
             bin_empty = self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty")
             if self.failures >= self.attempts or self.ctx.events.stopped or bin_empty:
                 self.feedback_message = (
@@ -235,6 +238,18 @@ class StopOnFailure(Decorator):
         self.feedback_message = self.decorated.feedback_message
         if status == Status.FAILURE:
             why = f"{self.reason}: {_deepest_feedback(self.decorated)}"
+            # A retry's last attempt may fail on its precondition ("the hand is empty"): the
+            # person needs what went wrong first.
+            for node in self.decorated.iterate():
+                if (
+                    isinstance(node, Retry)
+                    and node.status == Status.FAILURE
+                    and node.failures > 1
+                    and node.first_reason
+                    and node.first_reason not in why
+                ):
+                    why = f"{why} (first attempt: {node.first_reason})"
+                    break
             self.feedback_message = why
             self.ctx.events.stop(why)
         return status

@@ -148,6 +148,19 @@ def test_holding_part_fails_on_an_empty_hand_or_a_gripper_fault(ctx) -> None:
     assert node.status == Status.FAILURE and "0x0B" in node.feedback_message
 
 
+def test_a_stop_after_a_retry_names_what_failed_first(ctx) -> None:
+    class FailsThenEmpty(_FailsNTimes):
+        def update(self) -> Status:
+            self.feedback_message = "timeout" if self.runs == 1 else "the hand is empty"
+            return Status.FAILURE
+
+    node = StopOnFailure("s", Retry("r", FailsThenEmpty(9), ctx, attempts=2), ctx, "part lost")
+    for _ in range(3):
+        node.tick_once()
+    assert node.status == Status.FAILURE
+    assert ctx.events.stopped == "part lost: the hand is empty (first attempt: timeout)"
+
+
 def test_stop_on_failure_stops_the_cell_with_the_reason(ctx) -> None:
     node = StopOnFailure("s", _FailsNTimes(1), ctx, reason="part lost")
     node.tick_once()
