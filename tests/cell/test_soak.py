@@ -280,3 +280,81 @@ def test_a_short_ft_link_loss_while_packing_is_waited_out_not_a_stop() -> None:
     assert any("force-torque sensor lost" in a["reason"] for a in state.aborts), state.aborts
     assert result.status == "success" and state.stop_reason is None
     assert parts["packed"] == 1 and parts["in_hand"] == 0
+
+
+def _report(**over: Any) -> dict[str, Any]:
+    base: dict[str, Any] = {
+        "cycles": 3, "cycles_attempted": 3, "cycles_done": 2, "unhandled_exceptions": 0,
+        "exceptions": [], "spawned": 10, "unaccounted": 0, "operator_interventions": 1,
+        "false_bin_empty": 0, "bin_refills": 1, "twins": 1,
+        "parts": {"in_bin": 7, "in_hand": 0, "in_slot": 0, "packed": 2, "on_floor": 0},
+        "removed_by_operator": {"in_bin": 0, "in_hand": 1, "in_slot": 0, "on_floor": 0},
+        "shipped": {"boxes": 0, "parts": 0}, "aborts_by_reason": {"timeout": 1},
+        "stops_by_reason": {"x": 1}, "events": {"picked": 3}, "judged_ok": {"picked": 3},
+        "runs": [{"status": "success"}], "seed": 0, "sim_time_s": 100.0, "wall_s": 50.0,
+        "interrupted": False,
+        "faults": {"seed": 0, "rates": {"ft_spike": 0.1}, "opportunities": {"ft_spike": 5},
+                   "drawn": {"ft_spike": 1}, "injected": {"ft_spike": 1}},
+    }
+    base.update(over)
+    return base
+
+
+def test_shard_reports_add_up_into_one_report() -> None:
+    from cell.soak_cmd import merge_reports
+
+    a = _report()
+    b = _report(
+        seed=10000019, unhandled_exceptions=1, exceptions=[{"run": 1, "error": "E"}],
+        aborts_by_reason={"timeout": 2, "missed": 1}, unaccounted=0,
+        faults={"seed": 10000019, "rates": {"ft_spike": 0.1}, "opportunities": {"ft_spike": 7},
+                "drawn": {"ft_spike": 0}, "injected": {"ft_spike": 0}},
+    )
+    m = merge_reports([a, b], wall=60.0)
+    assert m["cycles"] == 6 and m["cycles_done"] == 4 and m["spawned"] == 20
+    assert m["unhandled_exceptions"] == 1 and m["exceptions"][0]["shard"] == 1
+    assert m["parts"]["in_bin"] == 14 and m["removed_by_operator"]["in_hand"] == 2
+    assert m["aborts_by_reason"] == {"timeout": 3, "missed": 1}
+    assert m["faults"]["opportunities"] == {"ft_spike": 12} and m["faults"]["seed"] == [0, 10000019]
+    assert m["wall_s"] == 60.0 and m["wall_s_per_cycle"] == 10.0
+    assert [s["seed"] for s in m["shards"]] == [0, 10000019] and m["runs"][1]["shard"] == 1
+
+
+def test_the_person_ships_a_box_whose_part_stands_off_its_place() -> None:
+    from cell.assemble import prepare
+    from cell.soak_cmd import Soak
+    from sim.faults import no_faults
+
+    config, doc = config_from_text(CONFIG.format(parts=1))
+    prep = prepare(config, doc)
+    soak = Soak(prep, no_faults(), 0, 0, 1, quiet=True)
+    soak._open_twin(prep)
+    try:
+        backend = soak.backend
+        assert soak._box_in_order([])  # an empty box, nothing recorded
+        soak.filled = {0}
+        assert not soak._box_in_order([])  # recorded filled, but the box is empty
+        from sim.part_body import upright_pose
+
+        x, y = soak.place_xy[0]
+        z = prep.geometry.tray_places[0][2]
+        body = backend._spawn(upright_pose(backend.part, x - 0.001, y, z))
+        backend.bodies.append(body)
+        assert soak._box_in_order([body])  # 1 mm off its place: in order
+        backend.remove_part(body)
+        off = backend._spawn(upright_pose(backend.part, x - 0.008, y, z))
+        backend.bodies.append(off)
+        assert off.tilt() > 1.5  # upright: only the offset is wrong
+        assert not soak._box_in_order([off])  # 8 mm off: the person ships the box
+    finally:
+        backend.close()
+
+
+def test_cli_refuses_zero_workers() -> None:
+    r = subprocess.run(
+        [sys.executable, "-m", "cell.cli", "soak", "--cycles", "1", "--workers", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2 and "--workers" in r.stderr and "Traceback" not in r.stderr
