@@ -8,6 +8,7 @@ stops the arm in the same tick it is read, before the child commands another ste
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import py_trees
@@ -80,6 +81,16 @@ class FTGuard(_CheckFirst):
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key=WRENCH_KEY, access=common.Access.READ)
 
+    def _over_limits(self, raw: Any) -> tuple[float, float] | None:
+        """(|F|, |T|) when the wrench is over either limit, else None. Squared magnitudes
+        against squared limits: this runs every tick on every active guard."""
+        w = np.asarray(raw, float)
+        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
+        if f2 > self.max_force * self.max_force or t2 > self.max_torque * self.max_torque:
+            return f2**0.5, t2**0.5
+        return None
+
     #: s a motion about to start waits for a wrench over the limits to fall back (a spike of a
     #: few samples) before the guard trips it without a start.
     SETTLE_S = 0.5
@@ -99,17 +110,15 @@ class FTGuard(_CheckFirst):
             return None
         if raw is None:
             return f"{self.decorated.name}: waiting for the force-torque link"
-        w = np.asarray(raw, float)
-        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
-        if f2 <= self.max_force * self.max_force and t2 <= self.max_torque * self.max_torque:
+        over = self._over_limits(raw)
+        if over is None:
             self._over_since = None
             return None
         now = self.ctx.devices.clock.now()
         if self._over_since is None:
             self._over_since = now
         if now - self._over_since < self.SETTLE_S:
-            return f"{self.decorated.name}: waiting for the wrench to settle (|F| {f2**0.5:.1f} N)"
+            return f"{self.decorated.name}: waiting for the wrench to settle (|F| {over[0]:.1f} N)"
         self._over_since = None
         return None  # still over the limits: check() fails the motion before it starts
 
@@ -120,12 +129,9 @@ class FTGuard(_CheckFirst):
             return None
         if raw is None:  # the sampler lost the stream: nothing moves unwatched
             return f"{self.decorated.name}: force-torque link lost: no wrench; arm stopped"
-        w = np.asarray(raw, float)
-        # Squared magnitudes against squared limits: this runs every tick on every active guard.
-        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
-        if f2 > self.max_force * self.max_force or t2 > self.max_torque * self.max_torque:
-            force, torque = f2**0.5, t2**0.5
+        over = self._over_limits(raw)
+        if over is not None:
+            force, torque = over
             return (
                 f"{self.decorated.name}: force-torque abort: |F| {force:.1f} N (limit "
                 f"{self.max_force:g}), |T| {torque:.2f} N*m (limit {self.max_torque:g}); "

@@ -172,42 +172,6 @@ def test_cell_soak_two_cycles_end_to_end(tmp_path: Path) -> None:
     assert r.returncode == (0 if s["unhandled_exceptions"] == 0 else 1)
 
 
-def test_a_missed_grasp_in_the_slot_is_retried_not_a_stop() -> None:
-    """The part is still in the slot after a missed pinch there: the shipped tree looks and
-    grasps again instead of calling a person."""
-    from cell.assemble import open_backend, prepare
-    from cell.runner import TickLog, TickLoop
-    from sim.faults import no_faults, twin_injector
-
-    config, doc = config_from_text(CONFIG.format(parts=1))
-    prep = prepare(config, doc)
-    backend = open_backend(prep)
-    injector = twin_injector(backend, no_faults(), 0)
-    backend.wrap_devices(injector.wrap)
-    prep.ctx.devices = backend.devices
-    prep.ctx.limits.cycles = 1
-    forced = {"done": False}
-
-    def on_tick(tick: int) -> None:
-        kinds = [e["kind"] for e in prep.state.events]
-        if "machined" in kinds and not forced["done"]:
-            injector.force("missed_grasp")  # the next close: the pinch in the slot
-            forced["done"] = True
-
-    loop = TickLoop(
-        prep.root, backend, prep.state, TickLog(None), 125.0, wrench=lambda: None, on_tick=on_tick
-    )
-    try:
-        result = loop.run(300.0)
-        parts = backend.account()
-    finally:
-        backend.close()
-    assert forced["done"] and injector.injected["missed_grasp"] == 1
-    assert any("closed on nothing" in a["reason"] for a in prep.state.aborts)
-    assert result.status == "success" and prep.state.stop_reason is None
-    assert parts["packed"] == 1
-
-
 def _one_cycle_with(
     fault: str, after_event: str, in_leaf: str = ""
 ) -> tuple[Any, Any, dict[str, int], Any]:
@@ -245,6 +209,18 @@ def _one_cycle_with(
         backend.close()
     assert forced["done"]
     return result, prep.state, parts, injector
+
+
+def test_a_missed_grasp_in_the_slot_is_retried_not_a_stop() -> None:
+    """The part is still in the slot after a missed pinch there: the shipped tree looks and
+    grasps again instead of calling a person."""
+    # The next close after machining is the pinch in the slot.
+    result, state, parts, injector = _one_cycle_with("missed_grasp", "machined")
+    assert injector.injected["missed_grasp"] == 1
+    assert any("closed on nothing" in a["reason"] for a in state.aborts)
+    assert result.status == "success" and state.stop_reason is None
+    assert parts["packed"] == 1
+
 
 
 def test_an_ft_spike_while_packing_is_retried_with_the_part_held_not_a_stop() -> None:

@@ -16,6 +16,17 @@ from trees import behaviours as lv
 from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 
 
+def _beside_sampler(
+    sampler: FTSampler, body: py_trees.behaviour.Behaviour
+) -> py_trees.composites.Parallel:
+    """The shipped root's shape: the FT sampler in parallel with the body, ending with it."""
+    return py_trees.composites.Parallel(
+        "root",
+        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[body]),
+        children=[sampler, body],
+    )
+
+
 @pytest.fixture
 def ctx():
     py_trees.blackboard.Blackboard.clear()
@@ -34,11 +45,7 @@ def test_go_home_runs_then_succeeds_with_a_joint_move(ctx) -> None:
 def test_ft_guard_fails_within_one_tick_stops_the_arm_and_says_why(ctx) -> None:
     leaf = lv.GoHome("home", ctx)
     guard = FTGuard("guard", leaf, ctx, max_force=50.0, max_torque=5.0)
-    root = py_trees.composites.Parallel(
-        "root",
-        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[guard]),
-        children=[FTSampler("ft", ctx), guard],
-    )
+    root = _beside_sampler(FTSampler("ft", ctx), guard)
     ctx.devices.arm.ticks_per_move = 100  # a long move
     root.tick_once()
     assert guard.status == Status.RUNNING and leaf.status == Status.RUNNING
@@ -257,11 +264,7 @@ def test_a_dead_ft_stream_stops_the_tree_and_the_arm(ctx) -> None:
     ctx.devices.arm.ticks_per_move = 100
     leaf = lv.GoHome("home", ctx)
     sampler = FTSampler("ft", ctx)
-    root = py_trees.composites.Parallel(
-        "root",
-        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[leaf]),
-        children=[sampler, leaf],
-    )
+    root = _beside_sampler(sampler, leaf)
     root.tick_once()
     assert root.status == Status.RUNNING
     stops = ctx.devices.arm.stops
@@ -292,11 +295,7 @@ def test_a_short_ft_link_loss_fails_the_motion_then_the_tree_goes_on(ctx) -> Non
     ctx.devices.arm.ticks_per_move = 100
     guard = FTGuard("guard", lv.GoHome("home", ctx), ctx, max_force=50.0, max_torque=5.0)
     sampler = FTSampler("ft", ctx)
-    root = py_trees.composites.Parallel(
-        "root",
-        policy=py_trees.common.ParallelPolicy.SuccessOnSelected(children=[guard]),
-        children=[sampler, guard],
-    )
+    root = _beside_sampler(sampler, guard)
     root.tick_once()
     assert guard.status == Status.RUNNING
     stops = ctx.devices.arm.stops
