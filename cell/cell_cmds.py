@@ -428,6 +428,9 @@ def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
         "sim_time_s": round(result.sim_time, 3),
         "ticks": result.ticks,
         "picked": state.counts.get("picked", 0),
+        "picked_recovered": sum(
+            1 for e in state.events if e["kind"] == "picked" and e.get("recovered")
+        ),
         "packed_claimed": len(packed_events),
         "fed_claimed": state.counts.get("fed", 0),
         "gaps_mm": gaps,
@@ -440,7 +443,7 @@ def _print_summary(s: dict[str, Any]) -> None:
     rows = [
         ("status", s["status"] + (f" ({s['stop_reason']})" if s["stop_reason"] else "")),
         ("cycles asked", str(s["cycles"])),
-        ("picked (hole grasp)", str(s["picked"])),
+        ("picked (hole grasp)", f"{s['picked']} ({s['picked_recovered']} by the recovery)"),
         ("fed (judged in slot)", f"{s['fed']} of {s['fed_claimed']}"),
         ("packed (judged)", f"{s['packed']} of {s['packed_claimed']}"),
         ("aborts", str(len(s["aborts"]))),

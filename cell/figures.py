@@ -1,9 +1,12 @@
-"""Fig.-5-style pictures of the stable-grasp regions, drawn with matplotlib (Agg, no display)."""
+"""Pictures drawn with matplotlib (Agg, no display): Fig.-5-style stable-grasp regions and the
+contact trace of a watched pivot."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -129,3 +132,57 @@ def plot_region_map(
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def plot_contact_trace(
+    samples: Sequence[Any],
+    phase_starts: dict[str, float],
+    path: str | Path,
+    title: str,
+    inner: str = "finger_b",
+    outer: str = "finger_a",
+) -> Path:
+    """The watched pivot over time: each finger touching the part or not, the inner pad tip's
+    depth in the hole (mm, below the open end's face) and beta (deg), the phases shaded.
+
+    ``samples``: :class:`sim.judge.WatchSample` (anything with ``t``, ``touch``, ``depth``,
+    ``in_hole`` and ``beta_deg``)."""
+    t = np.array([s.t for s in samples])
+    fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
+    ax_touch, ax_depth, ax_beta = axes
+    ax_touch.step(t, [1.2 + s.touch[inner] * 0.8 for s in samples], where="post",
+                  label="inner finger (in the hole) touches", color="tab:red")
+    ax_touch.step(t, [s.touch[outer] * 0.8 for s in samples], where="post",
+                  label="outer finger (S, outer wall) touches", color="tab:blue")
+    ax_touch.set_yticks([0.0, 0.8, 1.2, 2.0], ["no", "yes", "no", "yes"])
+    ax_touch.set_ylabel("contact")
+    ax_touch.legend(loc="center left", fontsize=8)
+    depth = np.array([1e3 * s.depth[inner] for s in samples])
+    inside = np.array([s.in_hole[inner] for s in samples])
+    ax_depth.plot(t, depth, color="tab:red")
+    if (~inside).any():
+        ax_depth.plot(t[~inside], depth[~inside], "kx", ms=3, label="pad tip out of the hole")
+        ax_depth.legend(loc="upper left", fontsize=8)
+    ax_depth.axhline(0.0, color="0.5", lw=0.8)
+    ax_depth.set_ylabel("inner pad tip depth\nin the hole (mm)")
+    ax_beta.plot(t, [s.beta_deg for s in samples], color="tab:green")
+    ax_beta.set_ylabel("beta (deg)")
+    ax_beta.set_xlabel("simulated time (s)")
+    ax_beta.set_ylim(-5, 95)
+    names = list(phase_starts)
+    colours = {"grasp": "0.92", "tilt": "#dbe9f6", "align": "#fde7cf", "lift": "#dff2dc",
+               "recovery": "#f6d5d5"}
+    end = float(t[-1]) if len(t) else 0.0
+    for i, name in enumerate(names):
+        start = phase_starts[name]
+        stop = phase_starts[names[i + 1]] if i + 1 < len(names) else end
+        for ax in axes:
+            ax.axvspan(start, stop, color=colours.get(name, "0.95"), zorder=0)
+        ax_touch.text(0.5 * (start + stop), 2.1, name, ha="center", va="bottom", fontsize=9)
+    ax_touch.set_ylim(-0.2, 2.45)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -4,6 +4,11 @@ Contract (scripts rely on it)::
 
     cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE
 
+``--record FILE.gif`` also writes ``FILE_trace.png``, the first trial's contact trace. Each
+``per_trial`` entry carries the stricter verdict in ``success`` and what it was built from
+(``inner_in_hole_all_along``, ``longest_free_s``, ``final_grasp``, ``camera_frames_steering``,
+``recovered``), ``phase_times_s`` and ``l_a_trace``.
+
 Trial ``i`` runs with seed ``S + i``; the same seed gives the same trial. Everything the user
 gives is checked before anything is simulated: an unknown part, a part the planner declines
 (hole narrower than the finger, deformable, ...), a cell YAML that fails validation or puts the
@@ -223,7 +228,10 @@ def cmd_pivot(args: argparse.Namespace) -> int:
     )
     _write_json(args.json, summary)
     print(_format_summary(summary, results, wall))
-    print(f"wrote {args.json}" + (f" and {recorded}" if recorded else ""))
+    print(
+        f"wrote {args.json}"
+        + (f", {recorded} and {trace_path(recorded)}" if recorded else "")
+    )
     return 0
 
 
@@ -242,10 +250,31 @@ def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
             rec["r"] = Recorder(world, target, normal, distance=0.24, height=0.15)
         rec["r"].capture()
 
-    result = run_trial(setup, seed, on_frame=on_frame, frame_every=12)
+    traced: dict[str, Any] = {}
+
+    def trace(samples: Any, phase_starts: dict[str, float]) -> None:
+        traced.update(samples=samples, phases=phase_starts)
+
+    result = run_trial(setup, seed, on_frame=on_frame, frame_every=12, trace=trace)
     if "r" in rec:
         rec["r"].save_gif(path, fps=12)
+    if traced.get("samples"):
+        from cell.figures import plot_contact_trace
+
+        verdict = "success" if result.success else f"failed: {result.failure}"
+        plot_contact_trace(
+            traced["samples"],
+            traced["phases"],
+            trace_path(path),
+            f"{setup.part.name}, seed {seed}: {verdict} (final grasp {result.final_grasp}, "
+            f"longest free {result.longest_free_s:.2f} s)",
+        )
     return result
+
+
+def trace_path(gif: Path) -> Path:
+    """``FILE.gif`` -> ``FILE_trace.png``: the contact trace written beside the animation."""
+    return gif.with_name(gif.stem + "_trace.png")
 
 
 def _format_summary(summary: dict[str, Any], results: list[TrialResult], wall: float) -> str:

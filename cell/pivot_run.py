@@ -1,9 +1,14 @@
 """Pivot trials in the twin: spawn a part, run Grasp -> Tilt -> Align, judge from the physics.
 
 Each trial perturbs the world away from what the skills are told (position +-3 mm, yaw +-3 deg,
-frictions +-20 %, mass +-10 %): the skills get the part's *nominal* pose and the planner's
-``(l_a, alpha)``, never the true pose. The outcome comes from :func:`sim.judge.judge` on the
-simulated state after the lift.
+frictions +-20 %, mass +-10 %): the skills get the part's *nominal* pose (or what the wrist
+camera saw before the Grasp) and the planner's ``(l_a, alpha)``, never the true pose. The
+outcome comes from the simulated state: :func:`sim.judge.judge` after the lift, and
+:class:`sim.judge.PivotWatch` every control step from the closed Grasp to the end of the lift
+(finger in the hole all along, no long free interval, a hole grasp at the end, no camera frame).
+
+When the in-hand Align fails, the recovery (:class:`skills.pivot.PickFromAbove`: let go, look,
+pick from above) may still save the part; the trial then counts as ``recovered``, not a success.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from drivers.pose import Pose
 from sim.arm import REACH_TOLERANCE, solve_ik
 from sim.camera import SimCamera
 from sim.cell_layout import CellLayout, build_cell
-from sim.judge import judge
+from sim.judge import PivotWatch, WatchSample, judge
 from sim.part_body import lying_pose, spawn_part
 from sim.robot import HOME_JOINTS, SimRobot
 from sim.robot_model import FINGER_WIDTH
@@ -32,7 +37,7 @@ from skills.mechanics.part import Part
 from skills.mechanics.planner import PivotPlan
 from skills.motion import Devices
 from skills.perception.look import Look
-from skills.pivot import Align, Grasp, PivotFrame, PivotParams, Tilt
+from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
 from skills.status import Status
 
 
@@ -145,6 +150,14 @@ class TrialResult:
     frictions: dict[str, float]
     mass: float
     perceived_pose: dict[str, float] | None = None  #: what Look reported (None: nominal used)
+    end_state_ok: bool = False  #: the end-state test alone (upright, held, finger in the hole)
+    inner_in_hole_all_along: bool = False
+    longest_free_s: float = 0.0  #: longest time no finger touched the part, closed Grasp to lift
+    final_grasp: str = "none"  #: "hole" | "pinch" | "other" | "none"
+    camera_frames_steering: int = 0  #: frames taken after the Grasp began
+    recovered: bool = False  #: the in-hand Align failed and the pick from above saved the part
+    phase_times_s: dict[str, float] = field(default_factory=dict)
+    l_a_trace: dict[str, float | None] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, object]:
         return dataclasses.asdict(self)
@@ -268,13 +281,29 @@ def run_trial(
     on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
     frame_every: int = 6,
     close_gripper_anyway: bool = True,
+    trace: Callable[[list[WatchSample], dict[str, float]], None] | None = None,
 ) -> TrialResult:
-    """One perturbed trial, judged from the simulated state."""
+    """One perturbed trial, judged from the simulated state. ``trace`` receives the watched
+    samples and the phase start times (for the contact-trace figure)."""
     tw = open_trial_world(setup, seed)
     world, robot, params, dev = tw.world, tw.robot, tw.params, tw.dev
+    camera = dev.camera
+    assert isinstance(camera, SimCamera)
+    fingers = ("finger_a", "finger_b")  # finger_a on S (outer), finger_b into the hole (H)
+    watch = PivotWatch(
+        world,
+        tw.body,
+        robot.body_id,
+        {n: robot.gripper.finger_link(n) for n in fingers},
+        robot.pad_tip,
+        lambda: camera.frames_taken,
+        inner="finger_b",
+        outer="finger_a",
+    )
     try:
         failure: str | None = None
         phase_name = "done"
+        recovered_by: str | None = None
         t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
         seen: dict[str, float] = {}
         frame = setup.frame()
@@ -296,29 +325,80 @@ def run_trial(
                     yaw=d.yaw,
                 )
         tilt = Tilt(frame, params, dev)
-        phases = [
-            ("grasp", Grasp(frame, params, dev)),
-            ("tilt", tilt),
-            ("align", Align(lambda: tilt.frame, setup.part, params, dev)),
-        ]
+        align = Align(lambda: tilt.frame, setup.part, params, dev)
+
+        def align_phase() -> None:
+            if align.lifting and watch.phase != "lift":
+                watch.enter("lift")
+
+        phases = [("grasp", Grasp(frame, params, dev)), ("tilt", tilt), ("align", align)]
         for phase_name, skill in phases if failure is None else []:
-            failure = _run_skill(phase_name, skill, world, robot, t_end, on_frame, frame_every)
+            if phase_name == "grasp":
+                watch.grasp_began()
+            else:
+                watch.enter(phase_name)
+            failure = _run_skill(
+                phase_name,
+                skill,
+                world,
+                robot,
+                t_end,
+                on_frame,
+                frame_every,
+                align_phase if skill is align else None,
+            )
             if failure is not None:
                 break
         else:
             phase_name = "done"
+        if phase_name == "align" and failure is not None and not robot.arm.status().protective_stop:
+            # The in-hand Align failed: the old way (let go, look, pick from above) may still
+            # save the part, counted apart.
+            watch.enter("recovery")
+            recovery = PickFromAbove(lambda: tilt.frame, setup.part, params, dev)
+            t_rec = world.clock.now() + setup.max_time
+            if _run_skill("recovery", recovery, world, robot, t_rec, on_frame, frame_every) is None:
+                recovered_by = failure
+                failure = None
+        watch.stop()
         fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
-        return TrialResult(**fields, perceived_pose=seen or None)
+        end_ok = bool(fields["success"])
+        strict = watch.failure()
+        recovered = recovered_by is not None and end_ok
+        if recovered:
+            fields["failure"] = f"{recovered_by}; recovered by the pick from above"
+        elif end_ok and strict is not None:
+            fields["failure"] = strict
+        fields["success"] = end_ok and strict is None and recovered_by is None
+        ends = watch.phase_starts
+        phase_times = watch.phase_times(world.clock.now())
+        phase_times.pop("recovery", None)
+        if trace is not None:
+            trace(watch.samples, dict(ends))
+        return TrialResult(
+            **fields,
+            perceived_pose=seen or None,
+            end_state_ok=end_ok,
+            inner_in_hole_all_along=watch.inner_in_hole_all_along(),
+            longest_free_s=watch.longest_free_s(),
+            final_grasp=watch.final_grasp().value,
+            camera_frames_steering=watch.camera_frames_steering(),
+            recovered=recovered,
+            phase_times_s={k: phase_times.get(k, 0.0) for k in ("grasp", "tilt", "align", "lift")},
+            l_a_trace=watch.l_a_trace(),
+        )
     finally:
         world.close()
 
 
 def _run_skill(  # type: ignore[no-untyped-def]
-    name, skill, world, robot, t_end, on_frame, frame_every
+    name, skill, world, robot, t_end, on_frame, frame_every, on_tick=None
 ) -> str | None:
     """Tick ``skill`` with the world until it ends; its failure message, or None."""
     result = skill.tick()
     while not result.done and world.clock.now() < t_end:
+        if on_tick is not None:
+            on_tick()
         world.step()
         if on_frame is not None and world.steps % frame_every == 0:
             on_frame(world, robot)
@@ -336,6 +416,8 @@ def summarize(part: str, results: list[TrialResult]) -> dict[str, object]:
         "part": part,
         "trials": n,
         "successes": k,
+        "recovered": sum(r.recovered for r in results),
+        "end_state_ok": sum(r.end_state_ok for r in results),
         "wilson95": [lo, hi],
         "per_trial": [r.to_json() for r in results],
     }

@@ -52,7 +52,7 @@ from sim.robot_model import (
     GRIPPER_BODY_SIZE,
 )
 from sim.world import SimWorld
-from skills.pivot import Align
+from skills.pivot import PickFromAbove
 from skills.regrasp import Regrasp, RegraspOptions
 
 VOXEL = 0.005  #: m, edge of the swept-volume grid's voxels
@@ -258,7 +258,7 @@ def run_regrasp_trial(
                 regrasp = Regrasp(frame, setup.part, params, dev, opts)
         phases = [
             ("regrasp", regrasp),
-            ("align", Align(regrasp.standing_frame, setup.part, params, dev)),
+            ("align", PickFromAbove(regrasp.standing_frame, setup.part, params, dev)),
         ]
         failure: str | None = None
         phase_name = "done"

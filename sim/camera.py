@@ -126,6 +126,8 @@ class SimCamera:
             raise ValueError(f"need 0 < near < far, got near={near} m, far={far} m")
         self.world = world
         self._base_T_tool = base_T_tool
+        #: frames handed out by :meth:`capture` so far (a judge counts which skill looked)
+        self.frames_taken = 0
         self._tool_T_camera = (
             tool_T_camera if tool_T_camera is not None else default_tool_T_camera()
         )
@@ -149,6 +151,7 @@ class SimCamera:
 
     def capture(self) -> Frame:
         """Render the scene now; ``stamp`` is the simulation time (s). Never times out."""
+        self.frames_taken += 1
         rgb, depth = self.render(self.world_T_camera())
         if self.noise is not None:
             depth = self._add_noise(depth)

@@ -1,14 +1,20 @@
-"""Judging a pivot from the simulated state only, never from the plan (issue 4, item 4).
+"""Judging a pivot from the simulated state only, never from the plan.
 
-After the lift the trial succeeds when the part's axis is within 10 deg of vertical with its open
-end up, no point of it touches the floor or it is clearly above it, it touches the fingers, and a
-fingertip lies inside its hole.
+:func:`judge` looks at the end state after the lift: the part's axis within 10 deg of vertical
+with its open end up, no point of it on the floor, held by the fingers, a fingertip inside its
+hole. That alone cannot tell the paper's method from a regrasp (let go, look, pick from above
+ends in the same state), so :class:`PivotWatch` also watches every control step from the moment
+the Grasp has closed to the end of the lift: whether the inner finger stayed in the hole, the
+longest time no finger touched the part, the kind of grasp at the end and how many camera frames
+were taken after the Grasp began. :meth:`PivotWatch.verdict` combines them.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -35,6 +41,196 @@ def finger_in_hole(part_body: PartBody, tip: np.ndarray, margin: float = 0.0) ->
     if part.hole_shape == "circle":
         return math.hypot(local[1], local[2]) < r
     return abs(local[1]) < r and abs(local[2]) < r
+
+
+def hook_in_hole(part_body: PartBody, point: np.ndarray) -> tuple[bool, float]:
+    """Whether ``point`` (a pad's tip, world, m) lies in the hole's volume, and its depth (m)
+    below the open end's face along the axis (negative: beyond the end)."""
+    part = part_body.part
+    local = part_body.pose().inverse().transform(point)
+    depth = 0.5 * part.length - float(local[0])
+    r = 0.5 * part.hole
+    if part.hole_shape == "circle":
+        radial = math.hypot(local[1], local[2]) < r
+    else:
+        radial = abs(local[1]) < r and abs(local[2]) < r
+    return bool(radial and 0.0 <= depth <= part.length), depth
+
+
+class GraspKind(str, Enum):
+    """What holds the part at the end (values are the JSON strings)."""
+
+    HOLE = "hole"  #: one pad tip inside the hole touching the part, the other finger outside
+    PINCH = "pinch"  #: both fingers touch the part, neither inside the hole
+    OTHER = "other"  #: touched some other way (one finger only, both inside, ...)
+    NONE = "none"  #: no finger touches the part
+
+
+@dataclass(frozen=True)
+class WatchSample:
+    t: float  #: s, simulation time
+    phase: str
+    touch: dict[str, bool]  #: finger name -> touching the part
+    in_hole: dict[str, bool]  #: finger name -> pad tip inside the hole's volume
+    depth: dict[str, float]  #: finger name -> pad tip depth below the open end (m)
+    beta_deg: float  #: the part's axis above the floor
+    l_a: float | None  #: where the outer finger touches along the part, l / length
+
+
+class PivotWatch:
+    """Samples the contact state after every control step while :attr:`active`.
+
+    ``pad_tip(name)`` gives a finger's pad-face tip (world, m): the point that is in the hole
+    when the finger is caught in it. ``frames()`` counts the camera frames taken so far.
+    ``inner`` names the finger meant for the hole, ``outer`` the one on the outer wall.
+    """
+
+    def __init__(
+        self,
+        world,  # type: ignore[no-untyped-def]
+        part_body: PartBody,
+        gripper_body: int,
+        finger_links: dict[str, int],
+        pad_tip: Callable[[str], np.ndarray],
+        frames: Callable[[], int],
+        inner: str,
+        outer: str,
+    ) -> None:
+        self.world, self.part_body, self.gripper_body = world, part_body, gripper_body
+        self.finger_links, self.pad_tip, self.frames = finger_links, pad_tip, frames
+        self.inner, self.outer = inner, outer
+        self.samples: list[WatchSample] = []
+        self.phase = ""
+        self.active = False
+        self.phase_starts: dict[str, float] = {}
+        self._frames0: int | None = None
+        self._frames1: int | None = None
+        world.after_step(self._sample)
+
+    def grasp_began(self) -> None:
+        """Camera frames are counted from here; the grasp phase's time too."""
+        self._frames0 = self.frames()
+        self.phase_starts.setdefault("grasp", self.world.clock.now())
+
+    def enter(self, phase: str) -> None:
+        """Start watching (if not yet) and name the phase the samples belong to."""
+        self.phase = phase
+        self.active = True
+        self.phase_starts.setdefault(phase, self.world.clock.now())
+
+    def stop(self) -> None:
+        self.active = False
+        self._frames1 = self.frames()
+
+    def _touching(self, name: str) -> list:  # type: ignore[type-arg]
+        return self.world.p.getContactPoints(
+            bodyA=self.part_body.body_id, bodyB=self.gripper_body, linkIndexB=self.finger_links[name]
+        )
+
+    def _sample(self) -> None:
+        if not self.active:
+            return
+        touch, in_hole, depth = {}, {}, {}
+        contacts = {}
+        for name in self.finger_links:
+            contacts[name] = self._touching(name)
+            touch[name] = bool(contacts[name])
+            in_hole[name], depth[name] = hook_in_hole(self.part_body, self.pad_tip(name))
+        l_a = None
+        if contacts[self.outer]:
+            inv = self.part_body.pose().inverse()
+            pts = np.array([inv.transform(c[5]) for c in contacts[self.outer]])
+            length = self.part_body.part.length
+            l_a = float((0.5 * length - pts[:, 0].mean()) / length)
+        self.samples.append(
+            WatchSample(
+                self.world.clock.now(),
+                self.phase,
+                touch,
+                in_hole,
+                depth,
+                math.degrees(self.part_body.tilt()),
+                l_a,
+            )
+        )
+
+    # --- what was seen ----------------------------------------------------------------------
+    def inner_in_hole_all_along(self) -> bool:
+        return bool(self.samples) and all(s.in_hole[self.inner] for s in self.samples)
+
+    def first_exit(self) -> float | None:
+        """s (simulation time) of the first sample with the inner pad tip out of the hole."""
+        return next((s.t for s in self.samples if not s.in_hole[self.inner]), None)
+
+    def longest_free_s(self) -> float:
+        """The longest run of samples in which no finger touched the part (s)."""
+        dt = self.world.settings.control_dt
+        longest = run = 0
+        for s in self.samples:
+            run = 0 if any(s.touch.values()) else run + 1
+            longest = max(longest, run)
+        return longest * dt
+
+    def camera_frames_steering(self) -> int:
+        if self._frames0 is None:
+            return 0
+        end = self._frames1 if self._frames1 is not None else self.frames()
+        return end - self._frames0
+
+    def final_grasp(self) -> GraspKind:
+        if not self.samples:
+            return GraspKind.NONE
+        last = self.samples[-1]
+        touching = [n for n, t in last.touch.items() if t]
+        if not touching:
+            return GraspKind.NONE
+        inside = [n for n in touching if last.in_hole[n]]
+        others = [n for n in last.touch if n not in inside]
+        if len(touching) == 2 and len(inside) == 1 and last.touch[others[0]]:
+            outside = others[0]
+            if last.depth[outside] >= 0.0 and not last.in_hole[outside]:
+                return GraspKind.HOLE
+        if len(touching) == 2 and not inside:
+            return GraspKind.PINCH
+        return GraspKind.OTHER
+
+    def l_a_trace(self) -> dict[str, float | None]:
+        """l_a = l / length where the outer finger touches S during the Tilt, at beta = 0, 30
+        and 60 deg (the first touching sample at or past each angle, None if S was not touched
+        within 10 deg of it) and ``upright``: the last touch of S before the part stands (the
+        Tilt's last touching sample; later the outer finger is moved to the outer wall)."""
+        tilt = [s for s in self.samples if s.phase == "tilt" and s.l_a is not None]
+        trace: dict[str, float | None] = {}
+        for key, beta in {"0": 0.0, "30": 30.0, "60": 60.0}.items():
+            hit = next((s for s in tilt if s.beta_deg >= beta - 1.0), None)
+            trace[key] = None if hit is None or hit.beta_deg > beta + 10.0 else hit.l_a
+        trace["upright"] = tilt[-1].l_a if tilt else None
+        return trace
+
+    def phase_times(self, end: float) -> dict[str, float]:
+        """s spent in each phase, up to ``end`` (simulation time)."""
+        names = list(self.phase_starts)
+        times = {}
+        for i, name in enumerate(names):
+            stop = self.phase_starts[names[i + 1]] if i + 1 < len(names) else end
+            times[name] = stop - self.phase_starts[name]
+        return times
+
+    def failure(self, max_free_s: float = 1.0) -> str | None:
+        """Why the watched maneuver is not the paper's in-hand pivot, or None."""
+        if not self.inner_in_hole_all_along():
+            t = self.first_exit()
+            return "the inner finger left the hole" + (f" at {t:.2f} s" if t is not None else "")
+        free = self.longest_free_s()
+        if free > max_free_s:
+            return f"no finger touched the part for {free:.2f} s (max {max_free_s:g} s)"
+        kind = self.final_grasp()
+        if kind is not GraspKind.HOLE:
+            return f"final grasp: {kind.value}, not a hole grasp"
+        frames = self.camera_frames_steering()
+        if frames:
+            return f"{frames} camera frame(s) used after the Grasp began"
+        return None
 
 
 def judge(

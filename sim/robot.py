@@ -94,6 +94,12 @@ class SimRobot:
         local = [outward * 0.5 * FINGER_THICKNESS, 0.0, FINGER_LENGTH - 0.002]
         return self.link_pose(name).transform(local)
 
+    def pad_tip(self, name: str) -> NDArray[np.float64]:
+        """World position (m) of a finger's pad face at mid-width, 2 mm from its tip: the point
+        that lies inside a part's hole when the finger is caught in it (the pad face of a
+        finger on the outer wall lies outside the hole's radius)."""
+        return self.link_pose(name).transform([0.0, 0.0, FINGER_LENGTH - 0.002])
+
     def tcp_world(self) -> Pose:
         """The TCP pose in the world frame, from the model (same as ``link_pose("tcp")``)."""
         return self.base_pose @ forward_kinematics(self.arm.joint_positions())

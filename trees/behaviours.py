@@ -30,7 +30,7 @@ from drivers.pose import Pose
 from skills.motion import Guard, Sequence
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
-from skills.pivot import Align, Grasp, PivotFrame, Tilt
+from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
 from skills.status import Status as SkillStatus
 from skills.status import StepResult
 from trees.context import CellContext
@@ -278,6 +278,25 @@ class AlignBehaviour(SkillBehaviour):
         self.ctx.events.event("picked", **data)
 
 
+class PickFromAboveBehaviour(AlignBehaviour):
+    """The recovery after a failed in-hand Align: let go, look, pick the standing part from
+    above. Its picks are journaled with ``recovered: true`` and counted apart: a regrasp, not
+    the paper's pivot."""
+
+    def make_skill(self) -> Skill:
+        if not self.bb.exists("/part/pivot_frame"):
+            raise SetupError("no pivot frame from a Tilt")
+        frame = self.bb.get("/part/pivot_frame")
+        return PickFromAbove(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
+
+    def on_success(self) -> None:
+        data: dict[str, object] = {"recovered": True}
+        if self.bb.exists("/part/target"):
+            c = self.bb.get("/part/target")["detection"].center
+            data.update(x=round(float(c[0]), 4), y=round(float(c[1]), 4))
+        self.ctx.events.event("picked", **data)
+
+
 class PutBack(SkillBehaviour):
     """Recovery after a failed pick: open the jaws (the part stays in the bin), rise, go home,
     remember the failure against the part's location -- then FAIL, so a Retry above tries again
@@ -490,6 +509,7 @@ TREE_PARAMS = ("timeout_s", "max_force_n", "max_torque_nm", "name")
 
 __all__ = [
     "AlignBehaviour",
+    "PickFromAboveBehaviour",
     "FeedSlotBehaviour",
     "GoHome",
     "GraspBehaviour",

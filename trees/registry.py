@@ -94,7 +94,16 @@ REGISTRY: dict[str, NodeType] = {
     "grasp": NodeType("leaf", "the pivot's Grasp (Sec. III-C)", dict(MOTION), lv.GraspBehaviour),
     "tilt": NodeType("leaf", "the pivot's Tilt about P_c", dict(MOTION), lv.TiltBehaviour),
     "align": NodeType(
-        "leaf", "the hole grasp on the standing part", dict(MOTION), lv.AlignBehaviour
+        "leaf",
+        "in-hand Align: turn about the rim into the hole grasp, no release (Sec. III-C)",
+        dict(MOTION),
+        lv.AlignBehaviour,
+    ),
+    "pick_from_above": NodeType(
+        "leaf",
+        "recovery after a failed align: let go, look, pick from above (counted apart)",
+        dict(MOTION),
+        lv.PickFromAboveBehaviour,
     ),
     "put_back": NodeType(
         "leaf",

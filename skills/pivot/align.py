@@ -1,20 +1,24 @@
-"""Align (Fig. 2(iv)): from the part the Tilt stood up, take the hole grasp -- one finger inside
-the hole, the other on the outer wall -- and lift.
+"""Align (Sec. III-C, Fig. 2(iv)): with the part standing and the inner finger over its rim, turn
+the gripper about the rim contact until the fingers are parallel to the part's axis, then close
+into the hole grasp and lift -- never letting go, never looking.
 
-The Tilt (:mod:`skills.pivot.tilt`) ends a little past the angle where the part's centre of mass
-passes over G; gravity then stands the part up on its end (Sec. III-B), which the paper needs
-before Align. Where it comes to rest is known only roughly: it stands on the edge of its base at
-G, so its axis is about ``D/2`` from the pivot towards the robot, but it slides several
-millimetres as it lands, and the hole grasp needs the wall to a millimetre or two. So Align
-looks, as the paper's cell does with its wrist camera:
+After the Tilt the fingers point roughly along the floor (the grasp was carried through 90 deg):
+the inner (H) finger lies on the rim with its tip in the hole, the outer (S) finger low on the
+outer wall. Align:
 
-1. let go and draw the fingers back along their axis;
-2. move the wrist camera ``view_height`` above the predicted rim, find the rim's ring in the
-   depth image (:func:`skills.perception.locate_upright_part`); fail if no standing part is seen;
-3. fingers straight down over the wall nearest the robot, the jaws open by ``wall_gap`` on each
-   side of the span a hole grasp pinches (for a round hole the inner pad touches at the chord of
-   Eq. 2); go down ``wall_depth`` below the rim -- a pad landing on the rim stops the arm under a
-   low force limit and fails the skill -- close and lift.
+1. places the turn's centre C at the rim contact: on the inner pad's face (from the tool pose and
+   the jaw opening, i.e. the fingers' own kinematics) where it crosses the inner wall that the
+   Tilt's located pivot predicts, ``align_press`` into the wall so the pad keeps touching it;
+2. turns the tool about C, about the pivot plane's normal, until the fingers point straight
+   down: the inner finger swings down into the hole along the inner wall, the outer one away
+   from the outer wall (the part stands on its base meanwhile; the inner finger keeps it);
+3. narrows the jaws around the wall, the TCP following so that the inner pad stays at C;
+4. slides ``insert_depth`` deeper along the inner wall (a low force limit: a finger landing on
+   something stops the arm);
+5. pinches the wall with ``hold_force`` (inner pad on the inner wall, outer pad on the outer
+   wall), checks that something is held and lifts ``lift_height``.
+
+Only the wrist sensor, the gripper and the arm's own pose steer it: no camera frame is taken.
 """
 
 from __future__ import annotations
@@ -26,10 +30,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.pose import Pose
+from skills.compliance import Compliance, CompliantPath
 from skills.mechanics.part import Part
 from skills.motion import Devices, GuardedMotion, Sequence
-from skills.perception import UprightPart, locate_upright_part
-from skills.pivot.frame import PivotFrame
+from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult
 
@@ -51,7 +55,18 @@ def hole_grasp_rotation(x_horizontal: NDArray[np.float64]) -> NDArray[np.float64
     return np.column_stack([x, np.cross(z, x), z])
 
 
+def turn_centre(
+    tool: Pose, jaw_width: float, hook_depth: float, tip_offset: float
+) -> NDArray[np.float64]:
+    """C (m, world): the rim contact H as the fingers carry it -- on the inner pad's face,
+    ``hook_depth`` (e_H) back from the fingertip along the fingers, where the Grasp closed it."""
+    x, z = tool.rotation[:, 0], tool.rotation[:, 2]
+    return tool.position - 0.5 * jaw_width * x + (tip_offset - hook_depth) * z
+
+
 class Align:
+    """The in-hand Align as a sequence of guarded, tickable steps."""
+
     def __init__(
         self,
         frame: PivotFrame | Callable[[], PivotFrame],
@@ -60,117 +75,120 @@ class Align:
         dev: Devices,
     ) -> None:
         """``frame`` may be a callable, read when Align starts (the Tilt's located frame)."""
-        arm, gripper, camera = dev.arm, dev.gripper, dev.camera
         self.part, self.params, self.dev = part, params, dev
         self._frame_source = frame if callable(frame) else (lambda: frame)
+        self._frame: PivotFrame | None = None
+        self.centre: NDArray[np.float64] | None = None  #: C, the turn's centre (m, world)
+        self.turn_angle = 0.0  #: rad the tool turns about the pivot plane's normal
+        self._pad = np.zeros(3)  #: m, where the inner pad's face is held while the jaws move
+        self._x = np.zeros(3)
+        self._rotation = np.eye(3)
+        self._t_still: float | None = None
+        self._checked = False
         p, g = params, params.guard
-        outer, inner = pinched_span(part, gripper.finger_width)
-        self.predicted_axis: NDArray[np.float64] | None = None  #: from the pivot (m, x y)
-        self.seen: UprightPart | None = None  #: what the camera found
-        st: dict[str, PivotFrame] = {}
-
-        def frame_now() -> PivotFrame:
-            if "frame" not in st:
-                st["frame"] = self._frame_source()
-            return st["frame"]
-
-        def rotation() -> NDArray[np.float64]:
-            return hole_grasp_rotation(-frame_now().u)  # outer finger on the robot's side
-
-        def rim_z() -> float:
-            return frame_now().floor_z + part.length
-
-        def release() -> None:
-            frame = frame_now()
-            self.predicted_axis = (frame.pivot - 0.5 * part.outer * frame.u)[:2].copy()
-            gripper.open(gripper.width() + p.release)
-
-        def withdraw() -> None:
-            tool = arm.tool_pose()
-            back = tool.position - p.approach_distance * tool.rotation[:, 2]
-            arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
-
-        def view() -> None:
-            if camera is None:
-                return
-            assert self.predicted_axis is not None
-            rot = rotation()
-            cam = camera.tool_T_camera().position
-            # Optical centre straight above the predicted axis, view_height above the rim.
-            target = np.array([*self.predicted_axis, rim_z() + p.view_height]) - rot @ cam
-            arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
-
-        def look() -> None:
-            if camera is None:
-                return
-            assert self.predicted_axis is not None
-            frame = camera.capture()
-            world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
-            self.seen = locate_upright_part(
-                frame,
-                camera.intrinsics(),
-                world_T_camera,
-                part,
-                self.predicted_axis,
-                frame_now().floor_z,
-                search=p.view_search,
-            )
-
-        def not_seen() -> str | None:
-            if camera is None:
-                return "no wrist camera to find the standing part"
-            if self.seen is None:
-                return "no standing part seen near where the Tilt left it"
-            return None
-
-        def wall_xy() -> NDArray[np.float64]:
-            assert self.seen is not None
-            toward_robot = -frame_now().u[:2]
-            return self.seen.center + 0.5 * (outer + inner) * toward_robot
-
-        def over_wall() -> None:
-            target = np.array([*wall_xy(), rim_z() + p.clear_height + p.tip_offset])
-            arm.move_to(Pose(target, rotation()), 2 * p.approach_speed, p.acceleration)
-
-        def narrow() -> None:
-            gripper.open(outer - inner + 2.0 * p.wall_gap)
-
-        def into_hole() -> None:
-            depth = min(p.wall_depth, part.length - p.floor_clearance)
-            target = np.array([*wall_xy(), rim_z() - depth + p.tip_offset])
-            arm.move_to(Pose(target, rotation()), 0.5 * p.approach_speed, p.acceleration)
-
-        def lift() -> None:
-            tool = arm.tool_pose()
-            up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
-            arm.move_to(up_pose, p.approach_speed, p.acceleration)
-
+        outer, inner = pinched_span(part, dev.gripper.finger_width)
+        self._narrow_to = (outer - inner) + 2.0 * p.wall_gap
+        self.turn = CompliantPath(
+            "turn about the rim",
+            dev,
+            g,
+            self._turn_path,
+            lambda _: abs(self.turn_angle),
+            p.align_speed,
+            4.0 * p.align_speed,
+            # The pad may press on the rim while the tool turns; past a few newtons along the
+            # closing line the TCP gives way rather than shove the standing part.
+            Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, limit=0.004),
+        )
+        pinch = GuardedMotion(
+            "pinch the wall", self._pinch, self._follow_pad, dev.arm, dev.ft, dev.clock, g
+        )
         self.sequence = Sequence(
             "align",
             [
-                dev.grip("let go", g, release),
-                dev.move("draw the fingers back", g, withdraw),
-                dev.move("camera over the part", g, view),
+                self.turn.motion(),
                 GuardedMotion(
-                    "find the standing part",
-                    look,
-                    lambda: True,
-                    arm,
+                    "narrow around the wall",
+                    self._narrow,
+                    self._follow_pad,
+                    dev.arm,
                     dev.ft,
                     dev.clock,
                     g,
-                    not_seen,
                 ),
-                dev.move("over the wall", g, over_wall),
-                dev.grip("open over the wall", g, narrow),
-                dev.move("into the hole", p.descent_guard, into_hole),
-                dev.grip("pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3),
-                dev.move("lift", g, lift),
+                dev.move("slide into the hole", p.descent_guard, self._insert),
+                pinch,
+                dev.move("lift", g, self._lift),
             ],
         )
-        self._pinch_step = 8  # index after "pinch the wall" succeeded
-        self._checked = False
+        #: the held part is checked once the sequence has passed the pinch
+        self._pinch_step = self.sequence.steps.index(pinch) + 1
 
+    # --- the steps ---------------------------------------------------------------------------
+    def _turn_path(self) -> Callable[[float], Pose]:
+        arm, gripper, p = self.dev.arm, self.dev.gripper, self.params
+        self._frame = self._frame_source()
+        tool = arm.tool_pose()
+        hook = self._frame.hook_depth(p.l_a, p.alpha)
+        self.centre = turn_centre(tool, gripper.width(), hook, p.tip_offset)
+        axis = self._frame.normal
+        z = tool.rotation[:, 2]
+        down = np.array([0.0, 0.0, -1.0])
+        self.turn_angle = math.atan2(float(np.dot(np.cross(z, down), axis)), float(z @ down))
+        centre, angle = self.centre, self.turn_angle
+        return lambda s: rotate_about_point(tool, centre, axis, s * angle)
+
+    def _hold_pad_here(self) -> None:
+        tool = self.dev.arm.tool_pose()
+        self._x = tool.rotation[:, 0].copy()
+        self._rotation = tool.rotation.copy()
+        self._pad = tool.position - 0.5 * self.dev.gripper.width() * self._x
+        self._t_still = None
+
+    def _narrow(self) -> None:
+        self._hold_pad_here()
+        p = self.params
+        self.dev.gripper.close(p.grip_force, p.narrow_speed, self._narrow_to)
+
+    def _follow_pad(self) -> bool:
+        """Keep the inner pad where it is while the jaws move (the TCP follows half the
+        closing); done once the fingers have been still for 0.2 s."""
+        gripper, clock = self.dev.gripper, self.dev.clock
+        position = self._pad + 0.5 * gripper.width() * self._x
+        self.dev.arm.servo(Pose(position, self._rotation))
+        if gripper.moving():
+            self._t_still = None
+            return False
+        if self._t_still is None:
+            self._t_still = clock.now()
+        return clock.now() - self._t_still >= 0.2
+
+    def _insert(self) -> None:
+        p, part = self.params, self.part
+        tool = self.dev.arm.tool_pose()
+        assert self._frame is not None
+        tip_z = float(tool.position[2] + p.tip_offset * tool.rotation[2, 2])
+        floor_room = tip_z - (self._frame.floor_z + p.floor_clearance)
+        depth = max(0.0, min(p.insert_depth, floor_room, part.length - p.floor_clearance))
+        target = tool.position - depth * np.array([0.0, 0.0, 1.0])
+        self.dev.arm.move_to(Pose(target, tool.rotation), 0.5 * p.approach_speed, p.acceleration)
+
+    def _pinch(self) -> None:
+        self._hold_pad_here()
+        self.dev.gripper.close(self.params.hold_force, self.params.close_speed)
+
+    def _lift(self) -> None:
+        p = self.params
+        tool = self.dev.arm.tool_pose()
+        up = Pose(tool.position + np.array([0.0, 0.0, p.lift_height]), tool.rotation)
+        self.dev.arm.move_to(up, p.approach_speed, p.acceleration)
+
+    @property
+    def lifting(self) -> bool:
+        """The hole grasp is taken and the lift runs."""
+        return self.sequence.index == len(self.sequence.steps) - 1
+
+    # --- the skill ---------------------------------------------------------------------------
     def tick(self) -> StepResult:
         result = self.sequence.tick()
         if (

@@ -23,21 +23,32 @@ class PivotParams:
     approach_speed: float = 0.05  #: m/s
     tilt_speed: float = 0.01  #: m/s of the TCP along the arc (quasi-static, Sec. II-B)
     acceleration: float = 0.3  #: m/s^2
-    #: theta of Fig. 10 (rad). None: ``tilt_past_tip`` beyond the tip-over angle atan(a/b) (at
-    #: most 90 deg). Past that angle gravity stands the part up ahead of the gripper and the
-    #: finger in the hole keeps it from going over (Sec. III-B); turning further would drive the
-    #: fingers into the standing part.
+    #: theta of Fig. 10 (rad). None: to upright (90 deg), the part carried the whole way with
+    #: the finger in its hole (Sec. III-B) -- or as far as the fingertips stay
+    #: ``floor_clearance`` above the floor; the part's weight stands it up the rest of the way.
     tilt_angle: float | None = None
-    tilt_past_tip: float = math.radians(4.0)
+    tilt_past_tip: float = math.radians(4.0)  #: rad the arc goes on past the tip-over angle
+    #: m the jaws open once the part passes ``ease_before_tip`` short of its tip-over angle:
+    #: gravity then stands the part on its base a little ahead of the arc, and a part that lands
+    #: upright before the arc ends is not pressed into the floor. Far smaller than the play of
+    #: the inner finger in the hole, so that finger never leaves it.
+    tilt_ease: float = 0.003
+    ease_before_tip: float = math.radians(3.0)  #: rad
+    tilt_floor_clearance: float = 0.003  #: m kept between the fingertips and the floor on the arc
+    finger_thickness: float = 0.008  #: m from a pad's face to the back of its finger
     locate_pivot: bool = True  #: place P_c from where the closed grasp found the rim
     tilt_squeeze: float | None = None  #: m the jaws may still close along the arc (None: free)
     tilt_axes: tuple[bool, bool, bool] = (False, False, True)  #: tool axes that give way
     tilt_press: float = 30.0  #: N the fingers may press along the arc before the TCP gives way
     tilt_compliance: float = 0.002  #: m/(N*s) the TCP gives way per newton over ``tilt_press``
     tilt_backoff: float = 0.004  #: m, the most the TCP gives way along the fingers (0: rigid)
-    swing_stop: float = 0.015  #: m of jaw closing along the arc that means the part swung ahead
-    swing_window: float = math.radians(15.0)  #: rad before the tip-over angle where swings count
-    settle: float = 1.0  #: s to let the part come to rest after the arc
+    settle: float = 0.3  #: s to let the standing part come to rest after the arc
+    #: Align in hand: rad/s of the turn about the rim contact that brings the fingers parallel
+    #: to the standing part's axis.
+    align_speed: float = 0.5
+    align_press: float = 0.0005  #: m the turn's centre lies inside the rim (keeps the contact)
+    insert_depth: float = 0.015  #: m the inner finger slides deeper into the hole after the turn
+    narrow_speed: float = 0.02  #: m/s of each finger while the jaws narrow around the wall
     clear_height: float = 0.03  #: m above the rim for moves over the standing part
     view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part
     view_search: float = 0.08  #: m the standing part may be from where the Tilt predicts it

@@ -1,5 +1,5 @@
 """Tilt (Sec. III-B, Fig. 10): carry the grasp along the arc of radius r about the far bottom
-corner P_c by theta, so the part turns about G while the fingers keep S and H.
+corner P_c until the part stands, the finger caught in the hole all the way.
 
 The arc is streamed to the arm one control step at a time, position-controlled along the arc and
 force-limited along the fingers (hybrid force-position, as the paper's packing uses): when the
@@ -8,6 +8,12 @@ outer finger presses on S harder than ``tilt_press`` the TCP backs off along the
 that is not the planned P_c; with rigid fingers the arc would then squeeze the part between S and
 the floor (the twin measured 80 N for a 2.7 mm offset), which the real 2F-85's compliant
 linkage would have absorbed.
+
+Past the tip-over angle the part's weight turns it towards upright by itself (Sec. III-B). The
+jaws then ease by ``tilt_ease``: the part is free to land on its base a degree or two ahead of
+the arc instead of being pressed into the floor by a rigid grasp, while the finger in the hole
+still keeps it from going further. The arc ends at theta = 90 deg, the part standing with the
+inner finger over its rim -- never let go.
 """
 
 from __future__ import annotations
@@ -32,52 +38,24 @@ class Tilt:
     distance to the pivot, and the pivot itself is placed from where the grasp found the rim
     (:meth:`PivotFrame.located`). The jaws hold the pinch but may close only ``tilt_squeeze``
     further: the grasp stays the rigid one the mechanics assume, where a gripper that kept
-    closing would drag S towards the rim early. The arc ends ``tilt_past_tip`` beyond the tip-over
-    angle, and the part is given ``settle`` seconds to stand up and come to rest. A part that
-    swings up ahead of the arc earlier (the jaws close by ``swing_stop`` once S has lost it) ends
-    the arc there; once the jaws have stopped (the swing is over) they let it go: turning on
-    would catch its wall and drag it back down.
+    closing would drag S towards the rim early.
     """
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
         self.frame = frame
-        p, arm, gripper = params, dev.arm, dev.gripper
-        tip = frame.section.tip_angle
-        self.angle = (
-            p.tilt_angle if p.tilt_angle is not None else min(0.5 * math.pi, tip + p.tilt_past_tip)
-        )  #: theta (rad) of this Tilt
-        state: dict[str, float] = {}
-
-        def path() -> Callable[[float], Pose]:
-            tool = arm.tool_pose()
-            state["width"] = gripper.width()
-            if p.tilt_squeeze is not None:
-                # Hold the pinch but let the jaws follow the part only this far: the mechanics
-                # of Sec. II-III take the grasp as rigid while the part turns.
-                floor = max(0.0, state["width"] - p.tilt_squeeze)
-                gripper.close(p.grip_force, p.close_speed, floor)
-            if p.locate_pivot:
-                self.frame = frame.located(tool, gripper.width())
-            return lambda s: self.frame.tilt_pose(tool, s * self.angle)
-
-        def swung() -> bool:
-            # The jaws close fast once the part has turned ahead of them towards upright. Well
-            # before the tip-over angle a closing is S sliding towards the rim instead (the
-            # paper's drifting l_a): the arc goes on.
-            if self.arc.progress * self.angle < tip - p.swing_window:
-                state["width"] = min(state["width"], gripper.width())
-                return False
-            return state["width"] - gripper.width() >= p.swing_stop
-
-        def length(pose_at: Callable[[float], Pose]) -> float:
-            return float(np.linalg.norm(pose_at(0.0).position - self.frame.pivot)) * self.angle
-
+        self.params = params
+        self.dev = dev
+        p = params
+        self.tip = frame.section.tip_angle  #: rad, beta where the weight passes over G
+        self.angle = p.tilt_angle if p.tilt_angle is not None else 0.5 * math.pi  #: theta (rad)
+        self.start_width = 0.0  #: m, jaw opening when the arc started
+        self.eased = False  #: the jaws have eased past the tip-over angle
         self.arc = CompliantPath(
             "arc about P_c",
             dev,
             p.tilt_guard,
-            path,
-            length,
+            self._path,
+            self._length,
             p.tilt_speed,
             p.acceleration,
             Compliance(
@@ -86,22 +64,62 @@ class Tilt:
                 gain=p.tilt_compliance,
                 limit=p.tilt_backoff,
             ),
-            stop_when=swung,
+            stop_when=self._ease_past_tip,
         )
-
-        def let_go() -> None:
-            if self.arc.stopped_early:  # the part swung up ahead: do not drag it back down
-                gripper.open(gripper.width() + p.release)
-
         self.sequence = Sequence(
             "tilt",
-            [
-                self.arc.motion(),
-                dev.grip("let the swing end", p.tilt_guard, lambda: None, settle=0.3),
-                dev.grip("let a swung part go", p.tilt_guard, let_go),
-                wait("let the part settle", dev, p.tilt_guard, p.settle),
-            ],
+            [self.arc.motion(), wait("let the part stand", dev, p.tilt_guard, p.settle)],
         )
+
+    def _path(self) -> Callable[[float], Pose]:
+        arm, gripper, p = self.dev.arm, self.dev.gripper, self.params
+        tool = arm.tool_pose()
+        self.start_width = gripper.width()
+        if p.tilt_squeeze is not None:
+            # Hold the pinch but let the jaws follow the part only this far: the mechanics
+            # of Sec. II-III take the grasp as rigid while the part turns.
+            gripper.close(p.grip_force, p.close_speed, max(0.0, self.start_width - p.tilt_squeeze))
+        if p.locate_pivot:
+            self.frame = self.frame.located(tool, gripper.width())
+        if p.tilt_angle is None:
+            self.angle = self._clear_of_floor(tool, gripper.width() + p.tilt_ease)
+        return lambda s: self.frame.tilt_pose(tool, s * self.angle)
+
+    def _clear_of_floor(self, tool: Pose, width: float) -> float:
+        """The largest theta (rad, at most 90 deg) at which every fingertip corner stays
+        ``tilt_floor_clearance`` above the floor. A grasp with S near the far end (large l_a) puts
+        the outer finger's back below the floor before the part is upright; the arc stops short
+        and the part's weight stands it up the rest of the way."""
+        p = self.params
+        floor = self.frame.floor_z + p.tilt_floor_clearance
+        corners = [
+            (side * 0.5 * width + side * back, p.tip_offset)
+            for side in (1.0, -1.0)
+            for back in (0.0, p.finger_thickness)
+        ]
+        best = self.tip
+        end = min(0.5 * math.pi, self.tip + p.tilt_past_tip)
+        for theta in np.linspace(self.tip, end, 31):
+            pose = self.frame.tilt_pose(tool, float(theta))
+            lowest = min(
+                float((pose.position + x * pose.rotation[:, 0] + z * pose.rotation[:, 2])[2])
+                for x, z in corners
+            )
+            if lowest < floor:
+                break
+            best = float(theta)
+        return best
+
+    def _length(self, pose_at: Callable[[float], Pose]) -> float:
+        return float(np.linalg.norm(pose_at(0.0).position - self.frame.pivot)) * self.angle
+
+    def _ease_past_tip(self) -> bool:
+        """Never ends the arc early: eases the jaws once, just before the tip-over angle."""
+        p = self.params
+        if not self.eased and self.theta >= self.tip - p.ease_before_tip:
+            self.eased = True
+            self.dev.gripper.open(self.dev.gripper.width() + p.tilt_ease, p.close_speed)
+        return False
 
     @property
     def theta(self) -> float:

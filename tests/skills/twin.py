@@ -23,7 +23,7 @@ from sim.robot_model import FINGER_WIDTH
 from sim.world import SimWorld
 from skills.mechanics.part import Part
 from skills.motion import Devices
-from skills.pivot import Align, PivotFrame, PivotParams
+from skills.pivot import PickFromAbove, PivotFrame, PivotParams
 from skills.status import Status
 
 #: Where the standing bushings are spawned in the bin (m, world): in reach, clear of the walls.
@@ -123,7 +123,7 @@ def take_hole_grasp(
     centre = np.array([*xy, 0.0]) + (section.a + 0.5 * part.outer) * u
     centre[2] = 0.5 * part.outer
     frame = PivotFrame(section, centre, yaw, twin.layout.bin_floor_z)
-    return twin.run(Align(frame, part, align_params(wall_depth=wall_depth), twin.dev), 20.0)
+    return twin.run(PickFromAbove(frame, part, align_params(wall_depth=wall_depth), twin.dev), 20.0)
 
 
 def with_layout(**changes: object) -> CellLayout:
