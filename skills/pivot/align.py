@@ -13,8 +13,9 @@ outer wall. Align:
    down: the inner finger swings down into the hole along the inner wall, the outer one away
    from the outer wall (the part stands on its base meanwhile; the inner finger keeps it);
 3. narrows the jaws around the wall, the TCP following so that the inner pad stays at C;
-4. slides ``insert_depth`` deeper along the inner wall (a low force limit: a finger landing on
-   something stops the arm);
+4. slides down along the inner wall until the fingertips are ``wall_depth`` below the rim (the
+   depth the slot feeding expects; a low force limit: a finger landing on something stops the
+   arm);
 5. pinches the wall with ``hold_force`` (inner pad on the inner wall, outer pad on the outer
    wall), checks that something is held and lifts ``lift_height``.
 
@@ -168,8 +169,9 @@ class Align:
         tool = self.dev.arm.tool_pose()
         assert self._frame is not None
         tip_z = float(tool.position[2] + p.tip_offset * tool.rotation[2, 2])
-        floor_room = tip_z - (self._frame.floor_z + p.floor_clearance)
-        depth = max(0.0, min(p.insert_depth, floor_room, part.length - p.floor_clearance))
+        floor = self._frame.floor_z
+        goal = max(floor + part.length - p.wall_depth, floor + p.floor_clearance)
+        depth = max(0.0, tip_z - goal)
         target = tool.position - depth * np.array([0.0, 0.0, 1.0])
         self.dev.arm.move_to(Pose(target, tool.rotation), 0.5 * p.approach_speed, p.acceleration)
 

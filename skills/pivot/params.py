@@ -47,7 +47,6 @@ class PivotParams:
     #: to the standing part's axis.
     align_speed: float = 0.5
     align_press: float = 0.0005  #: m the turn's centre lies inside the rim (keeps the contact)
-    insert_depth: float = 0.015  #: m the inner finger slides deeper into the hole after the turn
     narrow_speed: float = 0.02  #: m/s of each finger while the jaws narrow around the wall
     clear_height: float = 0.03  #: m above the rim for moves over the standing part
     view_height: float = 0.20  #: m of the wrist camera above the rim when it looks for the part
