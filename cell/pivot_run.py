@@ -282,9 +282,11 @@ def run_trial(
     frame_every: int = 6,
     close_gripper_anyway: bool = True,
     trace: Callable[[list[WatchSample], dict[str, float]], None] | None = None,
+    make_align: Callable[[Tilt, TrialSetup, PivotParams, Devices], Any] | None = None,
 ) -> TrialResult:
     """One perturbed trial, judged from the simulated state. ``trace`` receives the watched
-    samples and the phase start times (for the contact-trace figure)."""
+    samples and the phase start times (for the contact-trace figure); ``make_align`` builds
+    another skill in Align's place (the judge's tests give it skills that cheat)."""
     tw = open_trial_world(setup, seed)
     world, robot, params, dev = tw.world, tw.robot, tw.params, tw.dev
     camera = dev.camera
@@ -325,10 +327,13 @@ def run_trial(
                     yaw=d.yaw,
                 )
         tilt = Tilt(frame, params, dev)
-        align = Align(lambda: tilt.frame, setup.part, params, dev)
+        if make_align is None:
+            align = Align(lambda: tilt.frame, setup.part, params, dev)
+        else:
+            align = make_align(tilt, setup, params, dev)
 
         def align_phase() -> None:
-            if align.lifting and watch.phase != "lift":
+            if getattr(align, "lifting", False) and watch.phase != "lift":
                 watch.enter("lift")
 
         phases = [("grasp", Grasp(frame, params, dev)), ("tilt", tilt), ("align", align)]

@@ -57,6 +57,11 @@ def hook_in_hole(part_body: PartBody, point: np.ndarray) -> tuple[bool, float]:
     return bool(radial and 0.0 <= depth <= part.length), depth
 
 
+#: m: a finger closer to the part than this touches it (PyBullet's contact distance; negative
+#: is penetration)
+TOUCH = 0.0005
+
+
 class GraspKind(str, Enum):
     """What holds the part at the end (values are the JSON strings)."""
 
@@ -123,9 +128,12 @@ class PivotWatch:
         self._frames1 = self.frames()
 
     def _touching(self, name: str) -> list:  # type: ignore[type-arg]
-        return self.world.p.getContactPoints(
+        """Contact points of a finger on the part closer than :data:`TOUCH` (PyBullet also
+        reports points up to its breaking threshold apart, centimetres away)."""
+        points = self.world.p.getContactPoints(
             bodyA=self.part_body.body_id, bodyB=self.gripper_body, linkIndexB=self.finger_links[name]
         )
+        return [c for c in points if c[8] <= TOUCH]
 
     def _sample(self) -> None:
         if not self.active:

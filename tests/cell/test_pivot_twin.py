@@ -1,4 +1,4 @@
-"""The pivot in the twin, decided by physics (issue 4, item 8).
+"""The pivot in the twin, decided by physics.
 
 These run whole trials (about 20 s of simulated time, 1-2 s of wall time each).
 """
@@ -45,6 +45,16 @@ def test_a_headless_bushing_pivot_ends_in_a_hole_grasp(bushing_result) -> None:
     assert r.success, r.failure
     assert r.phase == "done"
     assert r.tilt_deg < 10.0 and r.height_m > 0.03
+    # the paper's method, watched every control step: never let go, never looked
+    assert r.end_state_ok and not r.recovered
+    assert r.inner_in_hole_all_along
+    assert r.longest_free_s <= 1.0
+    assert r.final_grasp == "hole"
+    assert r.camera_frames_steering == 0
+    assert set(r.phase_times_s) == {"grasp", "tilt", "align", "lift"}
+    assert all(t > 0.0 for t in r.phase_times_s.values())
+    assert set(r.l_a_trace) == {"0", "30", "60", "upright"}
+    assert 0.8 < r.l_a_trace["0"] < 1.0  # S where the plan put it (l_a = 0.9)
 
 
 def test_same_seed_same_trial(bushing_setup: TrialSetup, bushing_result) -> None:
@@ -63,11 +73,9 @@ def test_the_pivot_fails_when_the_fingers_do_not_close(bushing_setup: TrialSetup
             g.object_detected = lambda: True  # ... and the sensor lies about it
 
     r = run_trial(bushing_setup, SEED, on_frame=numb_gripper, frame_every=1)
-    assert not r.success
-    # Every skill ran to its end believing the gripper held: only the judge of the simulated
-    # state saw that the part was never lifted.
-    assert r.phase == "done"
-    assert r.failure in ("on the floor after the lift", "not held", "not lifted off the floor")
+    # The skills were told the part was held; the simulated state says it was not lifted.
+    assert not r.success and not r.end_state_ok and not r.recovered
+    assert r.final_grasp != "hole"
 
 
 def test_sim_devices_implement_the_interfaces() -> None:
