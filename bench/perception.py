@@ -5,7 +5,7 @@ Run by hand:  python bench/perception.py [--scenes 200] [--seed 10000] [--pipeli
 Runs ``cell perceive`` for each pipeline on the same scenes and prints one table: recall, false
 positives, position and yaw errors (median, p95) and the median processing time per frame
 (rendering excluded), wall clock and this process's CPU time: wall above CPU means the run waited
-for a core (another job on the machine), CPU above wall means extra threads. Targets (issue 5):
+for a core (another job on the machine), CPU above wall means extra threads. Targets:
 recall >= 0.98, yaw p95 <= 2 deg, position p95 <= 3 mm, median <= 60 ms per frame for the
 classical pipeline, on this 2-core machine.
 """

@@ -1,4 +1,4 @@
-"""``cell compare``: the pivot against the regrasp baseline on the same parts and seeds (issue 8).
+"""``cell compare``: the pivot against the regrasp baseline on the same parts and seeds.
 
 ::
 

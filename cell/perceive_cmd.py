@@ -1,4 +1,4 @@
-"""``cell perceive``: perception scored on random rendered bin scenes (issue 5).
+"""``cell perceive``: perception scored on random rendered bin scenes.
 
 Contract (scripts rely on it)::
 

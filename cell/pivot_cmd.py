@@ -1,4 +1,4 @@
-"""``cell pivot``: randomized pivot trials of one part in the PyBullet twin (issue 4).
+"""``cell pivot``: randomized pivot trials of one part in the PyBullet twin.
 
 Contract (scripts rely on it)::
 

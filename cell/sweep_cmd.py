@@ -1,4 +1,4 @@
-"""``cell sweep``: Table-3 sweeps of pivot trials over several parts, run as Ray tasks (issue 8).
+"""``cell sweep``: Table-3 sweeps of pivot trials over several parts, run as Ray tasks.
 
 Contract (scripts rely on it)::
 

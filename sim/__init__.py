@@ -1,1 +1,1 @@
-"""The PyBullet twin: implements the device interfaces of ``drivers`` (a later issue)."""
+"""The PyBullet twin: implements the device interfaces of ``drivers``."""

@@ -131,7 +131,9 @@ class PivotWatch:
         """Contact points of a finger on the part closer than :data:`TOUCH` (PyBullet also
         reports points up to its breaking threshold apart, centimetres away)."""
         points = self.world.p.getContactPoints(
-            bodyA=self.part_body.body_id, bodyB=self.gripper_body, linkIndexB=self.finger_links[name]
+            bodyA=self.part_body.body_id,
+            bodyB=self.gripper_body,
+            linkIndexB=self.finger_links[name],
         )
         return [c for c in points if c[8] <= TOUCH]
 

@@ -1,4 +1,4 @@
-"""The regrasp baseline the pivot is measured against (issue 8, item 4): pinch the lying part
+"""The regrasp baseline the pivot is measured against: pinch the lying part
 from above, turn it upright in the air, stand it on the bin floor, let go; :class:`Align` then
 takes the hole grasp on the standing part exactly as it does after the pivot's Tilt.
 

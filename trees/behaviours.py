@@ -261,6 +261,9 @@ class TiltBehaviour(SkillBehaviour):
 
 
 class AlignBehaviour(SkillBehaviour):
+    skill_type: type[Align] | type[PickFromAbove] = Align
+    recovered = False  #: picks journaled as the recovery's, counted apart
+
     def keys(self) -> dict[str, common.Access]:
         return {"/part/pivot_frame": common.Access.READ, "/part/target": common.Access.READ}
 
@@ -268,13 +271,13 @@ class AlignBehaviour(SkillBehaviour):
         if not self.bb.exists("/part/pivot_frame"):
             raise SetupError("no pivot frame from a Tilt")
         frame = self.bb.get("/part/pivot_frame")
-        return Align(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
+        return self.skill_type(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
 
     def on_success(self) -> None:
-        data: dict[str, object] = {}
+        data: dict[str, object] = {"recovered": True} if self.recovered else {}
         if self.bb.exists("/part/target"):  # where it lay: the journal's record of the bin
             c = self.bb.get("/part/target")["detection"].center
-            data = {"x": round(float(c[0]), 4), "y": round(float(c[1]), 4)}
+            data.update(x=round(float(c[0]), 4), y=round(float(c[1]), 4))
         self.ctx.events.event("picked", **data)
 
 
@@ -283,18 +286,8 @@ class PickFromAboveBehaviour(AlignBehaviour):
     above. Its picks are journaled with ``recovered: true`` and counted apart: a regrasp, not
     the paper's pivot."""
 
-    def make_skill(self) -> Skill:
-        if not self.bb.exists("/part/pivot_frame"):
-            raise SetupError("no pivot frame from a Tilt")
-        frame = self.bb.get("/part/pivot_frame")
-        return PickFromAbove(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
-
-    def on_success(self) -> None:
-        data: dict[str, object] = {"recovered": True}
-        if self.bb.exists("/part/target"):
-            c = self.bb.get("/part/target")["detection"].center
-            data.update(x=round(float(c[0]), 4), y=round(float(c[1]), 4))
-        self.ctx.events.event("picked", **data)
+    skill_type = PickFromAbove
+    recovered = True
 
 
 class PutBack(SkillBehaviour):

@@ -65,8 +65,37 @@ def turn_centre(
     return tool.position - 0.5 * jaw_width * x + (tip_offset - hook_depth) * z
 
 
-class Align:
+class HoleGraspSkill:
+    """A sequence of steps ending in a pinch of the wall and a lift: once the sequence has passed
+    the pinch (``_pinch_step``), a gripper that feels nothing fails the skill before it lifts."""
+
+    name = "hole grasp"
+    sequence: Sequence
+    dev: Devices
+    _pinch_step: int
+    _checked = False
+
+    def tick(self) -> StepResult:
+        result = self.sequence.tick()
+        if (
+            not self._checked
+            and self.sequence.index >= self._pinch_step
+            and result.status is not Status.FAILURE
+        ):
+            self._checked = True
+            if not self.dev.gripper.object_detected():
+                self.sequence.halt()
+                return StepResult(Status.FAILURE, f"{self.name}: the hole grasp closed on nothing")
+        return result
+
+    def halt(self) -> None:
+        self.sequence.halt()
+
+
+class Align(HoleGraspSkill):
     """The in-hand Align as a sequence of guarded, tickable steps."""
+
+    name = "align"
 
     def __init__(
         self,
@@ -85,7 +114,6 @@ class Align:
         self._x = np.zeros(3)
         self._rotation = np.eye(3)
         self._t_still: float | None = None
-        self._checked = False
         p, g = params, params.guard
         outer, inner = pinched_span(part, dev.gripper.finger_width)
         self._narrow_to = (outer - inner) + 2.0 * p.wall_gap
@@ -189,20 +217,3 @@ class Align:
     def lifting(self) -> bool:
         """The hole grasp is taken and the lift runs."""
         return self.sequence.index == len(self.sequence.steps) - 1
-
-    # --- the skill ---------------------------------------------------------------------------
-    def tick(self) -> StepResult:
-        result = self.sequence.tick()
-        if (
-            not self._checked
-            and self.sequence.index >= self._pinch_step
-            and result.status is not Status.FAILURE
-        ):
-            self._checked = True
-            if not self.dev.gripper.object_detected():
-                self.sequence.halt()
-                return StepResult(Status.FAILURE, "align: the hole grasp closed on nothing")
-        return result
-
-    def halt(self) -> None:
-        self.sequence.halt()

@@ -16,7 +16,6 @@ the paper's cell does with its wrist camera:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import numpy as np
@@ -26,14 +25,15 @@ from drivers.pose import Pose
 from skills.mechanics.part import Part
 from skills.motion import Devices, GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
-from skills.pivot.align import hole_grasp_rotation, pinched_span
+from skills.pivot.align import HoleGraspSkill, hole_grasp_rotation, pinched_span
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
-from skills.status import Status, StepResult
 
 
-class PickFromAbove:
+class PickFromAbove(HoleGraspSkill):
     """Release, look with the wrist camera, take the hole grasp from above (a regrasp)."""
+
+    name = "pick from above"
 
     def __init__(
         self,
@@ -128,6 +128,9 @@ class PickFromAbove:
             up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
             arm.move_to(up_pose, p.approach_speed, p.acceleration)
 
+        pinch = dev.grip(
+            "pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3
+        )
         self.sequence = Sequence(
             "pick from above",
             [
@@ -147,25 +150,8 @@ class PickFromAbove:
                 dev.move("over the wall", g, over_wall),
                 dev.grip("open over the wall", g, narrow),
                 dev.move("into the hole", p.descent_guard, into_hole),
-                dev.grip("pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3),
+                pinch,
                 dev.move("lift", g, lift),
             ],
         )
-        self._pinch_step = 8  # index after "pinch the wall" succeeded
-        self._checked = False
-
-    def tick(self) -> StepResult:
-        result = self.sequence.tick()
-        if (
-            not self._checked
-            and self.sequence.index >= self._pinch_step
-            and result.status is not Status.FAILURE
-        ):
-            self._checked = True
-            if not self.dev.gripper.object_detected():
-                self.sequence.halt()
-                return StepResult(Status.FAILURE, "pick from above: the hole grasp closed on nothing")
-        return result
-
-    def halt(self) -> None:
-        self.sequence.halt()
+        self._pinch_step = self.sequence.steps.index(pinch) + 1

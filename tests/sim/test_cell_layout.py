@@ -134,7 +134,7 @@ def test_tray_places_lie_inside_the_tray() -> None:
 
 
 def test_the_default_tray_holds_at_least_ten_bushings_in_reach() -> None:
-    """Packing places (issue 6): >= 10 upright bushings, inside the tray, the hole grasp over
+    """Packing places: >= 10 upright bushings, inside the tray, the hole grasp over
     each (set down 4 mm short of it, fingers down, the outer finger on the -x, -y diagonal)
     within the UR5's reach, at the floor and at the travel height."""
     from sim.arm import REACH_TOLERANCE, solve_ik

@@ -1,4 +1,4 @@
-"""PackInBox in the twin, judged from the simulated state (issue 6).
+"""PackInBox in the twin, judged from the simulated state.
 
 Two bushings stand in the bin. The first goes the whole way of the cell's cycle -- Align (hole
 grasp by physics, found by the wrist camera), FeedSlot, PickFromSlot -- and is packed into the

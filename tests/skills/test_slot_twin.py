@@ -1,4 +1,4 @@
-"""FeedSlot and PickFromSlot in the twin, judged from the simulated state (issue 6).
+"""FeedSlot and PickFromSlot in the twin, judged from the simulated state.
 
 The part gets into the hole grasp by physics: it is spawned standing in the bin and Align takes
 the grasp with the wrist camera. Nothing is welded or teleported; the judges read the simulator
