@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 
@@ -62,7 +62,7 @@ def hook_in_hole(part_body: PartBody, point: np.ndarray) -> tuple[bool, float]:
 TOUCH = 0.0005
 
 
-class GraspKind(str, Enum):
+class GraspKind(StrEnum):
     """What holds the part at the end (values are the JSON strings)."""
 
     HOLE = "hole"  #: one pad tip inside the hole touching the part, the other finger outside
