@@ -43,23 +43,27 @@ def finger_in_hole(part_body: PartBody, tip: np.ndarray, margin: float = 0.0) ->
     return abs(local[1]) < r and abs(local[2]) < r
 
 
+#: m: a finger closer to the part than this touches it (PyBullet's contact distance; negative
+#: is penetration)
+TOUCH = 0.0005
+
+
 def hook_in_hole(part_body: PartBody, point: np.ndarray) -> tuple[bool, float]:
     """Whether ``point`` (a pad's tip, world, m) lies in the hole's volume, and its depth (m)
-    below the open end's face along the axis (negative: beyond the end)."""
+    below the open end's face along the axis (negative: beyond the end).
+
+    A pad pressed flat on a rectangular hole's inner wall has its face on the wall itself and,
+    by the contact's penetration, a fraction of a millimetre into it: the volume reaches
+    :data:`TOUCH` into the wall (no wall is that thin; an outer pad stays outside)."""
     part = part_body.part
     local = part_body.pose().inverse().transform(point)
     depth = 0.5 * part.length - float(local[0])
-    r = 0.5 * part.hole
+    r = 0.5 * part.hole + TOUCH
     if part.hole_shape == "circle":
         radial = math.hypot(local[1], local[2]) < r
     else:
         radial = abs(local[1]) < r and abs(local[2]) < r
     return bool(radial and 0.0 <= depth <= part.length), depth
-
-
-#: m: a finger closer to the part than this touches it (PyBullet's contact distance; negative
-#: is penetration)
-TOUCH = 0.0005
 
 
 class GraspKind(StrEnum):
