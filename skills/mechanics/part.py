@@ -90,10 +90,11 @@ class Gripper:
     stroke: float = 0.085
     clearance: float = 0.010
     finger_length: float = 0.055
+    finger_thickness: float = 0.008  #: from a pad's face to the back of its finger
 
     def __post_init__(self) -> None:
         owner = f"gripper {self.name!r}"
-        for name in ("finger_width", "stroke", "finger_length"):
+        for name in ("finger_width", "stroke", "finger_length", "finger_thickness"):
             _positive(owner, name, getattr(self, name))
         if not math.isfinite(self.clearance) or self.clearance < 0:
             raise ValueError(f"{owner}: clearance must be >= 0, got {self.clearance!r}")

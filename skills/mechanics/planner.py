@@ -32,6 +32,16 @@ paper's Table 3 has them (0.28 and 0.53).
 
 The jaw opening at the grasp is the distance between the finger faces along the closing line,
 ``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
+
+Last, the approach itself (:func:`approach_problem`): the fingers come down along their own
+axis from ``approach_distance`` back, the jaws opened by the gripper's ``clearance``, and the
+inner finger then closes onto H. In the pivot plane each finger is a rectangle (its length and
+thickness); none may cut into the part's walls (the top and bottom walls' sections, ``delta``
+thick at the finger's edges) or the floor by more than ``contact_tolerance`` anywhere on the way
+(each straight move is checked as the shape the finger sweeps) -- the fingers only set onto S
+and H. A plan whose approach is
+blocked is passed over for the next ``(l_a, alpha)``; a part with none left is refused, naming
+what the finger meets.
 """
 
 from __future__ import annotations
@@ -65,6 +75,8 @@ class PlannerOptions:
     hook_depth: float = 0.005  # m the inner finger's tip must reach behind the rim
     palm_margin: float = 0.010  # m kept between the rim and the palm (finger base)
     alpha_margin: float = math.radians(2.0)  # rad kept inside the feasible set's edge
+    approach_distance: float = 0.06  # m the fingers travel along their axis onto the part
+    contact_tolerance: float = 0.001  # m a finger may cut into the part (it sets onto S and H)
     alpha_samples: int = 179  # 0.5 degree scan, then bisection at the edge
     beta_samples: int = 181  # 0.5 degree path samples; the final plan is re-checked at 0.25
 
@@ -139,6 +151,83 @@ def jaw_opening(section: Section, l_a: float, alpha: np.ndarray | float) -> np.n
     return l * np.cos(alpha) + section.delta * np.sin(alpha)
 
 
+def _finger(tip: np.ndarray, z: np.ndarray, back: np.ndarray, length: float) -> np.ndarray:
+    """The finger's outline in the pivot plane: its pad-face tip, the back of the tip, then the
+    same two at the palm (``length`` up the finger, against ``z``)."""
+    return np.array([tip, tip + back, tip + back - length * z, tip - length * z])
+
+
+def _swept_overlap(
+    poly: np.ndarray, shift: np.ndarray, box: tuple[float, float, float, float]
+) -> float:
+    """How deep (m) the convex ``poly``, translated by ``shift`` along a straight line, cuts
+    into the box ``(s0, s1, h0, h1)`` anywhere on the way: the smallest overlap over the
+    separating axes of the swept shape (the hull of the two ends: the polygon's edges, the
+    direction of travel) and the box's. 0 or less: apart."""
+    s0, s1, h0, h1 = box
+    corners = np.array([[s0, h0], [s1, h0], [s1, h1], [s0, h1]])
+    swept = np.vstack([poly, poly + shift])
+    edges = [poly[(i + 1) % len(poly)] - poly[i] for i in range(len(poly))] + [shift]
+    axes = [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
+    for edge in edges:
+        norm = float(np.hypot(*edge))
+        if norm > 1e-12:
+            axes.append(np.array([-edge[1], edge[0]]) / norm)
+    depth = math.inf
+    for axis in axes:
+        a, b = swept @ axis, corners @ axis
+        depth = min(depth, min(a.max(), b.max()) - max(a.min(), b.min()))
+    return float(depth)
+
+
+def approach_problem(
+    section: Section,
+    l_a: float,
+    alpha: float,
+    gripper: Gripper = Gripper(),
+    options: PlannerOptions = PlannerOptions(),
+) -> str | None:
+    """What the fingers meet on the way to the grasp at ``(l_a, alpha)``, or None when clear.
+
+    In the pivot plane, ``s`` along the axis from the part's centre (open end at ``+a``) and
+    ``h`` up from the floor: the outer fingertip ends on S ``= (a - l, 2b)``, the inner one
+    ``opening`` from it along the closing line ``x = (-cos alpha, sin alpha)``, fingers along
+    ``z = (-sin alpha, -cos alpha)``. The approach ends ``clearance`` wider (the outer finger on
+    S, the inner one further out), comes ``approach_distance`` down ``z``, and the inner finger
+    closes onto H.
+    """
+    a, b, delta = section.a, section.b, section.delta
+    l = 2.0 * a * l_a
+    x = np.array([-math.cos(alpha), math.sin(alpha)])
+    z = np.array([-math.sin(alpha), -math.cos(alpha)])
+    length, thick = gripper.finger_length, gripper.finger_thickness
+    outer_tip = np.array([a - l, 2.0 * b])
+    inner_tip = outer_tip - float(jaw_opening(section, l_a, alpha)) * x
+    obstacles = {
+        "the rim and the wall above the hole": (-a, a, 2.0 * b - delta, 2.0 * b),
+        "the wall below the hole": (-a, a, 0.0, delta),
+        "the floor": (-a - 1.0, a + 1.0, -1.0, 0.0),
+    }
+    tol = options.contact_tolerance
+    down = options.approach_distance * z
+    moves = (  # (finger, when, pad tip at the start, travel)
+        ("outer", "on the way down onto S", outer_tip - down, down),
+        ("inner", "on the way down", inner_tip - gripper.clearance * x - down, down),
+        ("inner", "closing onto H", inner_tip - gripper.clearance * x, gripper.clearance * x),
+    )
+    for finger, when, tip, travel in moves:
+        back = (thick if finger == "outer" else -thick) * x
+        outline = _finger(tip, z, back, length)
+        for what, box in obstacles.items():
+            depth = _swept_overlap(outline, travel, box)
+            if depth > tol + 1e-9:
+                return (
+                    f"approach blocked: the {finger} finger cuts {depth * 1e3:.1f} mm into "
+                    f"{what} {when} (l_a {l_a:.2f}, alpha {math.degrees(alpha):.1f} deg)"
+                )
+    return None
+
+
 def _run_starts(mask: np.ndarray, length: int) -> list[int]:
     """Indices where ``mask`` starts ``length`` consecutive True values, in order."""
     starts, run = [], 0
@@ -186,6 +275,7 @@ def plan_pivot(
     alphas = alpha_axis(options.alpha_samples)
     n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + 1e-9)) + 1
     stable_somewhere = False
+    approach_blocked: str | None = None  #: the last plan passed over for its approach
     margin_steps = int(math.ceil(options.alpha_margin / (alphas[1] - alphas[0]) - 1e-9))
     for la in options.la_max - options.la_step * np.arange(n_la):
         la = float(round(la, 10))
@@ -202,6 +292,14 @@ def plan_pivot(
         both, ok = feasible(alphas)
         stable_somewhere |= bool(ok.any())
         for first in _run_starts(both, margin_steps + 1):
+            # The approach first (cheap): a run whose start is blocked is passed over before
+            # its edge is refined.
+            blocked = approach_problem(
+                section, la, float(alphas[first]) + options.alpha_margin, gripper, options
+            )
+            if blocked is not None:
+                approach_blocked = blocked
+                continue
             # The edge of the feasible set, refined by bisection, then the margin inside it.
             alpha_min = float(alphas[first])
             if first > 0 and not both[first - 1]:
@@ -213,6 +311,10 @@ def plan_pivot(
             alpha = alpha_min + options.alpha_margin
             end = stable_beta_max(section, la, alpha, frictions, options.equation)
             if end is None or end < beta_req - 1e-9:  # a sliver the scan stepped over
+                continue
+            blocked = approach_problem(section, la, alpha, gripper, options)
+            if blocked is not None:
+                approach_blocked = blocked
                 continue
             return PivotPlan(
                 pivotable=True,
@@ -227,7 +329,12 @@ def plan_pivot(
                 alpha_hook=alpha_hook,
                 **common,
             )
-    if stable_somewhere:
+    if approach_blocked is not None:
+        reason = (
+            f"{approach_blocked}; every other stable (l_a, alpha) that fits the stroke is "
+            "blocked too"
+        )
+    elif stable_somewhere:
         reason = (
             f"stroke too short: every stable (l_a, alpha) with alpha >= "
             f"{math.degrees(alpha_hook):.1f} deg (to hook the hole) needs a jaw opening above "

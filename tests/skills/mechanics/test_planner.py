@@ -4,9 +4,16 @@ import math
 
 import pytest
 
+from cell.catalogue import load_catalogue
 from skills.mechanics.contact import Frictions
 from skills.mechanics.part import Gripper, Part
-from skills.mechanics.planner import PlannerOptions, hook_alpha, jaw_opening, plan_pivot
+from skills.mechanics.planner import (
+    PlannerOptions,
+    approach_problem,
+    hook_alpha,
+    jaw_opening,
+    plan_pivot,
+)
 from skills.mechanics.region import check_tilt
 
 BUSHING = Part("bushing", 0.068, 0.034, 0.028, "circle", 0.156)
@@ -86,3 +93,45 @@ def test_bad_part_raises(kwargs: dict, needle: str) -> None:
 def test_finger_wider_than_hole_raises_from_the_library() -> None:
     with pytest.raises(ValueError, match="not narrower than the hole"):
         BUSHING.section(0.030)
+
+
+# --- the approach at alpha ------------------------------------------------------------------
+
+THICK = Part(name="thick_bushing", length=0.060, outer=0.040, hole=0.022, mass=0.15)
+
+
+def test_approach_blocked_by_the_wall_below_a_narrow_hole_names_it() -> None:
+    # l_a 0.9 at 30.6 deg is stable and fits the stroke, but the inner finger, closing onto H,
+    # cuts into the wall below the 22 mm hole (the chord leaves it 9 mm).
+    reason = approach_problem(THICK.section(0.020), 0.9, math.radians(30.6))
+    assert reason is not None
+    assert "inner finger" in reason and "wall below the hole" in reason and "closing" in reason
+
+
+def test_the_planner_passes_a_blocked_approach_over_for_one_that_is_clear() -> None:
+    plan = plan_pivot(THICK)
+    assert plan.pivotable and plan.l_a is not None and plan.alpha is not None
+    assert plan.l_a < 0.9  # 0.9 is blocked (above); the next clear l_a is taken
+    assert approach_problem(THICK.section(0.020), plan.l_a, plan.alpha) is None
+
+
+def test_every_table3_plan_has_a_clear_approach() -> None:
+    for part in load_catalogue(None).parts.values():
+        plan = plan_pivot(part)
+        if plan.pivotable:
+            assert plan.l_a is not None and plan.alpha is not None
+            section = part.section(Gripper().finger_width)
+            assert approach_problem(section, plan.l_a, plan.alpha) is None, part.name
+
+
+def test_a_gripper_whose_fingers_cannot_get_in_is_refused_with_the_approach() -> None:
+    plan = plan_pivot(THICK, Gripper(finger_thickness=0.05))
+    assert not plan.pivotable
+    assert plan.reason.startswith("approach blocked: ")
+
+
+def test_fingers_coming_down_clear_of_the_part_pass() -> None:
+    # A wide hole and a small alpha: the inner finger comes down beyond the open end, the outer
+    # one onto the top surface; nothing is cut.
+    wide = Part(name="sleeve", length=0.050, outer=0.060, hole=0.050, mass=0.06)
+    assert approach_problem(wide.section(0.020), 0.9, math.radians(10.0)) is None
