@@ -201,9 +201,7 @@ class SimGripper:
             self._stalled = False
             self._target = None
             return
-        # The 2F-85 reports one position (the opening): it is still when the opening stops
-        # changing, even where both fingers drift together with a pinched wall that slides.
-        self._still = self._still + 1 if abs(float(v.sum())) < STILL_SPEED else 0
+        self._still = self._still + 1 if np.all(np.abs(v) < STILL_SPEED) else 0
         width = float(q.sum())
         if self._stalled:
             if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:
