@@ -2,7 +2,7 @@
 
 Run by hand:  python bench/grasp_map.py [--grid 181] [--la 0.9] [--repeat 5]
 Prints both times, the ratio and the number of grid points where the two disagree.
-Targets (issue 3): vectorized >= 1000x faster, < 0.3 s per 181x181 map, 0 disagreements.
+Targets: vectorized >= 1000x faster, < 0.3 s per 181x181 map, 0 disagreements.
 """
 
 from __future__ import annotations

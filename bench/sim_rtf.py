@@ -53,8 +53,8 @@ def main() -> None:
     sim.camera.SimCamera.capture = timed_capture  # type: ignore[method-assign]
 
     part = load_catalogue().get(args.part)
-    # The nominal pose, as issue 4 measured: the Look skill's two rendered frames are perception,
-    # timed by bench/perception.py.
+    # The nominal pose: the Look skill's two rendered frames are perception, timed by
+    # bench/perception.py.
     setup = TrialSetup(part=part, plan=plan_pivot(part), perceive=False)
     rows = []
     for i in range(args.trials):

@@ -10,7 +10,7 @@ py_trees' own nodes in the same places (PassThrough decorators, Running leaves).
     python bench/tick.py [--ticks 20000] [--leaf N]
 
 ``--leaf`` picks which leaf is active (the tip), default the deepest guarded one (grasp).
-Targets (issue 6): median <= 200 us and <= 1.5x the plain tree.
+Targets: median <= 200 us and <= 1.5x the plain tree.
 """
 
 from __future__ import annotations

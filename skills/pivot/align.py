@@ -71,9 +71,19 @@ class HoleGraspSkill:
 
     name = "hole grasp"
     sequence: Sequence
-    dev: Devices
     _pinch_step: int
     _checked = False
+
+    def __init__(
+        self,
+        frame: PivotFrame | Callable[[], PivotFrame],
+        part: Part,
+        params: PivotParams,
+        dev: Devices,
+    ) -> None:
+        """``frame`` may be a callable, read when the skill starts (the Tilt's located frame)."""
+        self.part, self.params, self.dev = part, params, dev
+        self._frame_source = frame if callable(frame) else (lambda: frame)
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
@@ -104,9 +114,7 @@ class Align(HoleGraspSkill):
         params: PivotParams,
         dev: Devices,
     ) -> None:
-        """``frame`` may be a callable, read when Align starts (the Tilt's located frame)."""
-        self.part, self.params, self.dev = part, params, dev
-        self._frame_source = frame if callable(frame) else (lambda: frame)
+        super().__init__(frame, part, params, dev)
         self._frame: PivotFrame | None = None
         self.centre: NDArray[np.float64] | None = None  #: C, the turn's centre (m, world)
         self.turn_angle = 0.0  #: rad the tool turns about the pivot plane's normal

@@ -42,10 +42,8 @@ class PickFromAbove(HoleGraspSkill):
         params: PivotParams,
         dev: Devices,
     ) -> None:
-        """``frame`` may be a callable, read when Align starts (the Tilt's located frame)."""
+        super().__init__(frame, part, params, dev)
         arm, gripper, camera = dev.arm, dev.gripper, dev.camera
-        self.part, self.params, self.dev = part, params, dev
-        self._frame_source = frame if callable(frame) else (lambda: frame)
         p, g = params, params.guard
         outer, inner = pinched_span(part, gripper.finger_width)
         self.predicted_axis: NDArray[np.float64] | None = None  #: from the pivot (m, x y)
