@@ -1,0 +1,304 @@
+"""Tick-level tests of skills/motion.py: GuardedMotion, arm/gripper motions, Sequence, wait.
+
+Fake devices only (tests/skills/fakes.py): the checks are on statuses, arm stops, commands and
+times of the injected clock, not on message text.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from drivers.arm import ArmStatus, MotionState
+from drivers.health import DeviceError
+from drivers.pose import Pose
+from skills.motion import Devices, Guard, GuardedMotion, Sequence, wait
+from skills.status import SkillInputError, Status
+from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
+
+TARGET = Pose(np.array([0.5, 0.1, 0.2]))
+
+
+def devices() -> dict:
+    return {"arm": FakeArm(), "gripper": FakeGripper(), "ft": FakeFT(), "clock": FakeClock()}
+
+
+def dev(d: dict) -> Devices:
+    return Devices(d["arm"], d["gripper"], d["ft"], d["clock"])
+
+
+class Counter:
+    """A command that counts its calls; ``done`` says when the motion counts as finished."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+        self.done = False
+
+    def __call__(self) -> None:
+        self.calls += 1
+
+
+def motion(d: dict, guard: Guard | None = None, failed=None) -> tuple[GuardedMotion, Counter]:  # type: ignore[no-untyped-def]
+    c = Counter()
+    m = GuardedMotion(
+        "m", c, lambda: c.done, d["arm"], d["ft"], d["clock"], guard or Guard(), failed
+    )
+    return m, c
+
+
+# ------------------------------------------------------------------------------ GuardedMotion
+def test_the_command_starts_on_the_first_tick_only_and_success_follows_finished() -> None:
+    d = devices()
+    m, c = motion(d)
+    assert c.calls == 0  # building a motion commands nothing
+    for _ in range(5):
+        assert m.tick().status is Status.RUNNING
+    assert c.calls == 1
+    c.done = True
+    assert m.tick().status is Status.SUCCESS
+    assert c.calls == 1 and d["arm"].stops == 0
+
+
+@pytest.mark.parametrize(
+    ("wrench", "trips"),
+    [
+        ([0, 0, 100.0, 0, 0, 0], False),  # exactly at the force limit: allowed
+        ([0, 0, 100.1, 0, 0, 0], True),
+        ([60.0, 60.0, 60.0, 0, 0, 0], True),  # the magnitude counts, not one axis (|F| 104)
+        ([0, 0, 0, 0, 0, 6.0], False),  # exactly at the torque limit
+        ([0, 0, 0, 4.0, 4.0, 4.0], True),  # |T| 6.9 over 6
+    ],
+)
+def test_the_guard_trips_on_the_force_or_torque_magnitude_over_the_limit(wrench, trips) -> None:
+    d = devices()
+    m, c = motion(d, Guard(max_force=100.0, max_torque=6.0, timeout=10.0))
+    assert m.tick().status is Status.RUNNING
+    d["ft"].value = np.array(wrench, float)
+    result = m.tick()
+    if trips:
+        assert result.status is Status.FAILURE
+        assert d["arm"].stops == 1 and d["arm"].state is MotionState.STOPPED
+    else:
+        assert result.status is Status.RUNNING and d["arm"].stops == 0
+
+
+def test_a_spike_on_the_very_first_tick_fails_after_the_command_and_stops_the_arm() -> None:
+    d = devices()
+    d["ft"].value = np.array([0, 0, 500.0, 0, 0, 0])
+    m, c = motion(d)
+    assert m.tick().status is Status.FAILURE
+    assert c.calls == 1 and d["arm"].stops == 1
+
+
+def test_the_guard_is_checked_before_finished_a_spike_fails_a_finished_motion() -> None:
+    d = devices()
+    m, c = motion(d)
+    m.tick()
+    c.done = True
+    d["ft"].value = np.array([0, 0, 150.0, 0, 0, 0])
+    assert m.tick().status is Status.FAILURE
+    assert d["arm"].stops == 1
+
+
+def test_peak_force_is_the_largest_magnitude_seen_and_resets_on_start() -> None:
+    d = devices()
+    m, _ = motion(d)
+    for f in (10.0, 40.0, 25.0):
+        d["ft"].value = np.array([0, f, 0, 0, 0, 0])
+        m.tick()
+    assert m.peak_force == pytest.approx(40.0)
+    m.start()
+    assert m.peak_force == 0.0
+
+
+def test_the_timeout_runs_on_the_injected_clock_from_the_start_of_the_motion() -> None:
+    d = devices()
+    clock = d["clock"]
+    clock.t = 100.0  # the motion's clock starts when it starts, not at zero
+    m, _ = motion(d, Guard(timeout=0.5))
+    assert m.tick().status is Status.RUNNING
+    clock.t = 100.5
+    assert m.tick().status is Status.RUNNING  # at the limit, not past it
+    assert d["arm"].stops == 0
+    clock.t = 100.51
+    assert m.tick().status is Status.FAILURE
+    assert d["arm"].stops == 1
+
+
+def test_a_failed_test_fails_the_motion_and_stops_the_arm() -> None:
+    d = devices()
+    why = {"reason": None}
+    m, c = motion(d, failed=lambda: why["reason"])
+    assert m.tick().status is Status.RUNNING
+    why["reason"] = "jammed"
+    c.done = True  # a failure is checked before finished
+    result = m.tick()
+    assert result.status is Status.FAILURE and "jammed" in result.message
+    assert d["arm"].stops == 1
+
+
+@pytest.mark.parametrize(
+    "error",
+    [
+        DeviceError("FT300", "/dev/ttyUSB1", "stale"),
+        TimeoutError("no frame"),
+        SkillInputError("no valid depth"),
+    ],
+)
+def test_a_device_or_input_error_fails_the_step_and_stops_the_arm_instead_of_raising(error) -> None:
+    d = devices()
+    m, _ = motion(d)
+    assert m.tick().status is Status.RUNNING
+
+    def broken() -> np.ndarray:
+        raise error
+
+    d["ft"].wrench = broken  # type: ignore[method-assign]
+    result = m.tick()
+    assert result.status is Status.FAILURE
+    assert d["arm"].stops == 1
+
+
+def test_an_arm_that_cannot_even_stop_still_gives_a_failure_not_an_exception() -> None:
+    d = devices()
+    m, _ = motion(d)
+    m.tick()
+
+    def dead(*_a: object) -> None:
+        raise DeviceError("UR5", "10.0.0.2", "link lost")
+
+    d["ft"].wrench = dead  # type: ignore[method-assign]
+    d["arm"].stop = dead  # type: ignore[method-assign]
+    assert m.tick().status is Status.FAILURE
+
+
+def test_halt_stops_the_arm_only_once_the_motion_started() -> None:
+    d = devices()
+    m, _ = motion(d)
+    m.halt()  # nothing was commanded: nothing to stop
+    assert d["arm"].stops == 0
+    m.tick()
+    m.halt()
+    assert d["arm"].stops == 1
+
+
+# ----------------------------------------------------------------- arm_motion, gripper_motion
+def test_an_arm_motion_commands_once_and_succeeds_when_the_arm_is_done() -> None:
+    d = devices()
+    d["arm"].ticks_per_move = 4
+    m = dev(d).move("go", Guard(), lambda: d["arm"].move_to(TARGET, 0.1, 0.5))
+    result, ticks = run(m, d)
+    assert result.status is Status.SUCCESS
+    assert ticks == 4
+    assert [k for k, _ in d["arm"].commands] == ["path"]
+    assert np.allclose(d["arm"].pose.position, TARGET.position)
+
+
+@pytest.mark.parametrize("state", [MotionState.FAULT, MotionState.STOPPED])
+def test_an_arm_motion_fails_when_the_arm_faults_or_stops_under_it(state) -> None:
+    d = devices()
+    d["arm"].ticks_per_move = 100
+    m = dev(d).move("go", Guard(), lambda: d["arm"].move_to(TARGET, 0.1, 0.5))
+    assert m.tick().status is Status.RUNNING
+    d["arm"].status = lambda: ArmStatus(state, "protective stop")  # type: ignore[method-assign]
+    assert m.tick().status is Status.FAILURE
+
+
+def test_a_gripper_motion_finishes_once_the_fingers_were_still_for_settle_seconds() -> None:
+    d = devices()
+    clock = d["clock"]
+    m = dev(d).grip("open", Guard(), lambda: d["gripper"].open(0.05), settle=0.1)
+    assert m.tick().status is Status.RUNNING  # commanded: the fingers move
+    assert d["gripper"].moving()
+    d["gripper"].tick()  # they stop
+    assert m.tick().status is Status.RUNNING  # still for 0 s
+    clock.t += 0.05
+    assert m.tick().status is Status.RUNNING
+    clock.t += 0.06
+    assert m.tick().status is Status.SUCCESS
+    assert d["gripper"].width() == pytest.approx(0.05)
+
+
+def test_a_gripper_motion_fails_on_a_gripper_fault_and_stops_the_arm() -> None:
+    d = devices()
+    m = dev(d).grip("close", Guard(), lambda: d["gripper"].close(10.0))
+    m.tick()
+    d["gripper"].fault = lambda: "0x0B"  # type: ignore[method-assign]
+    assert m.tick().status is Status.FAILURE
+    assert d["arm"].stops == 1
+
+
+# --------------------------------------------------------------------------------- Sequence
+def test_a_sequence_runs_its_steps_in_order_one_tick_each_and_then_succeeds() -> None:
+    d = devices()
+    order: list[str] = []
+    steps = [
+        GuardedMotion(n, lambda n=n: order.append(n), lambda: True, d["arm"], d["ft"],
+                      d["clock"], Guard())
+        for n in ("a", "b", "c")
+    ]
+    seq = Sequence("seq", steps)
+    statuses = []
+    for _ in range(5):
+        r = seq.tick()
+        statuses.append(r.status)
+        if r.done:
+            break
+    # each step finishes on its first tick; a finished step never starts the next in the
+    # same tick (one control step per tick)
+    assert statuses == [Status.RUNNING] * 3 + [Status.SUCCESS]
+    assert order == ["a", "b", "c"]
+
+
+def test_a_sequence_stops_at_the_first_failure_and_never_starts_the_rest() -> None:
+    d = devices()
+    started: list[str] = []
+
+    def step(name: str, fails: bool) -> GuardedMotion:
+        return GuardedMotion(name, lambda: started.append(name), lambda: True, d["arm"],
+                             d["ft"], d["clock"], Guard(), lambda: "no" if fails else None)
+
+    seq = Sequence("seq", [step("a", False), step("b", True), step("c", False)])
+    assert seq.tick().status is Status.RUNNING
+    assert seq.tick().status is Status.FAILURE
+    assert started == ["a", "b"]
+    assert seq.index == 1
+
+
+def test_halt_stops_the_step_in_progress_and_nothing_once_the_sequence_is_done() -> None:
+    d = devices()
+    d["arm"].ticks_per_move = 100
+    device = dev(d)
+    seq = Sequence("seq", [device.move("go", Guard(), lambda: d["arm"].move_to(TARGET, 0.1, 1))])
+    seq.halt()  # not started: nothing to stop
+    assert d["arm"].stops == 0
+    seq.tick()
+    assert d["arm"].state is MotionState.MOVING
+    seq.halt()  # mid-motion: the arm stops
+    assert d["arm"].stops == 1 and d["arm"].state is MotionState.STOPPED
+
+    d2 = devices()
+    quick = Sequence("q", [dev(d2).move("go", Guard(), lambda: d2["arm"].move_to(TARGET, 1, 1))])
+    result, _ = run(quick, d2)
+    assert result.status is Status.SUCCESS
+    quick.halt()
+    assert d2["arm"].stops == 0
+
+
+# ------------------------------------------------------------------------------------ wait
+def test_wait_holds_for_its_seconds_of_the_cell_clock_and_commands_nothing() -> None:
+    d = devices()
+    w = wait("settle", dev(d), Guard(), 0.3)
+    result, ticks = run(w, d)
+    assert result.status is Status.SUCCESS
+    assert ticks * d["clock"].dt == pytest.approx(0.3, abs=d["clock"].dt)
+    assert d["arm"].commands == [] and d["arm"].stops == 0
+
+
+def test_wait_is_guarded_a_push_while_holding_still_fails_it() -> None:
+    d = devices()
+    w = wait("settle", dev(d), Guard(max_force=20.0), 5.0)
+    spike = lambda i: setattr(d["ft"], "value", np.array([0, 0, 30.0, 0, 0, 0])) if i == 3 else None  # noqa: E731,E501
+    result, ticks = run(w, d, on_tick=spike)
+    assert result.status is Status.FAILURE and ticks == 3
+    assert d["arm"].stops == 1
