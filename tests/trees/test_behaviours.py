@@ -7,11 +7,7 @@ import py_trees
 import pytest
 from py_trees.common import Status
 
-from drivers.machine import TimedMachine
-from drivers.pose import Pose
-from skills.motion import Devices, Guard
-from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
-from tests.trees.helpers import Recorder, make_ctx, tick_tree
+from tests.trees.helpers import make_ctx, tick_tree
 from trees import behaviours as lv
 from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 
@@ -236,22 +232,6 @@ def test_update_never_blocks_one_tick_is_one_step(ctx) -> None:
     node = lv.GoHome("home", ctx)
     statuses = tick_tree(node, ctx, ticks=20)
     assert all(s == Status.RUNNING for s in statuses)
-
-
-def test_recorder_helper_is_an_events_sink() -> None:
-    rec = Recorder()
-    rec.event("fed")
-    rec.abort("x")
-    rec.stop("why")
-    rec.stop("later")
-    assert rec.kinds() == ["fed"] and rec.aborts == ["x"] and rec.stopped == "why"
-
-
-def test_devices_are_used_only_through_the_interfaces() -> None:
-    """The fakes obey the interfaces the behaviours use (a guard against drift)."""
-    dev = Devices(FakeArm(Pose()), FakeGripper(), FakeFT(), FakeClock())
-    assert isinstance(TimedMachine(dev.clock, 1.0).busy(), bool)
-    assert Guard().max_force > 0
 
 
 def test_a_dead_ft_stream_stops_the_tree_and_the_arm(ctx) -> None:
