@@ -350,9 +350,12 @@ def test_put_back_opens_rises_goes_home_remembers_the_part_and_then_fails(ctx) -
     risen = ctx.devices.arm.commands[0][1][-1]
     assert risen.position[2] > start_z + 0.05  # straight up before going home
     assert np.allclose(ctx.devices.arm.commands[1][1], ctx.geometry.home_joints)
-    assert ctx.failures == {lv.location_key((0.45, 0.02)): 1}
+    assert ctx.failures == {(45, 2): 1}  # the part's place in 1 cm cells
     run(lv.PutBack("put back #2", ctx), ctx)
-    assert ctx.failures == {lv.location_key((0.45, 0.02)): 2}  # counted per failed pick
+    assert ctx.failures == {(45, 2): 2}  # counted per failed pick
+    bb.set("/part/target", target(ctx, 0.52, -0.07))
+    run(lv.PutBack("put back #3", ctx), ctx)
+    assert ctx.failures == {(45, 2): 2, (52, -7): 1}  # and per part
 
 
 def test_put_back_without_a_chosen_part_remembers_nothing(ctx) -> None:
