@@ -14,9 +14,10 @@ import time
 
 import numpy as np
 
+from drivers.parts import Section, delta_round
 from skills.mechanics.balance import form_closure_lp, gravity_balance_lp
 from skills.mechanics.cone import eq7_feasible, eq8_feasible
-from skills.mechanics.contact import Frictions, Section, contact_wrenches, delta_round
+from skills.mechanics.contact import Frictions, contact_wrenches
 from skills.mechanics.region import alpha_axis, beta_axis
 
 

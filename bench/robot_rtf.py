@@ -16,7 +16,8 @@ from collections.abc import Callable
 
 from drivers.arm import MotionState
 from drivers.pose import Pose
-from sim.robot import HOME_TCP, SimRobot
+from drivers.ur5.kinematics import HOME_TCP
+from sim.robot import SimRobot
 from sim.world import SimWorld
 
 

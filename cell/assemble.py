@@ -20,8 +20,11 @@ from py_trees.behaviour import Behaviour
 from cell.catalogue import load_catalogue
 from cell.config import CellConfig
 from cell.runner import Backend, CellState
+from drivers.layout import CellLayout
+from drivers.parts import Gripper, Part
+from drivers.pose import Pose
+from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, solve_ik
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper, Part
 from skills.mechanics.planner import PivotPlan, plan_pivot
 from skills.motion import Guard
 from skills.perception.look import DOWN
@@ -37,7 +40,7 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 class Prepared:
     config: CellConfig
     doc: LinedDocument
-    layout: Any  # sim.cell_layout.CellLayout: the cell's geometry description
+    layout: CellLayout
     part: Part
     catalogue: list[Part]
     plan: PivotPlan
@@ -48,9 +51,7 @@ class Prepared:
     state: CellState
 
 
-def _layout(config: CellConfig, doc: LinedDocument) -> Any:
-    from sim.cell_layout import CellLayout
-
+def _layout(config: CellConfig, doc: LinedDocument) -> CellLayout:
     try:
         return CellLayout.from_dict(config.cell.layout, source="cell.layout")
     except ValueError as exc:
@@ -62,7 +63,9 @@ def _layout(config: CellConfig, doc: LinedDocument) -> Any:
         raise doc.error(path, reason if reason else text) from None
 
 
-def geometry_from(layout: Any, home_joints_deg: list[float], part_outer: float) -> CellGeometry:
+def geometry_from(
+    layout: CellLayout, home_joints_deg: list[float], part_outer: float
+) -> CellGeometry:
     x0, x1, y0, y1 = layout.bin_interior()
     tx0, tx1, ty0, ty1 = (
         layout.tray_center[0] - 0.5 * layout.tray_inner_size[0],
@@ -86,11 +89,8 @@ def geometry_from(layout: Any, home_joints_deg: list[float], part_outer: float) 
 
 
 def _check_reach(config: CellConfig, doc: LinedDocument, geometry: CellGeometry) -> None:
-    """Every fixed pose the workflow visits must be inside the UR5's reach, tool down."""
-    from drivers.pose import Pose
-    from sim.arm import REACH_TOLERANCE, solve_ik
-    from sim.robot import HOME_JOINTS
-
+    """Every fixed pose the workflow visits must be inside the UR5's reach, tool down (the same
+    kinematics as the twin's arm, and no simulator: `cell run` checks this before connecting)."""
     checks: list[tuple[tuple[str, ...], str, np.ndarray]] = [
         (
             ("cell", "layout", "machine_center"),

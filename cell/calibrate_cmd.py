@@ -10,7 +10,7 @@ floor at the bin's centre, and the twin's camera is mounted at a *true* mount th
 the configured one (``camera_xyz`` / ``camera_rpy`` of the layout): by default the configured
 mount perturbed by a random offset drawn from ``--seed`` (up to 4 mm per axis and 1.5 deg per
 angle); with ``--true-xyz`` (m) and/or ``--true-rpy`` (rad; roll-pitch-yaw as in
-:class:`sim.cell_layout.CellLayout`) exactly those, a half not given staying as configured. The
+:class:`drivers.layout.CellLayout`) exactly those, a half not given staying as configured. The
 arm then looks at the board from ``--views`` poses aimed with the configured mount
 (:func:`skills.perception.calibration.calibration_views`), the routine
 (:class:`skills.perception.calibration.HandEyeRoutine`) estimates the mount, and the command prints
@@ -77,7 +77,7 @@ def _read_cell(path: Path | None) -> tuple[dict[str, Any], Any]:
     """The raw mapping of the YAML file (empty if none) and its validated layout."""
     import yaml
 
-    from sim.cell_layout import CellLayout
+    from drivers.layout import CellLayout
 
     if path is None or not path.exists():
         return {}, CellLayout().validate()
@@ -111,9 +111,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from scipy.spatial.transform import Rotation
 
     from cell.cli import UserError
+    from drivers.layout import CellLayout
     from drivers.pose import Pose
     from sim.camera import SimCamera
-    from sim.cell_layout import CellLayout, build_cell
+    from sim.cell_layout import build_cell
     from sim.robot import SimRobot
     from sim.tag_board import place_tag_board
     from sim.world import SimWorld

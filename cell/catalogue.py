@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from skills.mechanics.part import HOLE_SHAPES, Part
+from drivers.parts import HOLE_SHAPES, Part
 from trees.yaml_lines import UniqueKeyLoader
 
 REQUIRED = ("length_mm", "outer_mm", "hole_mm", "hole_shape", "mass_kg")

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from cell.catalogue import Catalogue, load_catalogue
+from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper
 from skills.mechanics.planner import PivotPlan, PlannerOptions, plan_pivot
 from skills.mechanics.region import (
     HALF_PI,

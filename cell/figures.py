@@ -15,7 +15,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from skills.mechanics.contact import Frictions, Section, contact_wrenches  # noqa: E402
+from drivers.parts import Section
+from skills.mechanics.contact import Frictions, contact_wrenches  # noqa: E402
 
 
 def frictionless_equilibrium_curve(

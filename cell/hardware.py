@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from drivers.clock import WallClock
+from drivers.devices import Devices
 from drivers.health import CheckResult, DeviceError
 from drivers.machine import TimedMachine
-from skills.motion import Devices
 from trees.yaml_lines import ConfigError
 
 DEVICES = ("arm", "gripper", "ft", "camera")

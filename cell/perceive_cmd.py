@@ -65,8 +65,9 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
 def cmd_perceive(args: argparse.Namespace) -> int:
     from cell.catalogue import load_catalogue
     from cell.cli import UserError, _write_json
+    from drivers.layout import CellLayout
     from sim.camera import SimCamera
-    from sim.cell_layout import CellLayout, build_cell
+    from sim.cell_layout import build_cell
     from sim.scenes import look_down_pose, random_bin_scene
     from sim.world import SimWorld
     from skills.perception.bin_parts import detect_parts

@@ -27,8 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cell.catalogue import load_catalogue
+from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper
 from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
@@ -111,7 +111,7 @@ def pivot_args(
 def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     """Everything checked, nothing simulated: the trial setup, the plan, whether forced."""
     from cell.pivot_run import TrialSetup
-    from sim.cell_layout import CellLayout
+    from drivers.layout import CellLayout
 
     if args.trials < 1:
         raise PivotInputError(f"--trials: must be >= 1, got {args.trials}")

@@ -23,19 +23,20 @@ from typing import Any
 import numpy as np
 
 from cell.stats import wilson_interval
+from drivers.devices import Devices
+from drivers.layout import CellLayout
+from drivers.parts import Part
 from drivers.pose import Pose
-from sim.arm import REACH_TOLERANCE, solve_ik
+from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, solve_ik
 from sim.camera import SimCamera
-from sim.cell_layout import CellLayout, build_cell
+from sim.cell_layout import build_cell
 from sim.judge import PivotWatch, WatchSample, judge
 from sim.part_body import lying_pose, spawn_part
-from sim.robot import HOME_JOINTS, SimRobot
+from sim.robot import SimRobot
 from sim.robot_model import FINGER_WIDTH
 from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Part
 from skills.mechanics.planner import PivotPlan
-from skills.motion import Devices
 from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
 from skills.status import Status

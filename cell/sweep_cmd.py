@@ -35,8 +35,8 @@ from typing import TYPE_CHECKING, Any
 from cell.catalogue import load_catalogue
 from cell.errors import UserError
 from cell.stats import wilson_interval
+from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper
 from skills.mechanics.planner import PivotPlan, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only where trials run

@@ -87,8 +87,9 @@ def render_scene(seed: int, augment: bool = False) -> RenderedScene:
     the thin rail twice as often as well was tried: no better on held-out scenes.)
     """
     from cell.catalogue import load_catalogue
+    from drivers.layout import CellLayout
     from sim.camera import SimCamera, default_tool_T_camera, projection_matrix, view_matrix
-    from sim.cell_layout import CellLayout, build_cell
+    from sim.cell_layout import build_cell
     from sim.scenes import look_down_pose, random_bin_scene
     from sim.world import SimWorld
     from skills.perception.heightmap import height_map

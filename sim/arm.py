@@ -1,7 +1,8 @@
 """The twin's arm: Cartesian motion of the UR5's TCP, advanced one control step at a time.
 
 Every command returns at once; :meth:`SimWorld.step` moves the arm. Poses are of the ``tcp``
-link in the robot base frame (UR ``Base``; see :mod:`sim.robot_model`), metres and radians.
+link in the robot base frame (UR ``Base``; see :mod:`drivers.ur5.kinematics`), metres and
+radians.
 
 How it moves, and why:
 
@@ -11,9 +12,10 @@ How it moves, and why:
   :data:`ROTATION_LENGTH` m per rad, so ``speed`` also bounds the turning rate. The whole path is
   checked for reachability before the arm moves; an unreachable one faults at once.
 * **Inverse kinematics** is damped least squares on the model's own Jacobian
-  (:func:`sim.robot_model.jacobian`, the same chain as the URDF, in plain float arithmetic),
-  seeded with the last command so it never jumps branches: one step per control step while
-  following (about 1e-7 m, see :meth:`SimArm._track`), iterated to 1e-9 m for checks and jumps.
+  (:func:`drivers.ur5.kinematics.jacobian`, the same chain as the URDF, in plain float
+  arithmetic; :func:`drivers.ur5.kinematics.solve_ik`), seeded with the last command so it
+  never jumps branches: one step per control step while following (about 1e-7 m, see
+  :meth:`SimArm._track`), iterated to 1e-9 m for checks and jumps.
   PyBullet's ``calculateInverseKinematics`` (100 iterations, threshold 1e-5) leaves about
   1e-5 m here and starts from the body's live state; ours is cheaper per step as well.
 * **Joint control** is PyBullet POSITION_CONTROL with the joint torque limits, fed a position
@@ -45,13 +47,24 @@ from scipy.spatial.transform import Rotation
 
 from drivers.arm import ArmStatus, MotionState
 from drivers.pose import Pose
+from drivers.ur5.kinematics import (
+    ARM_LIMIT,
+    ARM_VELOCITY,
+    REACH_TOLERANCE,
+    ROTATION_LENGTH,
+    TCP_Z,
+    dls_step,
+    jacobian,
+    pose_error,
+    residual,
+    rotvec_to_matrix,
+    solve_ik,
+)
+from drivers.ur5.kinematics import forward_kinematics as fk
 from sim.ft_sensor import SimForceTorqueSensor
-from sim.robot_model import ARM_EFFORT, ARM_LIMIT, ARM_VELOCITY, TCP_Z, TOOL_MASS, jacobian
-from sim.robot_model import forward_kinematics as fk
+from sim.robot_model import ARM_EFFORT, TOOL_MASS
 from sim.world import SimWorld
 
-ROTATION_LENGTH = 0.1  #: m of path length per rad of rotation (couples turning to ``speed``)
-REACH_TOLERANCE = 0.005  #: m: an IK residual above this is "target unreachable"
 DONE_POSITION = 0.001  #: m: the TCP within this of the goal (and DONE_ANGLE) ends a move
 DONE_ANGLE = np.radians(0.5)  #: rad
 SETTLE_TIME = 0.5  #: s after the profile ends before a move is reported done regardless
@@ -133,68 +146,7 @@ class _Path:
         u = 0.0 if seg <= 0.0 else float((s - self.cumulative[i]) / seg)
         a, b = self.poses[i], self.poses[i + 1]
         position = a.position + u * (b.position - a.position)
-        return Pose(position, a.rotation @ _rotation(u * self.turns[i]))
-
-
-def _rotvec(m: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation vector (rad) of a rotation matrix; a scalar formula, several times faster than
-    scipy's on one matrix, which matters in the per-step IK."""
-    cos = min(max((m[0, 0] + m[1, 1] + m[2, 2] - 1.0) * 0.5, -1.0), 1.0)
-    angle = float(np.arccos(cos))
-    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
-    if angle < 1e-6:
-        return 0.5 * w
-    if angle > np.pi - 1e-3:  # near a half turn the skew part vanishes: let scipy decide
-        return Rotation.from_matrix(m).as_rotvec()
-    return (angle / (2.0 * np.sin(angle))) * w
-
-
-def _rotation(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrix of a rotation vector (rad), Rodrigues' formula."""
-    angle = float(np.sqrt(v @ v))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = v / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * (kx @ kx)
-
-
-def _pose_error(target: Pose, current: Pose) -> NDArray[np.float64]:
-    """``[dp; dphi]``: position error (m) and rotation vector (rad), both in the base frame."""
-    rotation = _rotvec(target.rotation @ current.rotation.T)
-    return np.concatenate([target.position - current.position, rotation])
-
-
-def _residual(err: NDArray[np.float64]) -> float:
-    """Size of a pose error (m): position error plus ``ROTATION_LENGTH`` times the angle."""
-    return float(np.sqrt(err[:3] @ err[:3]) + ROTATION_LENGTH * np.sqrt(err[3:] @ err[3:]))
-
-
-def _dls_step(jac: NDArray[np.float64], err: NDArray[np.float64], damping: float = 1e-3):
-    """Damped-least-squares joint step (rad) for a pose error; at most 0.3 rad per joint."""
-    dq = jac.T @ np.linalg.solve(jac @ jac.T + damping**2 * np.eye(6), err)
-    biggest = float(np.max(np.abs(dq)))
-    if biggest > 0.3:
-        dq *= 0.3 / biggest
-    return dq
-
-
-def solve_ik(
-    target: Pose, seed: ArrayLike, iterations: int = 50, tolerance: float = 1e-9
-) -> tuple[NDArray[np.float64], float]:
-    """Joints (rad) putting the TCP at ``target`` (base frame), and the residual (m).
-
-    Damped least squares from ``seed``, each step at most 0.3 rad, joints kept in +-2 pi. The
-    residual is the position error plus ``ROTATION_LENGTH`` times the angle error.
-    """
-    q = np.array(seed, float)
-    for _ in range(iterations):
-        jac, pose = jacobian(q)
-        err = _pose_error(target, pose)
-        if _residual(err) < tolerance:
-            return q, _residual(err)
-        q = np.clip(q + _dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
-    return q, _residual(_pose_error(target, fk(q)))
+        return Pose(position, a.rotation @ rotvec_to_matrix(u * self.turns[i]))
 
 
 class SimArm:
@@ -298,8 +250,8 @@ class SimArm:
         samples = max(1, int(np.ceil(path.length / CHECK_STEP)))
         q = start_q
         for s in np.linspace(0.0, path.length, samples + 1)[1:]:
-            q, residual = solve_ik(path.pose_at(float(s)), q, iterations=100)
-            if residual > REACH_TOLERANCE:
+            q, miss = solve_ik(path.pose_at(float(s)), q, iterations=100)
+            if miss > REACH_TOLERANCE:
                 self._fault("target unreachable", start_q)
                 return
         self._path, self._t = path, 0.0
@@ -509,19 +461,19 @@ class SimArm:
         """
         jac, pose = jacobian(self._q_to)
         if self._last_target is not None:
-            behind = _pose_error(self._last_target, pose)
-            if _residual(behind) > REACH_TOLERANCE and not (servo and self._clipped):
+            behind = pose_error(self._last_target, pose)
+            if residual(behind) > REACH_TOLERANCE and not (servo and self._clipped):
                 reason = "joint speed limit" if self._clipped else "target unreachable"
                 self._fault(reason, self._q_to)
                 return
-        err = _pose_error(target, pose)
-        if _residual(err) > JUMP:
-            q_next, residual = solve_ik(target, self._q_to)
-            if residual > REACH_TOLERANCE:
+        err = pose_error(target, pose)
+        if residual(err) > JUMP:
+            q_next, miss = solve_ik(target, self._q_to)
+            if miss > REACH_TOLERANCE:
                 self._fault("target unreachable", self._q_to)
                 return
         else:
-            q_next = np.clip(self._q_to + _dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
+            q_next = np.clip(self._q_to + dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
         self._last_target = target
         self._advance_to(q_next)
 
@@ -592,7 +544,7 @@ class SimArm:
         velocity = np.clip(ADMITTANCE_GAIN * (cmd - self.applied_wrench()), -limit, limit)
         velocity[~sel] = 0.0
         v = self._virtual
-        rotation = _rotation(velocity[3:] * self._dt) @ v.rotation
+        rotation = rotvec_to_matrix(velocity[3:] * self._dt) @ v.rotation
         self._virtual = Pose(v.position + velocity[:3] * self._dt, rotation)
 
     def _apply_impedance(self) -> None:
@@ -607,7 +559,7 @@ class SimArm:
         bias = self._p.calculateInverseDynamics(self._body, q_all, qd_all, [0.0] * len(movable))
         jac, pose = jacobian(q)
         twist = jac @ qd
-        wrench = FORCE_STIFFNESS * _pose_error(self._virtual, pose) - FORCE_DAMPING * twist
+        wrench = FORCE_STIFFNESS * pose_error(self._virtual, pose) - FORCE_DAMPING * twist
         tau = np.array([bias[i] for i in arm_cols]) + jac.T @ wrench
         tau = np.clip(tau, -np.asarray(self._effort), self._effort)
         self._q_to = q

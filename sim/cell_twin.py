@@ -17,16 +17,17 @@ from typing import Any
 
 import numpy as np
 
+from drivers.devices import Devices
+from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
+from drivers.parts import Part
 from sim.camera import SimCamera
-from sim.cell_layout import CellLayout, build_cell
+from sim.cell_layout import build_cell
 from sim.judge import judge
 from sim.part_body import PartBody, lying_pose, spawn_part
 from sim.robot import SimRobot
 from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Part
-from skills.motion import Devices
 
 
 @dataclass(frozen=True)

@@ -47,11 +47,11 @@ from numpy.typing import NDArray
 from drivers.arm import Arm, ArmStatus, MotionState
 from drivers.camera import Camera, Frame, Intrinsics
 from drivers.clock import Clock
+from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
 from drivers.pose import Pose
-from skills.motion import Devices
 
 FAULT_NAMES: tuple[str, ...] = (
     "missed_grasp",

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.parts import Part
 from drivers.pose import Pose, rot_x, rot_y, rot_z
 from sim.world import SimWorld
-from skills.mechanics.part import Part
 
 #: PyBullet keeps only the first 16 child shapes of a shape array.
 MAX_CHILD_SHAPES = 16

@@ -1,9 +1,10 @@
 """The twin's robot: the URDF loaded into a world, with its arm, gripper and wrist sensor.
 
 ``SimRobot(world, base_pose)`` places the UR5's base frame (UR ``Base``, z up) at ``base_pose``
-in the world. The workspace is in front of the robot along the base's +x: at home the tool points
-straight down (tool z = -base z, tool x = +base x) with the TCP at (0.5, 0, 0.3) m in the base
-frame, so a cell puts its bin about 0.5 m along the base's +x.
+in the world. The workspace is in front of the robot along the base's +x: at home
+(:data:`drivers.ur5.kinematics.HOME_TCP`) the tool points straight down (tool z = -base z, tool
+x = +base x) with the TCP at (0.5, 0, 0.3) m in the base frame, so a cell puts its bin about
+0.5 m along the base's +x.
 """
 
 from __future__ import annotations
@@ -12,23 +13,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.pose import Pose
-from sim.arm import SimArm, solve_ik
+from drivers.ur5.kinematics import ARM_JOINTS, FINGER_LENGTH, HOME_JOINTS, forward_kinematics
+from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
 from sim.gripper import FINGER_NAMES, SimGripper
-from sim.robot_model import (
-    ARM_JOINTS,
-    FINGER_LENGTH,
-    FINGER_THICKNESS,
-    forward_kinematics,
-    write_urdf,
-)
+from sim.robot_model import FINGER_THICKNESS, write_urdf
 from sim.world import SimWorld
-
-#: Home TCP pose in the base frame: 0.5 m in front, 0.3 m up, tool pointing down.
-HOME_TCP = Pose(np.array([0.5, 0.0, 0.3]), np.diag([1.0, -1.0, -1.0]))
-#: Joint angles (rad) of a home: elbow up, upper arm near vertical, wrist down (seed of the IK).
-_HOME_SEED = np.array([2.9215, -1.5621, 1.4454, -1.4541, -1.5708, -1.7909])
-HOME_JOINTS: NDArray[np.float64] = solve_ik(HOME_TCP, _HOME_SEED)[0]
 
 
 class SimRobot:

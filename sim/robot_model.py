@@ -1,27 +1,20 @@
 """The twin's robot: a UR5 with an FT300-like wrist sensor and a 2F-85-like parallel gripper.
 
-This module is the single source of the robot's geometry. It writes the URDF that PyBullet loads
-and gives the same chain to numpy (:func:`forward_kinematics`, :func:`jacobian`) so that the arm's
-inverse kinematics runs without a simulator round trip and agrees with PyBullet's links exactly.
+This module writes the URDF that PyBullet loads: the arm's chain, limits and tool stack come from
+:mod:`drivers.ur5.kinematics` (the same chain the arm's inverse kinematics and the cell's reach
+check run on, in plain numpy, so that they agree with PyBullet's links exactly); the masses,
+inertias, collision shapes and the gripper's fingers are the twin's own and are set here.
 
-Kinematics are the public ``ur_description`` UR5 joint origins; a test checks them against the
-UR5 Denavit-Hartenberg parameters (d1 0.089159, a2 -0.425, a3 -0.39225, d4 0.10915, d5 0.09465,
-d6 0.0823 m). ``ur_description``'s ``base_link`` is turned by pi about z from the UR controller's
-``Base`` frame; the URDF's root link ``base`` is that controller frame, so every TCP pose of the
-twin is in the frame a real UR5 reports.
+Frames (all SI: m, rad, kg), besides ``base``, ``tool0`` and ``tcp`` of
+:mod:`drivers.ur5.kinematics`:
 
-Frames (all SI: m, rad, kg):
-
-* ``base``: the robot base frame of :class:`drivers.arm.Arm` (UR ``Base``, z up).
-* ``tool0``: the flange, z out of the flange (the UR tool frame with a zero TCP offset).
 * ``ft_sensor``: the FT300-like puck, fixed to ``tool0`` by ``ft_joint`` (same axes and origin).
-* ``tcp``: between the fingertips, on the tool z axis, :data:`TCP_Z` beyond the flange; same axes
-  as ``tool0``. Tool frame convention: z is the approach (out of the flange, towards the
+* Tool axes (``tool0``, ``tcp``): z is the approach (out of the flange, towards the
   fingertips), x the closing axis with ``finger_a`` on +x and ``finger_b`` on -x.
 * ``finger_a`` / ``finger_b``: tool axes, origin at the centre of the pad's inner face where the
-  finger leaves the gripper body (tool z = :data:`FINGER_BASE_Z`); the pad runs
-  :data:`FINGER_LENGTH` along +z to the tip and is :data:`FINGER_THICKNESS` thick outwards. With
-  both fingers at ``q`` the origins are at tool x = +q and -q.
+  finger leaves the gripper body (tool z = :data:`drivers.ur5.kinematics.FINGER_BASE_Z`); the
+  pad runs :data:`FINGER_LENGTH` along +z to the tip and is :data:`FINGER_THICKNESS` thick
+  outwards. With both fingers at ``q`` the origins are at tool x = +q and -q.
 
 Collision shapes are capsules, cylinders and boxes only, to keep the cell fast.
 """
@@ -29,194 +22,46 @@ Collision shapes are capsules, cylinders and boxes only, to keep the cell fast.
 from __future__ import annotations
 
 import hashlib
-import math
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
+from numpy.typing import ArrayLike
 
-from drivers.pose import Pose
-
-PI = math.pi
-
-#: Arm joint names, base to wrist 3 (the order of every joint vector in the twin).
-ARM_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
+from drivers.ur5.kinematics import (
+    ARM_CHAIN,
+    ARM_JOINTS,
+    ARM_LIMIT,
+    ARM_VELOCITY,
+    BASE_FIXED,
+    FINGER_LENGTH,
+    FT_HEIGHT,
+    GRIPPER_BODY_HEIGHT,
+    PI,
+    TCP_Z,
+    TOOL0_FIXED,
+    JointSpec,
 )
+
 #: ``ur_description`` link masses (kg), shoulder to wrist 3; the base is fixed (4.0 kg).
 ARM_MASSES = (3.7, 8.393, 2.275, 1.219, 1.219, 0.1879)
 #: Joint torque limits (N*m), base to wrist 3 (UR5: 150 N*m on the large, 28 N*m on the wrist).
 ARM_EFFORT = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
-#: Joint speed limit (rad/s), every arm joint.
-ARM_VELOCITY = PI
-#: Joint position limit (rad), symmetric, every arm joint.
-ARM_LIMIT = 2.0 * PI
 
-# Tool stack along tool0's z (m).
+# Tool stack (its lengths along tool0's z are in drivers.ur5.kinematics).
 FT_RADIUS = 0.0375
-FT_HEIGHT = 0.0375
 FT_MASS = 0.3
-GRIPPER_BODY_SIZE = (0.075, 0.035, 0.090)  # x (closing axis), y, z (approach)
+GRIPPER_BODY_SIZE = (0.075, 0.035, GRIPPER_BODY_HEIGHT)  # x (closing axis), y, z (approach)
 GRIPPER_BODY_MASS = 0.9
 FINGER_THICKNESS = 0.008  # x
 FINGER_WIDTH = 0.020  # y: the pad width w of the paper's Eq. 2
-FINGER_LENGTH = 0.055  # z, hanging below the gripper body
 FINGER_MASS = 0.03
 FINGER_TRAVEL = 0.0425  # each finger 0..FINGER_TRAVEL from the tool axis; opening = sum
 FINGER_EFFORT = 235.0  # N, the 2F-85's largest grip force
 FINGER_VELOCITY = 0.15  # m/s, the 2F-85's fastest finger speed
-FINGER_BASE_Z = FT_HEIGHT + GRIPPER_BODY_SIZE[2]  # where the fingers leave the body
-FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH
-#: TCP offset from the flange along tool z (m): 5 mm above the fingertips' end.
-TCP_Z = FINGER_TIP_Z - 0.005
-#: Pose of the TCP in the flange frame ``tool0``.
-TOOL0_T_TCP = Pose(np.array([0.0, 0.0, TCP_Z]), np.eye(3))
 #: Mass (kg) hanging on the wrist sensor: puck, gripper body, fingers (and the massless tcp link).
 TOOL_MASS = FT_MASS + GRIPPER_BODY_MASS + 2 * FINGER_MASS + 1e-4
-
-
-@dataclass(frozen=True)
-class JointSpec:
-    """One URDF joint: origin in the parent link frame (m, rad, fixed-axis roll-pitch-yaw)."""
-
-    name: str
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    kind: str = "revolute"
-
-
-#: The UR controller Base -> ur_description base_link (pi about z), then the six arm joints.
-BASE_FIXED = JointSpec("base_link_joint", "base", "base_link", (0, 0, 0), (0, 0, PI), kind="fixed")
-ARM_CHAIN = (
-    JointSpec(ARM_JOINTS[0], "base_link", "shoulder_link", (0, 0, 0.089159), axis=(0, 0, 1)),
-    JointSpec(
-        ARM_JOINTS[1], "shoulder_link", "upper_arm_link", (0, 0.13585, 0), (0, PI / 2, 0), (0, 1, 0)
-    ),
-    JointSpec(ARM_JOINTS[2], "upper_arm_link", "forearm_link", (0, -0.1197, 0.425), axis=(0, 1, 0)),
-    JointSpec(
-        ARM_JOINTS[3], "forearm_link", "wrist_1_link", (0, 0, 0.39225), (0, PI / 2, 0), (0, 1, 0)
-    ),
-    JointSpec(ARM_JOINTS[4], "wrist_1_link", "wrist_2_link", (0, 0.093, 0), axis=(0, 0, 1)),
-    JointSpec(ARM_JOINTS[5], "wrist_2_link", "wrist_3_link", (0, 0, 0.09465), axis=(0, 1, 0)),
-)
-TOOL0_FIXED = JointSpec(
-    "wrist_3_link-tool0_fixed_joint", "wrist_3_link", "tool0", (0, 0.0823, 0), (-PI / 2, 0, 0),
-    kind="fixed",
-)
-
-
-def _homogeneous(xyz: ArrayLike, rpy: ArrayLike) -> NDArray[np.float64]:
-    m = np.eye(4)
-    m[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()  # URDF: fixed-axis roll, pitch, yaw
-    m[:3, 3] = xyz
-    return m
-
-
-def _rows(m: NDArray[np.float64]) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """A 4x4 transform as (rotation row-major, translation) float tuples."""
-    return tuple(float(v) for v in m[:3, :3].ravel()), tuple(float(v) for v in m[:3, 3])
-
-
-# The chain as float tuples: the per-step IK evaluates it every control step, and plain float
-# arithmetic on six 3x3 matrices is about 3x faster than numpy's per-call overhead.
-_BASE = _rows(_homogeneous(BASE_FIXED.xyz, BASE_FIXED.rpy))
-_ORIGINS = [_rows(_homogeneous(j.xyz, j.rpy)) for j in ARM_CHAIN]
-_ABOUT_Z = [j.axis == (0, 0, 1) for j in ARM_CHAIN]  # otherwise about y (checked below)
-_TOOL0 = _rows(_homogeneous(TOOL0_FIXED.xyz, TOOL0_FIXED.rpy))
-assert all(j.axis in ((0, 0, 1), (0, 1, 0)) for j in ARM_CHAIN)
-
-Mat3 = tuple[float, float, float, float, float, float, float, float, float]
-Vec3 = tuple[float, float, float]
-
-
-def _mul(a: Mat3, b: Mat3) -> Mat3:
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = a
-    b0, b1, b2, b3, b4, b5, b6, b7, b8 = b
-    return (
-        a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
-        a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
-        a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8,
-    )  # fmt: skip
-
-
-def _apply(r: Mat3, p: Vec3, v: Vec3) -> Vec3:
-    """``p + r v``."""
-    return (
-        p[0] + r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
-        p[1] + r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
-        p[2] + r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
-    )
-
-
-def _chain(q: ArrayLike) -> tuple[list[Vec3], list[Vec3], Mat3, Vec3]:
-    """Joint axes and origins (in ``base``) and the flange rotation and position."""
-    r, p = _BASE
-    axes, origins = [], []
-    for (r_o, p_o), about_z, angle in zip(_ORIGINS, _ABOUT_Z, q, strict=True):
-        p = _apply(r, p, p_o)
-        r = _mul(r, r_o)
-        c, s = math.cos(angle), math.sin(angle)
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = r
-        if about_z:
-            axes.append((r2, r5, r8))
-            r = (c * r0 + s * r1, c * r1 - s * r0, r2,
-                 c * r3 + s * r4, c * r4 - s * r3, r5,
-                 c * r6 + s * r7, c * r7 - s * r6, r8)  # fmt: skip
-        else:
-            axes.append((r1, r4, r7))
-            r = (c * r0 - s * r2, r1, s * r0 + c * r2,
-                 c * r3 - s * r5, r4, s * r3 + c * r5,
-                 c * r6 - s * r8, r7, s * r6 + c * r8)  # fmt: skip
-        origins.append(p)
-    p = _apply(r, p, _TOOL0[1])
-    return axes, origins, _mul(r, _TOOL0[0]), p
-
-
-def _end(r: Mat3, p: Vec3, tcp: bool) -> Vec3:
-    if not tcp:
-        return p
-    return (p[0] + TCP_Z * r[2], p[1] + TCP_Z * r[5], p[2] + TCP_Z * r[8])
-
-
-def flange_matrix(q: ArrayLike) -> NDArray[np.float64]:
-    """``base_T_tool0`` (4x4) for joint angles ``q`` (rad)."""
-    _, _, r, p = _chain(q)
-    m = np.eye(4)
-    m[:3, :3] = np.array(r).reshape(3, 3)
-    m[:3, 3] = p
-    return m
-
-
-def forward_kinematics(q: ArrayLike, tcp: bool = True) -> Pose:
-    """Pose of the TCP (or of ``tool0`` with ``tcp=False``) in ``base`` for joints ``q`` (rad)."""
-    _, _, r, p = _chain(q)
-    return Pose(np.array(_end(r, p, tcp)), np.array(r).reshape(3, 3))
-
-
-def jacobian(q: ArrayLike, tcp: bool = True) -> tuple[NDArray[np.float64], Pose]:
-    """Geometric Jacobian (6x6: linear m/rad over angular rad/rad, in ``base``) and the pose.
-
-    Column i is ``[a_i x (p - o_i); a_i]`` with the joint axis ``a_i`` and origin ``o_i``;
-    returned with the TCP (or flange) pose so one chain evaluation serves the IK step.
-    """
-    axes, origins, r, p = _chain(q)
-    e = _end(r, p, tcp)
-    columns = []
-    for (ax, ay, az), (ox, oy, oz) in zip(axes, origins, strict=True):
-        dx, dy, dz = e[0] - ox, e[1] - oy, e[2] - oz
-        columns.append((ay * dz - az * dy, az * dx - ax * dz, ax * dy - ay * dx, ax, ay, az))
-    return np.array(columns).T, Pose(np.array(e), np.array(r).reshape(3, 3))
 
 
 # ---------------------------------------------------------------------------------------------

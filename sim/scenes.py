@@ -10,11 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.layout import CellLayout
+from drivers.parts import Part
 from drivers.pose import Pose
-from sim.cell_layout import CellLayout
 from sim.part_body import PartBody, lying_pose, spawn_part
 from sim.world import SimWorld
-from skills.mechanics.part import Part
 
 #: Tool pointing straight down (tool z = -world z): the wrist camera then looks down too.
 DOWN = np.diag([1.0, -1.0, -1.0])

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.arm import MotionState
+from drivers.devices import Devices
 from drivers.pose import Pose
-from skills.motion import Devices, Guard, GuardedMotion
+from skills.motion import Guard, GuardedMotion
 
 
 @dataclass(frozen=True)

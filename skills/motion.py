@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.arm import Arm, MotionState
-from drivers.camera import Camera
 from drivers.clock import Clock
+from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
@@ -30,6 +30,18 @@ class Guard:
     max_force: float = 100.0
     max_torque: float = 6.0
     timeout: float = 10.0
+
+    # Devices.move / Devices.grip ask the guard for the motion: the bundle lives in drivers,
+    # below the skills, and must not import them (drivers.devices.MotionMaker).
+    def arm_motion(self, name: str, dev: Devices, command: Callable[[], None]) -> GuardedMotion:
+        """:func:`arm_motion` on ``dev`` under this guard."""
+        return arm_motion(name, dev.arm, dev.ft, dev.clock, self, command)
+
+    def gripper_motion(
+        self, name: str, dev: Devices, command: Callable[[], None], settle: float = 0.1
+    ) -> GuardedMotion:
+        """:func:`gripper_motion` on ``dev`` under this guard."""
+        return gripper_motion(name, dev.gripper, dev.arm, dev.ft, dev.clock, self, command, settle)
 
 
 class GuardedMotion:
@@ -184,27 +196,6 @@ class Sequence:
     def halt(self) -> None:
         if self.index < len(self.steps):
             self.steps[self.index].halt()
-
-
-@dataclass(frozen=True)
-class Devices:
-    """The devices a motion skill uses, handed in by the caller (never looked up)."""
-
-    arm: Arm
-    gripper: Gripper
-    ft: ForceTorqueSensor
-    clock: Clock
-    camera: Camera | None = None  #: the eye-in-hand RGB-D camera, where a skill needs to look
-
-    def move(self, name: str, guard: Guard, command: Callable[[], None]) -> GuardedMotion:
-        return arm_motion(name, self.arm, self.ft, self.clock, guard, command)
-
-    def grip(
-        self, name: str, guard: Guard, command: Callable[[], None], settle: float = 0.1
-    ) -> GuardedMotion:
-        return gripper_motion(
-            name, self.gripper, self.arm, self.ft, self.clock, guard, command, settle
-        )
 
 
 def wait(name: str, dev: Devices, guard: Guard, seconds: float) -> GuardedMotion:

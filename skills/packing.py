@@ -27,9 +27,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
-from skills.motion import Devices, Guard, Sequence, wait
+from skills.motion import Guard, Sequence, wait
 from skills.slot import (
     GRAVITY,
     ContactMove,
@@ -73,33 +74,6 @@ class PackParams:
     weight_check: float = 0.5
     guard: Guard = field(default_factory=Guard)
     push_guard: Guard = field(default_factory=lambda: Guard(max_force=30.0, timeout=15.0))
-
-
-def tray_places(
-    tray_roi: tuple[float, float, float, float],
-    floor_z: float,
-    outer: float,
-    margin: float = 0.0015,
-    trailing: float = 0.012,
-) -> NDArray[np.float64]:
-    """Places (x, y, floor z; m) of upright parts of diameter ``outer`` in packing order.
-
-    ``tray_roi``: ``(xmin, xmax, ymin, ymax)`` of the box's inside. A square grid of pitch
-    ``outer + margin`` from the ``+x, +y`` corner: row by row along ``-x``, rows towards ``-y``.
-    ``margin`` covers parts a little wider than nominal (the place is where the part is set
-    down from, the pushes find where it really goes); ``trailing`` (m) is kept free along the
-    ``-x`` and ``-y`` walls for the set-down offset and the outer finger beside the last part.
-    """
-    x0, x1, y0, y1 = tray_roi
-    pitch = outer + margin
-    nx = int((x1 - x0 - trailing) // pitch)
-    ny = int((y1 - y0 - trailing) // pitch)
-    half = 0.5 * pitch
-    return np.array(
-        [[x1 - half - i * pitch, y1 - half - j * pitch, floor_z] for j in range(ny)
-         for i in range(nx)],
-        float,
-    ).reshape(-1, 3)
 
 
 class PackInBox(SequenceSkill):

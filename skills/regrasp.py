@@ -51,9 +51,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
-from skills.motion import Devices, GuardedMotion, Sequence, wait
+from skills.motion import GuardedMotion, Sequence, wait
 from skills.pivot.align import hole_grasp_rotation
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams

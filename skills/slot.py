@@ -40,9 +40,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.arm import MotionState
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
-from skills.motion import Devices, Guard, GuardedMotion, Sequence, wait
+from skills.motion import Guard, GuardedMotion, Sequence, wait
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import hole_grasp_rotation, pinched_span
 from skills.status import StepResult

@@ -13,10 +13,11 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.devices import Devices
 from drivers.machine import Machine
-from skills.mechanics.part import Part
+from drivers.parts import Part
 from skills.mechanics.planner import PivotPlan
-from skills.motion import Devices, Guard
+from skills.motion import Guard
 from skills.pivot import PivotParams
 
 

@@ -18,13 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linprog
 
-from skills.mechanics.contact import (
-    WRENCH_NAMES,
-    Frictions,
-    Section,
-    contact_wrenches,
-    gravity_wrench,
-)
+from drivers.parts import Section
+from skills.mechanics.contact import WRENCH_NAMES, Frictions, contact_wrenches, gravity_wrench
 
 
 @dataclass(frozen=True)

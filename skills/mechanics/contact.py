@@ -26,6 +26,9 @@ Readings of the paper (the paper is terse here; each choice below reproduces Tab
   as written in Table 2 (S1 and G2 lean towards +x, H1 leans by ``-gamma_H``).
 * **Units.** Lengths in metres; the wrenches are unit forces with moments in metres. Only
   ratios matter for feasibility, so mass and scale drop out of the stability question.
+
+The section constants ``a``, ``b``, ``delta`` (:class:`drivers.parts.Section`) and Eq. 2-3 that
+give ``delta`` are part geometry and live with :class:`drivers.parts.Part`.
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from drivers.parts import Section
 
 #: Column order of the 3x6 wrench matrix, as in Table 2.
 WRENCH_NAMES: tuple[str, ...] = ("S1", "S2", "H1", "H2", "G1", "G2")
@@ -72,80 +77,6 @@ class Frictions:
     @property
     def frictionless(self) -> bool:
         return self.mu_s == 0.0 and self.mu_h == 0.0 and self.mu_g == 0.0
-
-
-def _finger_fits(hole: float, finger_width: float) -> tuple[float, float]:
-    """Validate ``0 < w < d`` (Eq. 2's ``0 < w/d < 1``) and return ``(d, w)``."""
-    d = _check_finite("hole size d", hole)
-    w = _check_finite("finger width w", finger_width)
-    if d <= 0.0:
-        raise ValueError(f"hole size d must be > 0 m, got {d:g}")
-    if w <= 0.0:
-        raise ValueError(f"finger width w must be > 0 m, got {w:g}")
-    if w >= d:
-        raise ValueError(
-            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole "
-            f"d = {d * 1e3:.1f} mm: the finger cannot enter the hole (needs 0 < w/d < 1)"
-        )
-    return d, w
-
-
-def hole_offset(hole: float, finger_width: float) -> float:
-    """Eq. 2: distance x (m) from the hole's axis to the flat face of a finger of width ``w``.
-
-    A flat finger of width ``w`` inside a round hole of diameter ``d`` touches the hole along a
-    chord of length ``w``; that chord lies ``x = d/2 * sqrt(1 - (w/d)^2)`` from the axis.
-    """
-    d, w = _finger_fits(hole, finger_width)
-    return 0.5 * d * math.sqrt(1.0 - (w / d) ** 2)
-
-
-def delta_round(outer: float, hole: float, finger_width: float) -> float:
-    """Eq. 3 for a round hole: ``delta = D/2 - x`` (m), the depth of H below the top corner."""
-    outer = _check_finite("outer size D", outer)
-    x = hole_offset(hole, finger_width)
-    if outer <= hole:
-        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
-    return 0.5 * outer - x
-
-
-def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
-    """``delta`` (m) for a rectangular hole: the finger's face lies flat on the inner wall.
-
-    The contact is then the wall's inner edge, one wall thickness ``(D - d)/2`` below the top.
-    (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see README.)
-    """
-    outer = _check_finite("outer size D", outer)
-    hole, _ = _finger_fits(hole, finger_width)
-    if outer <= hole:
-        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
-    return 0.5 * (outer - hole)
-
-
-@dataclass(frozen=True)
-class Section:
-    """The constant geometry of Table 1 for one part and finger: ``a``, ``b``, ``delta`` (m)."""
-
-    a: float
-    b: float
-    delta: float
-
-    def __post_init__(self) -> None:
-        a = _check_finite("half length a", self.a)
-        b = _check_finite("half height b", self.b)
-        delta = _check_finite("delta", self.delta)
-        if a <= 0.0 or b <= 0.0:
-            raise ValueError(f"half length a and half height b must be > 0 m, got a={a:g}, b={b:g}")
-        if not 0.0 <= delta <= 2.0 * b:
-            raise ValueError(f"delta must lie in [0, D] = [0, {2 * b:g}] m, got {delta:g}")
-
-    @property
-    def tip_angle(self) -> float:
-        """Tilt ``beta`` (rad) at which the centre of mass passes over G: ``atan(a/b)``.
-
-        Beyond it gravity turns the part towards upright about G (Sec. III-B).
-        """
-        return math.atan2(self.a, self.b)
 
 
 def check_la(l_a: ArrayLike) -> NDArray[np.float64]:

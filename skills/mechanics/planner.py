@@ -51,8 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skills.mechanics.contact import Frictions, Section, check_la, hole_offset
-from skills.mechanics.part import Gripper, Part
+from drivers.parts import Gripper, Part, Section, hole_offset
+from skills.mechanics.contact import Frictions, check_la
 from skills.mechanics.region import (
     HALF_PI,
     alpha_axis,

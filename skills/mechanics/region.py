@@ -19,16 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from drivers.parts import Section
 from skills.mechanics.balance import resolve_equation
 from skills.mechanics.cone import eq7_feasible, eq8_feasible
-from skills.mechanics.contact import (
-    Frictions,
-    Section,
-    check_alpha,
-    check_beta,
-    check_la,
-    contact_wrenches,
-)
+from skills.mechanics.contact import Frictions, check_alpha, check_beta, check_la, contact_wrenches
 
 HALF_PI = 0.5 * math.pi
 #: Default number of beta samples on [0, pi/2] for path questions (0.25 degree steps).

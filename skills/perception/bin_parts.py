@@ -33,8 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.camera import Frame, Intrinsics
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
 from skills.perception.heightmap import HeightMap, dot_last, height_map
 
 

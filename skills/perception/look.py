@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
-from skills.motion import Devices, Guard, GuardedMotion, Sequence
+from skills.motion import Guard, GuardedMotion, Sequence
 from skills.perception.bin_parts import Detection, detect_parts
 from skills.status import Status, StepResult
 

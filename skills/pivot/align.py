@@ -30,10 +30,11 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
 from skills.compliance import Compliance, CompliantPath
-from skills.mechanics.part import Part
-from skills.motion import Devices, GuardedMotion, Sequence
+from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult

@@ -24,8 +24,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from drivers.parts import Section
 from drivers.pose import Pose
-from skills.mechanics.contact import Section
 
 
 def _rotation_about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import math
 
+from drivers.devices import Devices
 from drivers.pose import Pose
-from skills.motion import Devices, GuardedMotion, Sequence
+from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import Status, StepResult

@@ -21,9 +21,10 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.devices import Devices
+from drivers.parts import Part
 from drivers.pose import Pose
-from skills.mechanics.part import Part
-from skills.motion import Devices, GuardedMotion, Sequence
+from skills.motion import GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import HoleGraspSkill, hole_grasp_rotation, pinched_span
 from skills.pivot.frame import PivotFrame

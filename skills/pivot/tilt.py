@@ -23,9 +23,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from drivers.devices import Devices
 from drivers.pose import Pose
 from skills.compliance import Compliance, CompliantPath
-from skills.motion import Devices, Sequence, wait
+from skills.motion import Sequence, wait
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import StepResult

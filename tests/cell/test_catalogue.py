@@ -17,7 +17,7 @@ from cell.catalogue import (
     default_catalogue_path,
     load_catalogue,
 )
-from skills.mechanics.part import Part
+from drivers.parts import Part
 
 from .conftest import TABLE3_PARTS as TABLE3
 

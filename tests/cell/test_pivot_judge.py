@@ -8,10 +8,11 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from cell.pivot_run import TrialSetup, run_trial
+from drivers.devices import Devices
+from drivers.parts import Gripper as GripperSpec
 from drivers.pose import Pose
-from skills.mechanics.part import Gripper as GripperSpec
 from skills.mechanics.planner import plan_pivot
-from skills.motion import Devices, GuardedMotion, Sequence, wait
+from skills.motion import GuardedMotion, Sequence, wait
 from skills.pivot import Align, PickFromAbove, PivotParams, Tilt
 from skills.pivot.align import hole_grasp_rotation
 

@@ -14,16 +14,18 @@ from cell.catalogue import load_catalogue
 from cell.pivot_run import TrialSetup, run_trial
 from drivers.arm import Arm, MotionState
 from drivers.camera import Camera
+from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
+from drivers.parts import Gripper as GripperSpec
 from drivers.pose import Pose
+from drivers.ur5.kinematics import HOME_TCP
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
-from sim.robot import HOME_TCP, SimRobot
+from sim.robot import SimRobot
 from sim.world import SimWorld
-from skills.mechanics.part import Gripper as GripperSpec
 from skills.mechanics.planner import plan_pivot
-from skills.motion import Devices, Guard, arm_motion
+from skills.motion import Guard, arm_motion
 from skills.status import Status
 
 SEED = 11

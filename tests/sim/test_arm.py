@@ -8,9 +8,9 @@ import pytest
 import drivers
 from drivers.arm import MotionState
 from drivers.pose import Pose, rot_y
+from drivers.ur5.kinematics import ARM_JOINTS, HOME_TCP
 from sim.arm import SimArm
-from sim.robot import HOME_TCP, SimRobot
-from sim.robot_model import ARM_JOINTS
+from sim.robot import SimRobot
 from sim.world import SimWorld
 
 from .conftest import add_floor, run_motion

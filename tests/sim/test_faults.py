@@ -10,6 +10,7 @@ from py_trees.common import Status
 
 from drivers.arm import Arm, MotionState
 from drivers.camera import Camera, Frame, Intrinsics
+from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
@@ -24,7 +25,6 @@ from sim.faults import (
     check_rates,
     no_faults,
 )
-from skills.motion import Devices
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
 from tests.trees.helpers import make_ctx
 from trees import behaviours as lv

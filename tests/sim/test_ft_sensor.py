@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from drivers.pose import Pose
+from drivers.ur5.kinematics import FINGER_BASE_Z, FINGER_LENGTH, FT_HEIGHT, HOME_TCP, TCP_Z
 from sim import ft_sensor as fts
 from sim import robot_model as rm
-from sim.robot import HOME_TCP, SimRobot
+from sim.robot import SimRobot
 from sim.world import SimWorld
 
 from .conftest import add_floor, run_motion
@@ -62,10 +63,10 @@ def test_torque_is_about_the_sensor_origin(world: SimWorld, robot: SimRobot) -> 
     pose = robot.arm.tool_pose()
     assert abs(pose.rotation[2, 2]) < 1e-4  # tool z horizontal (to 0.1 mrad of sag)
     com_z = (
-        rm.FT_MASS * rm.FT_HEIGHT / 2
-        + rm.GRIPPER_BODY_MASS * (rm.FT_HEIGHT + rm.GRIPPER_BODY_SIZE[2] / 2)
-        + 2 * rm.FINGER_MASS * (rm.FINGER_BASE_Z + rm.FINGER_LENGTH / 2)
-        + 1e-4 * rm.TCP_Z
+        rm.FT_MASS * FT_HEIGHT / 2
+        + rm.GRIPPER_BODY_MASS * (FT_HEIGHT + rm.GRIPPER_BODY_SIZE[2] / 2)
+        + 2 * rm.FINGER_MASS * (FINGER_BASE_Z + FINGER_LENGTH / 2)
+        + 1e-4 * TCP_Z
     ) / TOOL_MASS
     load = robot.ft.true_load()
     gravity_tool = pose.rotation.T @ np.array([0.0, 0.0, -TOOL_MASS * G])

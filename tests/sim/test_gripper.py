@@ -7,7 +7,8 @@ import pytest
 
 from drivers.arm import MotionState
 from drivers.pose import Pose
-from sim.robot import HOME_TCP, SimRobot
+from drivers.ur5.kinematics import HOME_TCP
+from sim.robot import SimRobot
 from sim.world import SimWorld
 
 from .conftest import add_box, add_floor, run_motion, run_until

@@ -1,4 +1,5 @@
-"""The robot model: the URDF chain against the UR5's DH forward kinematics and PyBullet."""
+"""The twin's robot model: its URDF and PyBullet's links against the chain of
+:mod:`drivers.ur5.kinematics` (tested against the UR5's DH parameters in tests/drivers/ur5)."""
 
 from __future__ import annotations
 
@@ -10,64 +11,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from drivers.pose import Pose
+from drivers.ur5 import kinematics as kin
 from sim import robot_model as rm
-from sim.robot import HOME_JOINTS, HOME_TCP, SimRobot
+from sim.robot import SimRobot
 from sim.world import SimWorld
 
 from .conftest import add_box
-
-# UR5 Denavit-Hartenberg parameters (Universal Robots' published values), m and rad.
-DH_D = (0.089159, 0.0, 0.0, 0.10915, 0.09465, 0.0823)
-DH_A = (0.0, -0.425, -0.39225, 0.0, 0.0, 0.0)
-DH_ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
-
-
-def dh_flange(q: np.ndarray) -> np.ndarray:
-    """base_T_flange from the standard DH convention, independent of the URDF chain."""
-    m = np.eye(4)
-    for theta, d, a, alpha in zip(q, DH_D, DH_A, DH_ALPHA, strict=True):
-        ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-        m = m @ np.array(
-            [
-                [ct, -st * ca, st * sa, a * ct],
-                [st, ct * ca, -ct * sa, a * st],
-                [0, sa, ca, d],
-                [0, 0, 0, 1],
-            ]
-        )
-    return m
-
-
-def test_fk_matches_dh_for_random_joints() -> None:
-    rng = np.random.default_rng(0)
-    for q in rng.uniform(-2 * math.pi, 2 * math.pi, (200, 6)):
-        ours = rm.flange_matrix(q)
-        ref = dh_flange(q)
-        assert np.linalg.norm(ours[:3, 3] - ref[:3, 3]) < 1e-6
-        assert np.abs(ours[:3, :3] - ref[:3, :3]).max() < 1e-9
-
-
-def test_tcp_is_on_the_tool_z_axis_past_the_fingertips_minus_5_mm() -> None:
-    q = np.random.default_rng(1).uniform(-3, 3, 6)
-    flange, tcp = rm.forward_kinematics(q, tcp=False), rm.forward_kinematics(q)
-    offset = flange.inverse() @ tcp
-    assert np.allclose(offset.position, [0, 0, rm.TCP_Z], atol=1e-12)
-    assert np.allclose(offset.rotation, np.eye(3), atol=1e-12)
-    assert rm.TCP_Z == pytest.approx(0.0375 + 0.09 + 0.055 - 0.005)
-
-
-def test_jacobian_matches_finite_differences() -> None:
-    q = np.random.default_rng(2).uniform(-3, 3, 6)
-    jac, pose = rm.jacobian(q)
-    eps = 1e-7
-    for i in range(6):
-        dq = np.zeros(6)
-        dq[i] = eps
-        moved = rm.forward_kinematics(q + dq)
-        lin = (moved.position - pose.position) / eps
-        ang = Rotation.from_matrix(moved.rotation @ pose.rotation.T).as_rotvec() / eps
-        assert np.allclose(jac[:3, i], lin, atol=1e-6)
-        assert np.allclose(jac[3:, i], ang, atol=1e-6)
 
 
 def test_pybullet_links_agree_with_the_model_at_a_placed_base() -> None:
@@ -77,7 +26,7 @@ def test_pybullet_links_agree_with_the_model_at_a_placed_base() -> None:
         q = np.random.default_rng(3).uniform(-2.5, 2.5, 6)
         robot.arm.reset_joints(q)
         for link, tcp in (("tcp", True), ("tool0", False)):
-            expected = base @ rm.forward_kinematics(q, tcp=tcp)
+            expected = base @ kin.forward_kinematics(q, tcp=tcp)
             d, angle = robot.link_pose(link).distance(expected)
             assert d < 1e-6 and angle < 1e-5, link
 
@@ -93,7 +42,7 @@ def test_urdf_masses_limits_and_tool_geometry() -> None:
     assert [masses[n] for n in arm_links] == list(rm.ARM_MASSES)
     assert masses["ft_sensor"] == 0.3 and masses["gripper_body"] == 0.9
     joints = {j.get("name"): j for j in root.iter("joint")}
-    for name, effort in zip(rm.ARM_JOINTS, rm.ARM_EFFORT, strict=True):
+    for name, effort in zip(kin.ARM_JOINTS, rm.ARM_EFFORT, strict=True):
         limit = joints[name].find("limit")
         assert float(limit.get("lower")) == pytest.approx(-2 * math.pi)
         assert float(limit.get("upper")) == pytest.approx(2 * math.pi)
@@ -125,14 +74,6 @@ def test_pad_faces_are_width_apart_and_the_tcp_between_the_tips(
         assert (lo_a[0] + hi_b[0]) / 2 == pytest.approx(tcp.position[0], abs=2e-4)
         assert hi_a[1] - lo_a[1] == pytest.approx(0.020, abs=4e-4)
         assert tcp.position[2] - lo_a[2] == pytest.approx(0.005, abs=2e-4)
-
-
-def test_home_points_the_tool_down_in_front() -> None:
-    home = rm.forward_kinematics(HOME_JOINTS)
-    d, angle = home.distance(HOME_TCP)
-    assert d < 1e-8 and angle < 1e-8
-    assert HOME_TCP.position[0] == pytest.approx(0.5)
-    assert np.allclose(HOME_TCP.rotation[:, 2], [0, 0, -1])
 
 
 def test_urdf_file_is_cached_by_content(tmp_path) -> None:

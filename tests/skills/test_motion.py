@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from drivers.arm import ArmStatus, MotionState
+from drivers.devices import Devices
 from drivers.health import DeviceError
 from drivers.pose import Pose
-from skills.motion import Devices, Guard, GuardedMotion, Sequence, wait
+from skills.motion import Guard, GuardedMotion, Sequence, wait
 from skills.status import SkillInputError, Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
 

@@ -11,8 +11,8 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from drivers.arm import MotionState
+from drivers.devices import Devices
 from sim.robot_model import FINGER_WIDTH
-from skills.motion import Devices
 from skills.pivot import PivotFrame, PivotParams
 from skills.regrasp import Regrasp, RegraspOptions, upright_turn
 from skills.status import Status

@@ -12,8 +12,9 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from drivers.arm import MotionState
-from skills.motion import Devices
-from skills.packing import PackInBox, tray_places
+from drivers.devices import Devices
+from drivers.layout import tray_places
+from skills.packing import PackInBox
 from skills.slot import FeedSlot, PickFromSlot, travel_path
 from skills.status import Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run

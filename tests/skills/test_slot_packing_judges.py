@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from sim.cell_layout import CellLayout, build_cell
+from drivers.layout import CellLayout
+from sim.cell_layout import build_cell
 from sim.judge import judge_in_slot, judge_packed
 from sim.part_body import spawn_part, upright_pose
 from sim.robot import SimRobot

@@ -2,7 +2,7 @@
 bin and Align takes the hole grasp on it by physics (no weld, no teleport).
 
 Only the setup (spawning the part, building the cell) and the judges touch the simulator; the
-skills get :class:`skills.motion.Devices` over the twin's drivers.
+skills get :class:`drivers.devices.Devices` over the twin's drivers.
 """
 
 from __future__ import annotations
@@ -14,15 +14,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from cell.catalogue import load_catalogue
+from drivers.devices import Devices
+from drivers.layout import CellLayout
+from drivers.parts import Part
 from drivers.pose import Pose, rot_z
 from sim.camera import SimCamera
-from sim.cell_layout import CellBodies, CellLayout, build_cell
+from sim.cell_layout import CellBodies, build_cell
 from sim.part_body import PartBody, spawn_part, upright_pose
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_WIDTH
 from sim.world import SimWorld
-from skills.mechanics.part import Part
-from skills.motion import Devices
 from skills.pivot import PickFromAbove, PivotFrame, PivotParams
 from skills.status import Status
 

@@ -7,12 +7,12 @@ from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
 from cell.catalogue import load_catalogue
+from drivers.devices import Devices
 from drivers.machine import TimedMachine
+from drivers.parts import Gripper
 from drivers.pose import Pose
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper
 from skills.mechanics.planner import plan_pivot
-from skills.motion import Devices
 from skills.pivot import PivotParams
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
 from trees.context import CellContext, CellGeometry

@@ -2,7 +2,8 @@
 
 import pytest
 
-from skills.mechanics.contact import Frictions, Section, delta_round
+from drivers.parts import Section, delta_round
+from skills.mechanics.contact import Frictions
 
 FRICTIONLESS = Frictions(0.0, 0.0, 0.0)
 GROUND_ONLY = Frictions(0.0, 0.0, 0.4)  # Fig. 5(b), Fig. 7

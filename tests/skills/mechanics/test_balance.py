@@ -4,8 +4,9 @@ import math
 
 import numpy as np
 
+from drivers.parts import Section
 from skills.mechanics.balance import gravity_balance_lp, solve_point
-from skills.mechanics.contact import Frictions, Section, contact_wrenches
+from skills.mechanics.contact import Frictions, contact_wrenches
 from skills.mechanics.region import (
     HALF_PI,
     alpha_axis,

@@ -5,9 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from drivers.parts import Section
 from skills.mechanics.balance import form_closure_lp, gravity_balance_lp
 from skills.mechanics.cone import eq7_feasible, eq8_feasible, in_cone
-from skills.mechanics.contact import Frictions, Section, contact_wrenches
+from skills.mechanics.contact import Frictions, contact_wrenches
 from skills.mechanics.region import alpha_axis, beta_axis
 
 from .conftest import FRICTIONLESS, GROUND_ONLY, PAPER

@@ -6,14 +6,8 @@ import re
 import numpy as np
 import pytest
 
-from skills.mechanics.contact import (
-    Frictions,
-    Section,
-    contact_wrenches,
-    delta_rectangular,
-    delta_round,
-    hole_offset,
-)
+from drivers.parts import Section, delta_rectangular, delta_round, hole_offset
+from skills.mechanics.contact import Frictions, contact_wrenches
 
 from .conftest import PAPER
 

@@ -5,8 +5,8 @@ import math
 import pytest
 
 from cell.catalogue import load_catalogue
+from drivers.parts import Gripper, Part
 from skills.mechanics.contact import Frictions
-from skills.mechanics.part import Gripper, Part
 from skills.mechanics.planner import (
     PlannerOptions,
     approach_problem,

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from skills.mechanics.contact import Section
+from drivers.parts import Section
 from skills.mechanics.region import (
     HALF_PI,
     alpha_axis,

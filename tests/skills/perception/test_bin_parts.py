@@ -9,8 +9,9 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from drivers.camera import Frame
+from drivers.layout import CellLayout
 from sim.camera import SimCamera, default_tool_T_camera
-from sim.cell_layout import CellLayout, build_cell
+from sim.cell_layout import build_cell
 from sim.scenes import look_down_pose, random_bin_scene
 from sim.world import SimWorld
 from skills.perception.bin_parts import detect_parts

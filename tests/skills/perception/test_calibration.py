@@ -14,9 +14,10 @@ from scipy.spatial.transform import Rotation
 
 from cell.cli import main
 from drivers.camera import Intrinsics
+from drivers.layout import CellLayout
 from drivers.pose import Pose
 from sim.camera import SimCamera, default_tool_T_camera
-from sim.cell_layout import CellLayout, build_cell
+from sim.cell_layout import build_cell
 from sim.robot import SimRobot
 from sim.tag_board import place_tag_board
 from sim.world import SimWorld

@@ -60,7 +60,7 @@ def test_a_lying_part_is_not_taken_for_a_standing_one() -> None:
 def test_a_wall_beside_the_part_is_not_taken_for_its_rim() -> None:
     """A part standing 7 cm from the bin's wall (taller than the part): the wall's inner face
     crosses the rim's height band inside the search radius and once pulled the fit off."""
-    from sim.cell_layout import CellLayout
+    from drivers.layout import CellLayout
 
     part = load_catalogue().get("bushing")
     layout = CellLayout(bin_inner_size=(0.50, 0.44))  # walls at y = +-0.22, 80 mm tall

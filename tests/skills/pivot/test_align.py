@@ -16,7 +16,7 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from drivers.arm import MotionState
-from skills.motion import Devices
+from drivers.devices import Devices
 from skills.pivot import Align, PivotFrame, PivotParams
 from skills.pivot.align import hole_grasp_rotation, pinched_span, turn_centre
 from skills.status import Status

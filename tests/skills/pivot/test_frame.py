@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from skills.mechanics.contact import Section, delta_round
+from drivers.parts import Section, delta_round
 from skills.pivot.frame import PivotFrame, rotate_about_point
 
 SECTION = Section(0.034, 0.017, delta_round(0.034, 0.028, 0.020))

@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from drivers.arm import MotionState
-from skills.mechanics.contact import Section, delta_round
-from skills.motion import Devices, Guard
+from drivers.devices import Devices
+from drivers.parts import Section, delta_round
+from skills.motion import Guard
 from skills.pivot import PivotFrame, PivotParams, Tilt
 from skills.status import Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run

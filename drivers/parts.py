@@ -1,15 +1,19 @@
 """A hollow part's geometry and the gripper's, in SI units, validated on construction.
 
-These are the plain parameter objects the mechanics and the skills receive; the YAML catalogue
-that produces them lives in :mod:`cell.catalogue`.
+These are the plain parameter objects the mechanics and the skills plan with, the twin builds its
+bodies from and the hardware path carries through the cell. They live in the bottom layer so that
+``sim`` (which implements the device interfaces) can take a :class:`Part` without importing the
+skills above it; the YAML catalogue that produces them lives in :mod:`cell.catalogue`.
+
+With the part comes the geometry of where a flat finger of width ``w`` touches the hole (the
+paper's Eq. 2-3) and the section constants of Table 1 (:class:`Section`): they are properties of
+the part and the finger alone, which the mechanics in :mod:`skills.mechanics.contact` then use.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-
-from skills.mechanics.contact import Section, delta_rectangular, delta_round
 
 HOLE_SHAPES = ("circle", "rectangle")
 
@@ -19,6 +23,87 @@ def _positive(owner: str, name: str, value: float) -> None:
         raise ValueError(f"{owner}: {name} must be a finite number, got {value!r}")
     if value <= 0:
         raise ValueError(f"{owner}: {name} must be > 0, got {value:g}")
+
+
+def _finite(name: str, value: float) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return value
+
+
+def _finger_fits(hole: float, finger_width: float) -> tuple[float, float]:
+    """Validate ``0 < w < d`` (Eq. 2's ``0 < w/d < 1``) and return ``(d, w)``."""
+    d = _finite("hole size d", hole)
+    w = _finite("finger width w", finger_width)
+    if d <= 0.0:
+        raise ValueError(f"hole size d must be > 0 m, got {d:g}")
+    if w <= 0.0:
+        raise ValueError(f"finger width w must be > 0 m, got {w:g}")
+    if w >= d:
+        raise ValueError(
+            f"finger width w = {w * 1e3:.1f} mm is not narrower than the hole "
+            f"d = {d * 1e3:.1f} mm: the finger cannot enter the hole (needs 0 < w/d < 1)"
+        )
+    return d, w
+
+
+def hole_offset(hole: float, finger_width: float) -> float:
+    """Eq. 2: distance x (m) from the hole's axis to the flat face of a finger of width ``w``.
+
+    A flat finger of width ``w`` inside a round hole of diameter ``d`` touches the hole along a
+    chord of length ``w``; that chord lies ``x = d/2 * sqrt(1 - (w/d)^2)`` from the axis.
+    """
+    d, w = _finger_fits(hole, finger_width)
+    return 0.5 * d * math.sqrt(1.0 - (w / d) ** 2)
+
+
+def delta_round(outer: float, hole: float, finger_width: float) -> float:
+    """Eq. 3 for a round hole: ``delta = D/2 - x`` (m), the depth of H below the top corner."""
+    outer = _finite("outer size D", outer)
+    x = hole_offset(hole, finger_width)
+    if outer <= hole:
+        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
+    return 0.5 * outer - x
+
+
+def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
+    """``delta`` (m) for a rectangular hole: the finger's face lies flat on the inner wall.
+
+    The contact is then the wall's inner edge, one wall thickness ``(D - d)/2`` below the top.
+    (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see README.)
+    """
+    outer = _finite("outer size D", outer)
+    hole, _ = _finger_fits(hole, finger_width)
+    if outer <= hole:
+        raise ValueError(f"outer size D = {outer:g} m must exceed the hole d = {hole:g} m")
+    return 0.5 * (outer - hole)
+
+
+@dataclass(frozen=True)
+class Section:
+    """The constant geometry of Table 1 for one part and finger: ``a``, ``b``, ``delta`` (m)."""
+
+    a: float
+    b: float
+    delta: float
+
+    def __post_init__(self) -> None:
+        a = _finite("half length a", self.a)
+        b = _finite("half height b", self.b)
+        delta = _finite("delta", self.delta)
+        if a <= 0.0 or b <= 0.0:
+            raise ValueError(f"half length a and half height b must be > 0 m, got a={a:g}, b={b:g}")
+        if not 0.0 <= delta <= 2.0 * b:
+            raise ValueError(f"delta must lie in [0, D] = [0, {2 * b:g}] m, got {delta:g}")
+
+    @property
+    def tip_angle(self) -> float:
+        """Tilt ``beta`` (rad) at which the centre of mass passes over G: ``atan(a/b)``.
+
+        Beyond it gravity turns the part towards upright about G (Sec. III-B).
+        """
+        return math.atan2(self.a, self.b)
 
 
 @dataclass(frozen=True)
@@ -83,6 +168,8 @@ class Gripper:
     The default width, 20 mm, is the one at which Eq. 3 reproduces Table 3's bushing and cookie
     can; set it to your pads. ``finger_length`` is how far the pads reach below the palm: the
     inner finger cannot hook deeper behind the rim than that (less a margin for the palm).
+    (Not the device: that is :class:`drivers.gripper.Gripper`, the interface a gripper driver
+    implements.)
     """
 
     name: str = "robotiq-2f85"
@@ -100,3 +187,14 @@ class Gripper:
             raise ValueError(f"{owner}: clearance must be >= 0, got {self.clearance!r}")
         if self.clearance >= self.stroke:
             raise ValueError(f"{owner}: clearance {self.clearance:g} m leaves no usable stroke")
+
+
+__all__ = [
+    "HOLE_SHAPES",
+    "Gripper",
+    "Part",
+    "Section",
+    "delta_rectangular",
+    "delta_round",
+    "hole_offset",
+]
