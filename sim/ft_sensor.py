@@ -54,6 +54,9 @@ class SimForceTorqueSensor:
         # The child's centre of mass in the joint frame (the child link frame): the simulator
         # reports the reaction torque about it.
         self._com = np.asarray(self._p.getDynamicsInfo(body_id, joint_index)[3], float)
+        # As plain floats for true_load(), which runs every control step: the same double
+        # arithmetic as numpy scalars, at a fraction of their per-operation cost.
+        self._com_xyz = (float(self._com[0]), float(self._com[1]), float(self._com[2]))
         rng = world.rng
         self._offset = np.concatenate(
             [
@@ -75,7 +78,7 @@ class SimForceTorqueSensor:
         For tests and the twin's own controllers; skills use :meth:`wrench`.
         """
         fx, fy, fz, tx, ty, tz = self._p.getJointState(self._body, self._joint)[2]
-        cx, cy, cz = self._com
+        cx, cy, cz = self._com_xyz
         # Negate (parent-on-child -> tool-on-sensor) and move the torque from the child's COM
         # to the joint origin, T_o = T_c + r_c x F, written out (numpy.cross is slow here).
         return -np.array(

@@ -167,14 +167,22 @@ class SimGripper:
                 )
 
     def _after_step(self) -> None:
-        if self._locking:
-            self._ratchet()
-        self._watch()
+        """Ratchet and watch on one read of both fingers' joint states (each PyBullet state
+        query costs about as much as all the arithmetic here; moving a joint limit does not
+        change the state read)."""
+        locking = self._locking
+        if not locking and self._target is None:
+            return
+        states = self._p.getJointStates(self._body, self._joints)
+        if locking:
+            self._ratchet(states)
+        self._watch(states)
 
-    def _ratchet(self) -> None:
-        """Move each finger's opening limit in behind it: it may close further, not reopen."""
+    def _ratchet(self, states: list) -> None:  # type: ignore[type-arg]
+        """Move each finger's opening limit in behind it: it may close further, not reopen.
+        ``states``: PyBullet's joint states of the two fingers, read after this step."""
         for i, joint in enumerate(self._joints):
-            q = self._p.getJointState(self._body, joint)[0]
+            q = states[i][0]
             limit = max(q + RATCHET_SLACK, RATCHET_SLACK)
             if limit < self._limits[i] - 1e-5:
                 self._limits[i] = limit
@@ -182,27 +190,30 @@ class SimGripper:
                     self._body, joint, jointLowerLimit=0.0, jointUpperLimit=limit
                 )
 
-    def _watch(self) -> None:
+    def _watch(self, states: list) -> None:  # type: ignore[type-arg]
         """After each control step: has the command arrived, or stalled on something?
+        ``states``: PyBullet's joint states of the two fingers, read after this step.
 
         Watching goes on after a stall: if the opening then moves more than :data:`LOST` (m)
         towards the target, the part slipped out, and the fingers count as moving again
         (``moving()`` True, ``object_detected()`` False) until they arrive or stall anew. Small
         finger motion in a pinch (a part turning) does not end the stall.
+
+        Two fingers: plain floats, not numpy (the same double arithmetic, without numpy's
+        per-call cost on two-element arrays every control step).
         """
         if self._target is None:
             return
         self._steps += 1
-        states = self._p.getJointStates(self._body, self._joints)
-        q = np.array([s[0] for s in states])
-        v = np.array([s[1] for s in states])
-        if np.all(np.abs(q - self._target / 2) < ARRIVED):
+        (qa, va), (qb, vb) = states[0][:2], states[1][:2]
+        half = self._target / 2
+        if abs(qa - half) < ARRIVED and abs(qb - half) < ARRIVED:
             self._active = False
             self._stalled = False
             self._target = None
             return
-        self._still = self._still + 1 if np.all(np.abs(v) < STILL_SPEED) else 0
-        width = float(q.sum())
+        self._still = self._still + 1 if abs(va) < STILL_SPEED and abs(vb) < STILL_SPEED else 0
+        width = qa + qb
         if self._stalled:
             if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:
                 self._stalled = False

@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
@@ -55,8 +56,13 @@ def hook_in_hole(part_body: PartBody, point: np.ndarray) -> tuple[bool, float]:
     A pad pressed flat on a rectangular hole's inner wall has its face on the wall itself and,
     by the contact's penetration, a fraction of a millimetre into it: the volume reaches
     :data:`TOUCH` into the wall (no wall is that thin; an outer pad stays outside)."""
+    return _hook_in_hole_local(part_body, part_body.pose().inverse().transform(point))
+
+
+def _hook_in_hole_local(part_body: PartBody, local: np.ndarray) -> tuple[bool, float]:
+    """:func:`hook_in_hole` for a point already in the part frame (the watch moves both pad
+    tips into the part frame with one pose read per control step)."""
     part = part_body.part
-    local = part_body.pose().inverse().transform(point)
     depth = 0.5 * part.length - float(local[0])
     r = 0.5 * part.hole + TOUCH
     if part.hole_shape == "circle":
@@ -134,28 +140,50 @@ class PivotWatch:
     def _touching(self, name: str) -> list:  # type: ignore[type-arg]
         """Contact points of a finger on the part closer than :data:`TOUCH` (PyBullet also
         reports points up to its breaking threshold apart, centimetres away)."""
+        return self._touching_all()[name]
+
+    def _touching_all(self) -> dict[str, list]:  # type: ignore[type-arg]
+        """:meth:`_touching` for every finger from one contact query: PyBullet lists the
+        gripper's points manifold by manifold whether or not a link is named, so each finger's
+        points come in the same order as from a query of its own link."""
         points = self.world.p.getContactPoints(
-            bodyA=self.part_body.body_id,
-            bodyB=self.gripper_body,
-            linkIndexB=self.finger_links[name],
+            bodyA=self.part_body.body_id, bodyB=self.gripper_body
         )
-        return [c for c in points if c[8] <= TOUCH]
+        return {
+            name: [c for c in points if c[4] == link and c[8] <= TOUCH]
+            for name, link in self.finger_links.items()
+        }
 
     def _sample(self) -> None:
+        """One :class:`WatchSample` of the state after this control step.
+
+        The part's pose is read once and every point is moved into its frame with it: the same
+        numbers as :func:`hook_in_hole` and :meth:`PartBody.tilt` on each point, for a sixth of
+        the cost (this runs every control step of a trial; each pose read and ``Pose`` built
+        cost more than PyBullet's step of a resting cell)."""
         if not self.active:
             return
+        part_body = self.part_body
+        position, rotation = part_body.frame()
+        # Pose.inverse() and its transform(), written out on the arrays.
+        rt = rotation.T
+        origin = -rt @ position
+
+        def to_part(point: Any) -> np.ndarray:
+            return np.asarray(point, float) @ rt.T + origin
+
         touch, in_hole, depth = {}, {}, {}
-        contacts = {}
+        contacts = self._touching_all()
         for name in self.finger_links:
-            contacts[name] = self._touching(name)
             touch[name] = bool(contacts[name])
-            in_hole[name], depth[name] = hook_in_hole(self.part_body, self.pad_tip(name))
+            in_hole[name], depth[name] = _hook_in_hole_local(part_body, to_part(self.pad_tip(name)))
         l_a = None
         if contacts[self.outer]:
-            inv = self.part_body.pose().inverse()
-            pts = np.array([inv.transform(c[5]) for c in contacts[self.outer]])
-            length = self.part_body.part.length
+            pts = np.array([to_part(c[5]) for c in contacts[self.outer]])
+            length = part_body.part.length
             l_a = float((0.5 * length - pts[:, 0].mean()) / length)
+        # PartBody.tilt() of this pose: the axis is the rotation's first column.
+        beta = float(math.asin(min(1.0, abs(rotation[:, 0].copy()[2]))))
         self.samples.append(
             WatchSample(
                 self.world.clock.now(),
@@ -163,7 +191,7 @@ class PivotWatch:
                 touch,
                 in_hole,
                 depth,
-                math.degrees(self.part_body.tilt()),
+                math.degrees(beta),
                 l_a,
             )
         )

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from drivers.parts import Part
 from drivers.pose import Pose, rot_x, rot_y, rot_z
-from sim.world import SimWorld
+from sim.world import SimWorld, matrix_from_quaternion
 
 #: PyBullet keeps only the first 16 child shapes of a shape array.
 MAX_CHILD_SHAPES = 16
@@ -177,8 +177,16 @@ class PartBody:
 
     def pose(self) -> Pose:
         """World pose of the part frame (PyBullet reports the centre of mass; this undoes it)."""
+        return Pose(*self.frame())
+
+    def frame(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(position, rotation)`` of :meth:`pose`, the same numbers without building a
+        :class:`Pose`: the judge reads the part every control step, and each ``Pose`` costs more
+        than the query. Computed as ``Pose.from_quaternion(pos, quat) @ com_T_part`` would."""
         pos, quat = self.world.p.getBasePositionAndOrientation(self.body_id)
-        return Pose.from_quaternion(pos, quat) @ self._com_T_part
+        rotation = matrix_from_quaternion(quat)
+        com = self._com_T_part
+        return np.asarray(pos, float) + rotation @ com.position, rotation @ com.rotation
 
     def axis(self) -> NDArray[np.float64]:
         """Unit vector of the part's ``+x`` axis (towards the open end) in the world."""

@@ -18,7 +18,7 @@ from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
 from sim.gripper import FINGER_NAMES, SimGripper
 from sim.robot_model import FINGER_THICKNESS, write_urdf
-from sim.world import SimWorld
+from sim.world import SimWorld, matrix_from_quaternion
 
 
 class SimRobot:
@@ -72,23 +72,34 @@ class SimRobot:
 
     def link_pose(self, link: str) -> Pose:
         """World pose of a link's frame (``tcp``, ``tool0``, ``finger_a``, ...)."""
+        return Pose(*self._link_frame(link))
+
+    def _link_frame(self, link: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(position, rotation)`` of :meth:`link_pose` without building a :class:`Pose` (the
+        judge asks for the pad tips every control step); the same numbers as
+        ``Pose.from_quaternion`` of the link state."""
         state = self.world.p.getLinkState(
             self.body_id, self.link_index[link], computeForwardKinematics=True
         )
-        return Pose.from_quaternion(state[4], state[5])
+        return np.asarray(state[4], float), matrix_from_quaternion(state[5])
+
+    def _link_point(self, link: str, local: list[float]) -> NDArray[np.float64]:
+        """A point given in a link's frame, in the world (as ``link_pose(link).transform``)."""
+        position, rotation = self._link_frame(link)
+        return np.asarray(local, float) @ rotation.T + position
 
     def fingertip(self, name: str) -> NDArray[np.float64]:
         """World position (m) of the centre of a finger's tip, 2 mm inside its end: the point the
         judge tests against the part's hole (a pad face alone can touch the rim from outside)."""
         outward = 1.0 if name == "finger_a" else -1.0
         local = [outward * 0.5 * FINGER_THICKNESS, 0.0, FINGER_LENGTH - 0.002]
-        return self.link_pose(name).transform(local)
+        return self._link_point(name, local)
 
     def pad_tip(self, name: str) -> NDArray[np.float64]:
         """World position (m) of a finger's pad face at mid-width, 2 mm from its tip: the point
         that lies inside a part's hole when the finger is caught in it (the pad face of a
         finger on the outer wall lies outside the hole's radius)."""
-        return self.link_pose(name).transform([0.0, 0.0, FINGER_LENGTH - 0.002])
+        return self._link_point(name, [0.0, 0.0, FINGER_LENGTH - 0.002])
 
     def tcp_world(self) -> Pose:
         """The TCP pose in the world frame, from the model (same as ``link_pose("tcp")``)."""

@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
+import math
 import os
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
 def _flush_c_stdio() -> None:
@@ -58,6 +61,31 @@ with _quiet():  # its import prints its build time
     import pybullet
     import pybullet_data
     from pybullet_utils.bullet_client import BulletClient
+
+
+def matrix_from_quaternion(quat: ArrayLike) -> NDArray[np.float64]:
+    """The 3x3 rotation matrix of a PyBullet ``(x, y, z, w)`` quaternion (normalised first).
+
+    Bit for bit what ``scipy.spatial.transform.Rotation.from_quat(quat).as_matrix()`` returns,
+    and so what :meth:`drivers.pose.Pose.from_quaternion` builds: the same operations in the same
+    order (checked equal on 200 000 random quaternions, unit and not). Why not SciPy: its
+    ``Rotation`` costs about 70 us a call in array-API dispatch, and the twin converts several
+    poses every control step (the judge's watch, the pad tips); this costs about 3 us.
+    """
+    x, y, z, w = (float(v) for v in quat)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if norm == 0.0:
+        raise ValueError("found zero norm quaternion")
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    return np.array(
+        [
+            [x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)],
+            [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
+            [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2],
+        ]
+    )
 
 
 @dataclass(frozen=True)
@@ -111,6 +139,11 @@ class SimWorld:
             solverResidualThreshold=self.settings.solver_residual,
             deterministicOverlappingPairs=1,
         )
+        # Bound once: ``BulletClient`` builds a new ``functools.partial`` on every attribute
+        # access, and :meth:`step` calls this ``substeps`` times per control step.
+        self._step_simulation = functools.partial(
+            pybullet.stepSimulation, physicsClientId=self.p._client
+        )
         self.rng = np.random.default_rng(seed)
         self.clock = SimClock()
         self._before_step: list[Callable[[], None]] = []
@@ -134,11 +167,13 @@ class SimWorld:
         """Advance one control period."""
         for fn in self._before_step:
             fn()
-        for _ in range(self.settings.substeps):
+        settings = self.settings
+        dt = settings.physics_dt
+        for _ in range(settings.substeps):
             for fn in self._before_substep:
                 fn()
-            self.p.stepSimulation()
-            self.clock._advance(self.settings.physics_dt)
+            self._step_simulation()
+            self.clock._advance(dt)
         self.steps += 1
         for fn in self._after_step:
             fn()
