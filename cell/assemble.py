@@ -18,7 +18,7 @@ import numpy as np
 from py_trees.behaviour import Behaviour
 
 from cell.catalogue import load_catalogue
-from cell.config import CellConfig
+from cell.config import CellConfig, skill_settings
 from cell.runner import Backend, CellState
 from drivers.layout import CellLayout
 from drivers.parts import Gripper, Part
@@ -27,6 +27,7 @@ from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, solve_ik
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, plan_pivot
 from skills.motion import Guard
+from skills.params import apply_config
 from skills.perception.look import DOWN
 from skills.pivot import PivotParams
 from trees.context import CellContext, CellGeometry, WorkflowLimits
@@ -149,11 +150,13 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     if not plan.pivotable:
         raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")
     assert plan.l_a is not None and plan.alpha is not None
-    # The hole grasp holds the part 20 mm below its rim, so that, standing in the 40 mm slot
-    # pocket, the part is let go on the floor with the outer finger still above the machine.
-    from skills.slot import SlotParams
-
-    params = PivotParams(l_a=plan.l_a, alpha=plan.alpha, wall_depth=SlotParams().grip_depth)
+    # The hole grasp holds the part the slot's grip_depth below its rim, so that, standing in
+    # the slot's pocket, the part is let go on the floor with the outer finger above the machine.
+    settings = skill_settings(config)
+    params = apply_config(
+        PivotParams(l_a=plan.l_a, alpha=plan.alpha, wall_depth=settings["slot"].grip_depth),
+        settings.pop("pivot"),
+    )
     geometry = geometry_from(layout, config.devices.arm.home_joints_deg, part.outer)
     _check_reach(config, doc, geometry)
     state = CellState(name=config.cell.name)
@@ -173,7 +176,8 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             cycles=config.workflow.cycles,
             ft_link_grace=s.ft_link_grace_s,
         ),
-        default_guard=Guard(s.ft_abort_force_n, s.ft_abort_torque_nm, s.default_timeout_s),
+        default_guard=Guard(s.ft_abort_force_n, s.ft_abort_torque_nm),
+        skill_params=settings,
         catalogue=[part],
     )
     spec, tree_doc, path = resolve_tree_spec(config.tree, doc, DATA_DIR)

@@ -23,21 +23,28 @@ import time
 from pathlib import Path
 from typing import Any
 
+from cell.errors import UserError
+from cell.journal import RETURNED_TO_BIN, RETURNED_TO_SLOT
+from cell.output import report_config_error, write_json
+from drivers.events import EventKind
 from trees.yaml_lines import ConfigError
 
+#: Events printed as progress lines by `cell sim`.
+PROGRESS_KINDS = frozenset(
+    {EventKind.PICKED, EventKind.FED, EventKind.MACHINED, EventKind.PACKED,
+     EventKind.CYCLE_FAILED, EventKind.BIN_EMPTY}
+)
 
-def _load(path: Path | None) -> Any:
+
+def load_prepared(path: Path | None) -> Any:
+    """The configuration at ``path`` (None: the shipped example) validated and prepared
+    (:func:`cell.assemble.prepare`): what `cell sim`, `cell run`, `cell tree`, `cell
+    check-hardware` and `cell soak` start from. Raises :class:`ConfigError`."""
     from cell.assemble import prepare
     from cell.config import load_config
 
     config, doc = load_config(path)
     return prepare(config, doc)
-
-
-def _fail_config(exc: ConfigError, command: str) -> int:
-    for line in str(exc).splitlines():
-        print(f"cell {command}: error: {line}", file=sys.stderr)
-    return 2
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -128,8 +135,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 # --------------------------------------------------------------------------------- sim/run
 def cmd_sim(args: argparse.Namespace) -> int:
-    from cell.cli import UserError
-
     if args.cycles is not None and args.cycles < 1:
         raise UserError(f"--cycles: must be >= 1, got {args.cycles}")
     if args.seed is not None and args.seed < 0:
@@ -137,9 +142,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.record is not None and args.record.suffix.lower() != ".gif":
         raise UserError(f"--record: {args.record}: the animation is written as a .gif")
     try:
-        prep = _load(args.config)
+        prep = load_prepared(args.config)
     except ConfigError as exc:
-        return _fail_config(exc, "sim")
+        return report_config_error(exc, "sim")
     if prep.config.cell.backend != "sim":
         raise UserError(
             f"{prep.doc.source}: cell.backend is {prep.config.cell.backend!r}; `cell sim` runs "
@@ -151,12 +156,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from cell.cli import UserError
-
     try:
-        prep = _load(args.config)
+        prep = load_prepared(args.config)
     except ConfigError as exc:
-        return _fail_config(exc, "run")
+        return report_config_error(exc, "run")
     if prep.config.cell.backend != "hw":
         raise UserError(
             f"{prep.doc.source}: cell.backend is {prep.config.cell.backend!r}; `cell run` drives "
@@ -184,7 +187,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     except ConfigError as exc:
         if prep.state.journal is not None:
             prep.state.journal.close()
-        return _fail_config(exc, command)
+        return report_config_error(exc, command)
     config = prep.config
     cycles = prep.ctx.limits.cycles
     log = TickLog(config.log.tick_log)
@@ -240,9 +243,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     if box_png is not None:
         print(f"wrote {box_png} (the box at the end)")
     if args.json is not None:
-        from cell.cli import _write_json
-
-        _write_json(args.json, summary)
+        write_json(args.json, summary)
         print(f"wrote {args.json}")
     if result.status == "interrupted":
         print(
@@ -282,7 +283,6 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
     machined part the slot -- and the journal says so; on hardware the run is refused until a
     person has done the same.
     """
-    from cell.cli import UserError
     from cell.journal import Journal, JournalError, Resume
 
     path = prep.config.log.journal
@@ -314,7 +314,7 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
                 f"--resume: the journal ({p}) says the gripper held a part when the cell "
                 f"stopped; take it out and put it back in {where}, then resume"
             )
-        kind = "returned_to_bin" if state.in_hand == "bin" else "returned_to_slot"
+        kind = RETURNED_TO_BIN if state.in_hand == "bin" else RETURNED_TO_SLOT
         journal.append(
             0, 0.0, kind, {"why": "held at the crash; the twin cannot re-create a grasp"}
         )
@@ -361,14 +361,14 @@ class _Progress:
         while self.seen < len(events):
             e = events[self.seen]
             self.seen += 1
-            if e["kind"] in ("picked", "fed", "machined", "packed", "cycle_failed", "bin_empty"):
+            if e["kind"] in PROGRESS_KINDS:
                 verdict = e.get("verdict")
                 judged = ""
                 if isinstance(verdict, dict):
                     judged = (
                         " [twin: ok]" if verdict.get("ok") else f" [twin: {verdict.get('failure')}]"
                     )
-                packed = state.counts.get("packed", 0)
+                packed = state.counts.get(EventKind.PACKED, 0)
                 self._line(
                     f"  t={e['t']:7.1f} s  {e['kind']:<12s}{judged}  packed {packed}/"
                     f"{self.cycles}  wall {time.perf_counter() - self.wall0:.0f} s"
@@ -379,7 +379,7 @@ class _Progress:
         now = time.perf_counter()
         if self.tty and now - getattr(self, "_drawn", 0.0) >= 0.2:  # 5 redraws a second
             self._drawn = now
-            packed = state.counts.get("packed", 0)
+            packed = state.counts.get(EventKind.PACKED, 0)
             width = 30
             filled = int(round(width * min(packed, self.cycles) / max(1, self.cycles)))
             tip = self.prep.root.tip()
@@ -399,15 +399,15 @@ def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
     state = prep.state
     events = state.events
 
-    def judged(kind: str) -> list[dict[str, Any]]:
+    def judged(kind: EventKind) -> list[dict[str, Any]]:
         return [e for e in events if e["kind"] == kind]
 
     def ok(e: dict[str, Any]) -> bool:
         v = e.get("verdict")
         return bool(v.get("ok")) if isinstance(v, dict) else True  # hw: no twin to judge
 
-    fed = [e for e in judged("machined") if ok(e)]
-    packed_events = judged("packed")
+    fed = [e for e in judged(EventKind.MACHINED) if ok(e)]
+    packed_events = judged(EventKind.PACKED)
     packed = [e for e in packed_events if ok(e)]
     times = [0.0] + [e["t"] for e in packed_events]
     tacts = [b - a for a, b in zip(times[:-1], times[1:], strict=True)]
@@ -420,19 +420,21 @@ def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
         "cycles": cycles,
         "packed": len(packed),
         "fed": len(fed),
-        "aborts": [{"reason": a["reason"], "tick": a["tick"]} for a in state.aborts],
+        "aborts": [
+            {"reason": a["reason"], "code": a.get("code"), "tick": a["tick"]} for a in state.aborts
+        ],
         "tact_time_s_mean": (sum(tacts) / len(tacts)) if tacts else None,
         "wall_s": round(result.wall_s, 2),
         "status": result.status,
         "stop_reason": state.stop_reason,
         "sim_time_s": round(result.sim_time, 3),
         "ticks": result.ticks,
-        "picked": state.counts.get("picked", 0),
+        "picked": state.counts.get(EventKind.PICKED, 0),
         "picked_recovered": sum(
-            1 for e in state.events if e["kind"] == "picked" and e.get("recovered")
+            1 for e in state.events if e["kind"] == EventKind.PICKED and e.get("recovered")
         ),
         "packed_claimed": len(packed_events),
-        "fed_claimed": state.counts.get("fed", 0),
+        "fed_claimed": state.counts.get(EventKind.FED, 0),
         "gaps_mm": gaps,
         "events": events,
     }
@@ -469,9 +471,9 @@ def cmd_tree(args: argparse.Namespace) -> int:
         print(describe_types())
         return 0
     try:
-        prep = _load(args.config)
+        prep = load_prepared(args.config)
     except ConfigError as exc:
-        return _fail_config(exc, "tree")
+        return report_config_error(exc, "tree")
     print(py_trees.display.unicode_tree(prep.root))
     dot, png = write_pictures(prep.root, args.out)
     print(f"wrote {dot} and {png}")
@@ -479,8 +481,6 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from cell.cli import UserError
-
     try:
         text = args.log.read_text(encoding="utf-8")
     except OSError as exc:
@@ -508,15 +508,13 @@ def cmd_check_hardware(args: argparse.Namespace) -> int:
     from cell.hardware import check_hardware, format_table
 
     try:
-        prep = _load(args.config)
+        prep = load_prepared(args.config)
     except ConfigError as exc:
-        return _fail_config(exc, "check-hardware")
+        return report_config_error(exc, "check-hardware")
     rows = check_hardware(prep.config, prep.layout, move_test=args.move_test)
     print(format_table(rows))
     if args.json is not None:
-        from cell.cli import _write_json
-
-        _write_json(
+        write_json(
             args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]}
         )
     ok = all(r.ok for r in rows)
@@ -529,9 +527,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
 
     text = json.dumps(schema(), indent=1)
     if args.out is not None:
-        from cell.cli import _write_json
-
-        _write_json(args.out, schema())
+        write_json(args.out, schema())
         print(f"wrote {args.out}")
     else:
         print(text)

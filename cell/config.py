@@ -15,8 +15,11 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
+from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
+from skills.params import apply_config, config_keys
+from trees.context import SECTION_DOCS, SKILL_SECTIONS
 from trees.yaml_lines import ConfigError, LinedDocument, load_yaml, parse_yaml
 
 
@@ -142,11 +145,21 @@ class WorkflowSection(_Section):
 
 
 class SafetySection(_Section):
-    """Default force-torque abort limits of the tree's guards (per motion leaf overridable)."""
+    """The cell's force-torque abort limits: of every motion leaf whose tree node gives none,
+    both for the FT guard around the leaf and for every motion of its skill."""
 
-    ft_abort_force_n: float = Field(80.0, gt=0.0, le=300.0)
-    ft_abort_torque_nm: float = Field(8.0, gt=0.0, le=50.0)
-    default_timeout_s: float = Field(30.0, gt=0.0, le=600.0)
+    ft_abort_force_n: float = Field(
+        DEFAULT_MAX_FORCE, gt=0.0, le=300.0, description="|F| at the wrist that stops a motion (N)"
+    )
+    ft_abort_torque_nm: float = Field(
+        DEFAULT_MAX_TORQUE,
+        gt=0.0,
+        le=50.0,
+        description="|T| at the wrist that stops a motion (N*m)",
+    )
+    default_timeout_s: float = Field(
+        30.0, gt=0.0, le=600.0, description="the longest a motion leaf of the tree may run (s)"
+    )
     ft_link_grace_s: float = Field(
         0.5,
         ge=0.0,
@@ -198,6 +211,47 @@ class FaultsSection(_Section):
     rates: FaultRates = Field(default_factory=FaultRates)
 
 
+def _shown(value: float) -> float:
+    return float(f"{value:.12g}")  # 4 deg, not 4.000000000000001
+
+
+def _skill_section_model(name: str, params: type) -> type[BaseModel]:
+    fields: dict[str, Any] = {}
+    for k in config_keys(params):
+        fields[k.key] = (
+            float,
+            Field(
+                _shown(k.shown(k.default)),
+                ge=_shown(k.shown(k.low)),
+                le=_shown(k.shown(k.high)),
+                description=f"{k.doc} ({k.shown_unit})",
+            ),
+        )
+    model = create_model(  # type: ignore[call-overload]
+        f"Skills{''.join(w.title() for w in name.split('_'))}Section",
+        __base__=_Section,
+        __doc__=f"skills.{name}: {SECTION_DOCS[name]}",
+        **fields,
+    )
+    return model  # type: ignore[no-any-return]
+
+
+#: One model per skill section, generated from the skill's parameter dataclass: the defaults,
+#: ranges and units written there are the only copy.
+SkillsSection: type[BaseModel] = create_model(  # type: ignore[call-overload]
+    "SkillsSection",
+    __base__=_Section,
+    __doc__="Each skill's parameters (SI, unit in the key's name, angles in degrees); a tree "
+    "node of that skill may override any of them",
+    **{
+        name: (model, Field(default_factory=model))
+        for name, model in (
+            (name, _skill_section_model(name, cls)) for name, cls in SKILL_SECTIONS.items()
+        )
+    },
+)
+
+
 class CellConfig(_Section):
     """The whole task configuration. ``tree`` is a behaviour spec or ``{file: PATH}``."""
 
@@ -206,6 +260,7 @@ class CellConfig(_Section):
     devices: DevicesSection = Field(default_factory=DevicesSection)
     workflow: WorkflowSection = Field(default_factory=WorkflowSection)
     safety: SafetySection = Field(default_factory=SafetySection)
+    skills: SkillsSection = Field(default_factory=SkillsSection)  # type: ignore[valid-type]
     log: LogSection = Field(default_factory=LogSection)
     faults: FaultsSection = Field(default_factory=FaultsSection)
     tree: dict[str, Any] = Field(
@@ -287,6 +342,41 @@ def validate_document(doc: LinedDocument) -> CellConfig:
         if not math.isfinite(getattr(config.safety, key)):
             raise doc.error(("safety", key), "must be finite")
     return config
+
+
+def skill_settings(config: CellConfig) -> dict[str, Any]:
+    """Each skill section's parameters (SI) as configured; the pivot's are the configured values
+    alone (``apply_config`` them to a :class:`PivotParams` once ``l_a`` and ``alpha`` are planned).
+
+    The hole grasp is one grasp for the whole cell: Align's ``wall_depth`` and the packing's
+    ``grip_depth`` are the slot's ``grip_depth``, so the part is held where every station
+    expects it."""
+
+    def values(name: str) -> dict[str, float]:
+        return getattr(config.skills, name).model_dump(exclude_unset=True)
+
+    slot = apply_config(SKILL_SECTIONS["slot"](), values("slot"))
+    settings: dict[str, Any] = {"slot": slot, "pivot": values("pivot")}
+    for name, cls in SKILL_SECTIONS.items():
+        if name not in settings:
+            base = cls(grip_depth=slot.grip_depth) if name == "pack_in_box" else cls()
+            settings[name] = apply_config(base, values(name))
+    return settings
+
+
+def skills_reference() -> str:
+    """The ``skills:`` sections as Markdown tables, key by key (docs/configuration.md)."""
+    out: list[str] = []
+    for name, cls in SKILL_SECTIONS.items():
+        out += [f"#### `skills.{name}`: {SECTION_DOCS[name]}", ""]
+        out += ["| key | default | range | unit | meaning |", "| --- | --- | --- | --- | --- |"]
+        for k in config_keys(cls):
+            lo, hi, d = (_shown(k.shown(v)) for v in (k.low, k.high, k.default))
+            out.append(
+                f"| `skills.{name}.{k.key}` | {d:g} | {lo:g}..{hi:g} | {k.shown_unit} | {k.doc} |"
+            )
+        out.append("")
+    return "\n".join(out)
 
 
 def load_config(path: str | Path | None) -> tuple[CellConfig, LinedDocument]:

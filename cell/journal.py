@@ -14,8 +14,11 @@ from __future__ import annotations
 import json
 import sqlite3
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
+
+from drivers.events import EventKind, SlotState
 
 
 class JournalError(Exception):
@@ -77,12 +80,24 @@ class Journal:
         self._db.close()
 
 
+class JournalKind(StrEnum):
+    """Records of the journal that are not workflow events."""
+
+    ABORT = "abort"
+    STOP = "stop"
+    RETURNED_TO_BIN = "returned_to_bin"  #: the part held at a crash went back to the bin
+    RETURNED_TO_SLOT = "returned_to_slot"  #: a machined part held at a crash went back
+
+
+RETURNED_TO_BIN, RETURNED_TO_SLOT = JournalKind.RETURNED_TO_BIN, JournalKind.RETURNED_TO_SLOT
+
+
 @dataclass
 class Resume:
     """What the journal says the cell had done when it stopped."""
 
     filled: list[int] = field(default_factory=list)  #: box places, in packing order
-    slot: str = "empty"  #: "empty" | "fed" | "machined"
+    slot: SlotState = SlotState.EMPTY
     #: What the gripper held: None, "bin" (a part picked from the bin, not yet fed) or
     #: "machined" (a part taken from the slot, not yet packed).
     in_hand: str | None = None
@@ -96,33 +111,33 @@ class Resume:
         for e in events:
             kind = e["kind"]
             r.runs = max(r.runs, int(e["run"]))
-            if kind == "picked":
+            if kind == EventKind.PICKED:
                 r.in_hand = "bin"
                 if "x" in e and "y" in e:
                     r.picked_from.append([float(e["x"]), float(e["y"])])
-            elif kind == "fed":
-                if r.slot != "empty":
+            elif kind == EventKind.FED:
+                if r.slot is not SlotState.EMPTY:
                     raise JournalError(f"the slot was fed twice (event {e['seq']})")
-                r.in_hand, r.slot = None, "fed"
-            elif kind == "machined":
-                r.slot = "machined"
-            elif kind == "picked_from_slot":
-                r.in_hand, r.slot = "machined", "empty"
-            elif kind == "packed":
+                r.in_hand, r.slot = None, SlotState.FED
+            elif kind == EventKind.MACHINED:
+                r.slot = SlotState.MACHINED
+            elif kind == EventKind.PICKED_FROM_SLOT:
+                r.in_hand, r.slot = "machined", SlotState.EMPTY
+            elif kind == EventKind.PACKED:
                 r.in_hand = None
                 place = int(e["place"])
                 if place in r.filled:
                     raise JournalError(f"box place {place} packed twice (event {e['seq']})")
                 r.filled.append(place)
-            elif kind == "cycle_done":
+            elif kind == EventKind.CYCLE_DONE:
                 r.cycles_done += 1
-            elif kind == "returned_to_bin":  # the part held at a crash went back to the bin
+            elif kind == RETURNED_TO_BIN:  # the part held at a crash went back to the bin
                 r.in_hand = None
                 if r.picked_from:
                     r.picked_from.pop()
-            elif kind == "returned_to_slot":  # a machined part held at a crash went back
-                r.in_hand, r.slot = None, "machined"
+            elif kind == RETURNED_TO_SLOT:  # a machined part held at a crash went back
+                r.in_hand, r.slot = None, SlotState.MACHINED
         return r
 
 
-__all__ = ["Journal", "JournalError", "Resume"]
+__all__ = ["Journal", "JournalError", "JournalKind", "Resume"]

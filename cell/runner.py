@@ -22,7 +22,13 @@ import py_trees
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
+from cell.journal import JournalKind
 from drivers.clock import Clock
+from drivers.events import EventKind, StopKind
+from skills.status import Failure
+
+#: The events that end a cycle (the state file is saved on them).
+CYCLE_ENDS = frozenset({EventKind.CYCLE_DONE, EventKind.CYCLE_FAILED})
 
 
 class Backend(Protocol):
@@ -52,6 +58,9 @@ class CellState:
     aborts: list[dict[str, Any]] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     stop_reason: str | None = None
+    stop_code: StopKind | None = None
+    #: the configured reason of the node that stopped the cell (a stop_on_failure's), if any
+    stop_cause: str | None = None
     tick: int = 0
     time: float = 0.0
     on_event: list[Callable[[str, dict[str, Any]], dict[str, Any] | None]] = field(
@@ -65,15 +74,19 @@ class CellState:
             self.journal.append(self.tick, self.time, kind, data)
 
     # -- trees.context.Events ------------------------------------------------------------
-    def abort(self, reason: str) -> None:
-        self.aborts.append({"reason": reason, "tick": self.tick, "t": round(self.time, 3)})
-        self._journal("abort", {"reason": reason})
+    def abort(self, reason: str, code: Failure | None = None) -> None:
+        why = None if code is None else code.value
+        self.aborts.append(
+            {"reason": reason, "code": why, "tick": self.tick, "t": round(self.time, 3)}
+        )
+        self._journal(JournalKind.ABORT, {"reason": reason, "code": why})
 
-    def event(self, kind: str, **data: object) -> None:
-        self.counts[kind] = self.counts.get(kind, 0) + 1
-        if kind == "packed" and isinstance(data.get("place"), int):
+    def event(self, kind: EventKind, **data: object) -> None:
+        kind = EventKind(kind)
+        self.counts[kind.value] = self.counts.get(kind.value, 0) + 1
+        if kind is EventKind.PACKED and isinstance(data.get("place"), int):
             self.filled.append(int(data["place"]))  # type: ignore[arg-type]
-        record: dict[str, Any] = {"kind": kind, "tick": self.tick, "t": round(self.time, 3)}
+        record: dict[str, Any] = {"kind": kind.value, "tick": self.tick, "t": round(self.time, 3)}
         record.update({k: _jsonable(v) for k, v in data.items()})
         for fn in self.on_event:
             verdict = fn(kind, dict(data))
@@ -82,10 +95,10 @@ class CellState:
         self.events.append(record)
         self._journal(kind, {k: v for k, v in record.items() if k not in ("kind", "tick", "t")})
 
-    def stop(self, reason: str) -> None:
+    def stop(self, reason: str, code: StopKind | None = None, cause: str | None = None) -> None:
         if self.stop_reason is None:
-            self.stop_reason = reason
-            self._journal("stop", {"reason": reason})
+            self.stop_reason, self.stop_code, self.stop_cause = reason, code, cause
+            self._journal(JournalKind.STOP, {"reason": reason, "code": code, "cause": cause})
 
     @property
     def stopped(self) -> str | None:
@@ -102,6 +115,7 @@ class CellState:
             "aborts": _jsonable(self.aborts),
             "events": _jsonable(self.events),
             "stop_reason": self.stop_reason,
+            "stop_code": self.stop_code,
             "tick": self.tick,
             "time": round(self.time, 4),
         }
@@ -122,7 +136,7 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, np.ndarray):
         return [_jsonable(x) for x in v.tolist()]
     if isinstance(v, np.generic):
-        return v.item()
+        return _jsonable(v.item())  # an np.float64 rounds as a float does
     if isinstance(v, float):
         return round(v, 6)
     if v is None or isinstance(v, bool | int | str):
@@ -281,7 +295,7 @@ class TickLoop:
                 if (
                     "events" in extra
                     and self.state_file is not None
-                    and any(e["kind"] in ("cycle_done", "cycle_failed") for e in extra["events"])
+                    and any(e["kind"] in CYCLE_ENDS for e in extra["events"])
                 ):
                     self.state.save(self.state_file)  # crash-safe: after every cycle
                 if self.on_tick is not None:

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from drivers.devices import Devices
+from drivers.events import EventKind, SlotState
 from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
 from drivers.parts import Part
@@ -157,7 +158,7 @@ class SimCellBackend:
             px, py, pz = places[i]
             self._packed_at_start.append(self._spawn(upright_pose(part, px, py, pz)))
         self.bodies.extend(self._packed_at_start)
-        if resume.slot != "empty":
+        if resume.slot != SlotState.EMPTY:
             sx, sy, sz = layout.slot_center
             self.bodies.append(self._spawn(upright_pose(part, sx, sy, sz)))
         return left
@@ -254,7 +255,7 @@ class SimCellBackend:
 
     def judge(self, kind: str, data: dict[str, Any]) -> dict[str, Any] | None:
         """The simulated state's verdict on a workflow event, or None for events not judged."""
-        if kind in ("picked", "picked_from_slot"):
+        if kind in (EventKind.PICKED, EventKind.PICKED_FROM_SLOT):
             body = self._nearest(self._tcp())
             tips = {n: self.robot.fingertip(n) for n in ("finger_a", "finger_b")}
             v = judge(
@@ -264,10 +265,10 @@ class SimCellBackend:
                 self.robot.body_id,
                 {n: self.robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
                 tips,
-                floor_z=self.layout.bin_floor_z if kind == "picked" else 0.0,
+                floor_z=self.layout.bin_floor_z if kind == EventKind.PICKED else 0.0,
             )
             return {"ok": v.success, "failure": v.failure, "tilt_deg": round(v.tilt_deg, 2)}
-        if kind == "machined":
+        if kind == EventKind.MACHINED:
             from sim.judge import judge_in_slot
 
             slot = np.asarray(self.layout.slot_center, float)
@@ -280,7 +281,7 @@ class SimCellBackend:
                 "offset_mm": round(1e3 * sv.offset_m, 2),
                 "bottom_mm": round(1e3 * sv.bottom_m, 2),
             }
-        if kind == "packed":
+        if kind == EventKind.PACKED:
             from sim.judge import judge_packed
 
             body = self._nearest(self._tcp())

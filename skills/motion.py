@@ -20,16 +20,25 @@ from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
-from skills.status import RUNNING, SkillInputError, Status, StepResult
+from skills.status import RUNNING, Failure, SkillInputError, Status, StepResult
+
+#: The cell's abort limits where a configuration gives none (its ``safety`` section defaults to
+#: these): |F| in N and |T| in N*m at the wrist, and the time one motion of a skill may take (s).
+DEFAULT_MAX_FORCE = 80.0
+DEFAULT_MAX_TORQUE = 8.0
+DEFAULT_MOTION_TIMEOUT = 10.0
 
 
 @dataclass(frozen=True)
 class Guard:
-    """Limits for one motion: force (N) and torque (N*m) magnitudes in the tool frame, time (s)."""
+    """Limits for one motion: force (N) and torque (N*m) magnitudes in the tool frame, time (s).
 
-    max_force: float = 100.0
-    max_torque: float = 6.0
-    timeout: float = 10.0
+    A skill run by the tree gets its force and torque from the tree node (see
+    :func:`skills.params.with_limits`); these defaults are for skills run on their own."""
+
+    max_force: float = DEFAULT_MAX_FORCE
+    max_torque: float = DEFAULT_MAX_TORQUE
+    timeout: float = DEFAULT_MOTION_TIMEOUT
 
     # Devices.move / Devices.grip ask the guard for the motion: the bundle lives in drivers,
     # below the skills, and must not import them (drivers.devices.MotionMaker).
@@ -56,9 +65,12 @@ class GuardedMotion:
         ft: ForceTorqueSensor,
         clock: Clock,
         guard: Guard,
-        failed: Callable[[], str | None] | None = None,
+        failed: Callable[[], str | Failed | None] | None = None,
+        failure: Failure = Failure.CHECK_FAILED,
     ) -> None:
+        """``failed()`` gives a reason to stop (a text, code ``failure``) or a (code, text)."""
         self.name = name
+        self.failure = failure
         self._command = command
         self._finished = finished
         self._failed = failed
@@ -82,7 +94,8 @@ class GuardedMotion:
                 self.arm.stop()
             except DeviceError:
                 pass
-            return StepResult(Status.FAILURE, f"{self.name}: {exc}; arm stopped")
+            code = Failure.BAD_INPUT if isinstance(exc, SkillInputError) else Failure.DEVICE_LOST
+            return StepResult(Status.FAILURE, f"{self.name}: {exc}; arm stopped", code)
 
     def _tick(self) -> StepResult:
         if self._t0 is None:
@@ -97,18 +110,22 @@ class GuardedMotion:
                 f"{self.name}: force-torque guard: |F| = {force:.1f} N (limit "
                 f"{self.guard.max_force:g}), |T| = {torque:.2f} N*m (limit "
                 f"{self.guard.max_torque:g}); arm stopped",
+                Failure.FORCE_TORQUE,
             )
         elapsed = self.clock.now() - (self._t0 or 0.0)
         if elapsed > self.guard.timeout:
             self.arm.stop()
             return StepResult(
-                Status.FAILURE, f"{self.name}: timeout after {elapsed:.1f} s; arm stopped"
+                Status.FAILURE,
+                f"{self.name}: timeout after {elapsed:.1f} s; arm stopped",
+                Failure.TIMEOUT,
             )
         if self._failed is not None:
             reason = self._failed()
             if reason:
                 self.arm.stop()
-                return StepResult(Status.FAILURE, f"{self.name}: {reason}")
+                code, text = reason if isinstance(reason, tuple) else (self.failure, reason)
+                return StepResult(Status.FAILURE, f"{self.name}: {text}", code)
         if self._finished():
             return StepResult(Status.SUCCESS, f"{self.name}: done")
         return RUNNING
@@ -117,6 +134,21 @@ class GuardedMotion:
         """Stop what this motion started (idempotent)."""
         if self._t0 is not None:
             self.arm.stop()
+
+
+#: A reason to stop with its code.
+Failed = tuple[Failure, str]
+
+
+def arm_failure(arm: Arm, contact: bool = False) -> Failed | None:
+    """The arm's own reason to stop a motion: a fault, or a stop that no contact explains."""
+    st = arm.status()
+    if st.state is MotionState.FAULT:
+        return Failure.ARM_FAULT, f"arm fault: {st.message}"
+    if st.state is MotionState.STOPPED and not contact:
+        return Failure.ARM_STOPPED, f"arm stopped: {st.message}"
+    return None
+
 
 
 def arm_motion(
@@ -129,13 +161,8 @@ def arm_motion(
 ) -> GuardedMotion:
     """A guarded arm motion that finishes when the arm reports DONE and fails on FAULT/STOPPED."""
 
-    def failed() -> str | None:
-        st = arm.status()
-        if st.state is MotionState.FAULT:
-            return f"arm fault: {st.message}"
-        if st.state is MotionState.STOPPED:
-            return f"arm stopped: {st.message}"
-        return None
+    def failed() -> Failed | None:
+        return arm_failure(arm)
 
     return GuardedMotion(
         name, command, lambda: arm.status().state is MotionState.DONE, arm, ft, clock, guard, failed
@@ -163,9 +190,9 @@ def gripper_motion(
             state["t"] = clock.now()
         return clock.now() - state["t"] >= settle
 
-    def failed() -> str | None:
+    def failed() -> Failed | None:
         fault = gripper.fault()
-        return f"gripper fault: {fault}" if fault else None
+        return (Failure.GRIPPER_FAULT, f"gripper fault: {fault}") if fault else None
 
     def command_and_reset() -> None:
         state["t"] = None

@@ -31,6 +31,7 @@ from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.motion import Guard, Sequence, wait
+from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
     ContactMove,
@@ -46,34 +47,46 @@ from skills.slot import (
 
 @dataclass(frozen=True)
 class PackParams:
-    """Parameters of :class:`PackInBox` (SI units)."""
+    """Parameters of :class:`PackInBox` (SI units); the fields declared with
+    :func:`~skills.params.si` are the ``skills.pack_in_box`` section of a cell's configuration."""
 
-    grip_depth: float = 0.020  #: m the fingertips reach below the rim in the hole grasp
-    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
+    #: m the fingertips reach below the rim in the hole grasp (in the cell: the slot's
+    #: ``grip_depth``, the grasp every station shares, so not a key of its own)
+    grip_depth: float = 0.020
+    tip_offset: float = si(0.005, "m", 0.0, 0.05, "from the TCP to the fingertips along tool z")
     #: Direction (x, y) of the outer finger from the part: the trailing side of both pushes.
     trail_dir: tuple[float, float] = (-1.0, -1.0)
-    offset: float = 0.004  #: m the part is set down short of its place along -x and along -y
-    push_range: float = 0.012  #: m beyond the place a push may go before "nothing to push on"
-    clear_height: float = 0.02  #: m above the highest thing in the box while moving over it
-    travel_z: float = 0.13  #: m, the lowest the part's bottom travels at to and from the box
-    min_radius: float = 0.30  #: m from the base axis a travel path keeps
-    travel_speed: float = 0.15  #: m/s
-    approach_speed: float = 0.05  #: m/s
-    push_speed: float = 0.01  #: m/s of every push
-    acceleration: float = 0.3  #: m/s^2
-    settle: float = 0.2  #: s held still before a reference wrench is read
-    floor_gap: float = 0.005  #: m above the floor where the fast descent ends
-    contact_force: float = 4.0  #: N against a push that means contact
-    overshoot: float = 0.004  #: m the -z push aims below the floor (contact stops it)
-    lift_off: float = 0.0005  #: m back up after the floor contact, so the part slides freely
-    #: m back after the +x contact, so the +y push does not rub along the +x neighbour (two
+    offset: float = si(
+        0.004, "m", 0.0, 0.03, "the part is set down short of its place along -x and -y"
+    )
+    push_range: float = si(
+        0.012, "m", 0.001, 0.1, "beyond the place a push may go before nothing to push on"
+    )
+    clear_height: float = si(0.02, "m", 0.0, 0.2, "above the highest thing in the box")
+    travel_z: float = si(0.13, "m", 0.0, 0.5, "the lowest the part's bottom travels at")
+    min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
+    travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
+    approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
+    push_speed: float = si(0.01, "m/s", 0.001, 0.1, "of every push")
+    acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
+    settle: float = si(0.2, "s", 0.0, 5.0, "held still before a reference wrench is read")
+    floor_gap: float = si(0.005, "m", 0.0, 0.05, "above the floor where the fast descent ends")
+    contact_force: float = si(4.0, "N", 0.5, 50.0, "against a push that means contact")
+    overshoot: float = si(
+        0.004, "m", 0.0, 0.02, "the -z push aims below the floor (contact stops it)"
+    )
+    lift_off: float = si(
+        0.0005, "m", 0.0, 0.005, "back up after the floor contact, so the part slides freely"
+    )
+    #: back after the +x contact, so the +y push does not rub along the +x neighbour (two
     #: 12-sided parts sliding past each other catch corner on corner and stop the push short)
-    back_off: float = 0.001
-    release: float = 0.006  #: m the jaws open to let go
-    #: Fraction of the part's weight the wrench must lose after the release (0: no check).
-    weight_check: float = 0.5
+    back_off: float = si(0.001, "m", 0.0, 0.01, "back after the +x contact")
+    release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
+    weight_check: float = si(
+        0.5, "1", 0.0, 1.0, "fraction of the part's weight the wrench must lose; 0: no check"
+    )
     guard: Guard = field(default_factory=Guard)
-    push_guard: Guard = field(default_factory=lambda: Guard(max_force=30.0, timeout=15.0))
+    push_guard: Guard = guard_field(30.0, 15.0, "every push and the descent into the box")
 
 
 class PackInBox(SequenceSkill):

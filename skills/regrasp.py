@@ -324,7 +324,7 @@ class Regrasp:
     def tick(self) -> StepResult:
         result = self.sequence.tick()
         if result.status is Status.FAILURE:
-            return StepResult(Status.FAILURE, f"regrasp: {result.message}")
+            return result.failed(f"regrasp: {result.message}")
         return result
 
     def halt(self) -> None:

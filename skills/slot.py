@@ -43,55 +43,77 @@ from drivers.arm import MotionState
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
-from skills.motion import Guard, GuardedMotion, Sequence, wait
+from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure, wait
+from skills.params import guard_field, si
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import hole_grasp_rotation, pinched_span
-from skills.status import StepResult
+from skills.status import Failure, StepResult
 
 GRAVITY = 9.81  #: m/s^2
 
 
 @dataclass(frozen=True)
 class SlotParams:
-    """Parameters of :class:`FeedSlot` and :class:`PickFromSlot` (SI units)."""
+    """Parameters of :class:`FeedSlot` and :class:`PickFromSlot` (SI units); the fields declared
+    with :func:`~skills.params.si` are the ``skills.slot`` section of a cell's configuration."""
 
-    #: m the fingertips reach below the rim in the hole grasp. It must leave the outer finger
-    #: above the machine when the part stands on the slot floor: ``grip_depth < length -
-    #: slot_depth`` (28 mm for the bushing in the 40 mm pocket). Align with ``wall_depth`` equal
-    #: to it gives this grasp; a deeper one is let go above the floor (``max_drop``).
-    grip_depth: float = 0.020
-    slot_depth: float = 0.040  #: m, the pocket's depth: the machine's top is this above its floor
-    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis
+    #: It must leave the outer finger above the machine when the part stands on the slot floor:
+    #: ``grip_depth < length - slot_depth`` (28 mm for the bushing in the 40 mm pocket). The cell
+    #: gives Align and the packing this same depth, so every hole grasp is the one the slot expects.
+    grip_depth: float = si(
+        0.020, "m", 0.005, 0.2, "the fingertips reach below the rim in the hole grasp"
+    )
+    slot_depth: float = si(
+        0.040, "m", 0.005, 0.3, "the pocket's depth: the machine's top above its floor"
+    )
+    tip_offset: float = si(0.005, "m", 0.0, 0.05, "from the TCP to the fingertips along tool z")
     #: Direction (x, y) of tool x -- the outer finger's side of the part -- over the slot;
     #: None keeps the held grasp's (FeedSlot) or points it at the robot base (PickFromSlot).
     finger_dir: tuple[float, float] | None = None
-    clear_height: float = 0.02  #: m between the part (or the fingertips) and the machine's top
-    travel_z: float = 0.13  #: m, the lowest the part's bottom (or the fingertips) travels at
-    min_radius: float = 0.30  #: m from the base axis a travel path keeps (see travel_path)
-    travel_speed: float = 0.15  #: m/s
-    approach_speed: float = 0.05  #: m/s
-    insert_speed: float = 0.01  #: m/s into the pocket and onto its floor
-    acceleration: float = 0.3  #: m/s^2
-    settle: float = 0.2  #: s held still before the reference wrench is read
-    contact_force: float = 4.0  #: N against the motion that means contact
-    overshoot: float = 0.004  #: m the insertion aims below the slot floor (contact stops it)
-    depth_tolerance: float = 0.006  #: m above the floor a contact may be and still be "on it"
-    finger_clearance: float = 0.003  #: m the outer fingertip keeps above the machine's top
-    max_drop: float = 0.020  #: m, the highest a part may be let go above the slot floor
-    release: float = 0.006  #: m the jaws open to let go
-    wall_gap: float = 0.004  #: m between each pad and the wall before the pinch (PickFromSlot)
-    hold_force: float = 15.0  #: N per finger of the hole grasp (PickFromSlot)
-    view_height: float = 0.20  #: m of the camera above the rim when looking (PickFromSlot)
-    view_search: float = 0.03  #: m the part may stand off the slot's centre in the view
+    clear_height: float = si(
+        0.02, "m", 0.0, 0.2, "between the part (or fingertips) and the machine's top"
+    )
+    travel_z: float = si(
+        0.13, "m", 0.0, 0.5, "the lowest the part's bottom (or the fingertips) travels at"
+    )
+    min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
+    travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
+    approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
+    insert_speed: float = si(0.01, "m/s", 0.001, 0.1, "into the pocket and onto its floor")
+    acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
+    settle: float = si(0.2, "s", 0.0, 5.0, "held still before the reference wrench is read")
+    contact_force: float = si(4.0, "N", 0.5, 50.0, "against the motion that means contact")
+    overshoot: float = si(
+        0.004, "m", 0.0, 0.02, "the insertion aims below the slot floor (contact stops it)"
+    )
+    depth_tolerance: float = si(
+        0.006, "m", 0.0, 0.03, "above the floor a contact may be and still be on it"
+    )
+    finger_clearance: float = si(
+        0.003, "m", 0.0, 0.02, "the outer fingertip keeps above the machine's top"
+    )
+    max_drop: float = si(0.020, "m", 0.0, 0.1, "the highest a part may be let go above the floor")
+    release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
+    wall_gap: float = si(
+        0.004, "m", 0.0, 0.02, "between each pad and the wall before the pinch (pick)"
+    )
+    hold_force: float = si(15.0, "N", 1.0, 100.0, "per finger of the hole grasp (pick)")
+    view_height: float = si(
+        0.20, "m", 0.05, 1.0, "of the camera above the rim when looking (pick)"
+    )
+    view_search: float = si(0.03, "m", 0.0, 0.2, "the part may stand off the slot's centre")
     use_camera: bool = True  #: PickFromSlot finds the rim with the camera (if there is one)
-    #: Fraction of the part's weight the wrench must lose (FeedSlot) or gain (PickFromSlot);
-    #: 0 skips the check.
-    weight_check: float = 0.5
+    weight_check: float = si(
+        0.5, "1", 0.0, 1.0,
+        "fraction of the part's weight the wrench must lose (feed) or gain (pick); 0: no check",
+    )
     guard: Guard = field(default_factory=Guard)
-    #: Into the pocket and onto the floor: a part on the machine's edge must stop the arm.
-    insert_guard: Guard = field(default_factory=lambda: Guard(max_force=30.0, timeout=15.0))
-    #: Pads down beside the wall: a pad landing on the rim must stop the arm.
-    descent_guard: Guard = field(default_factory=lambda: Guard(max_force=25.0, timeout=10.0))
+    insert_guard: Guard = guard_field(
+        30.0, 15.0, "into the pocket and onto its floor (a part on the edge must stop the arm)"
+    )
+    descent_guard: Guard = guard_field(
+        25.0, 10.0, "pads down beside the wall (a pad landing on the rim must stop the arm)"
+    )
 
 
 # ------------------------------------------------------------------------ shared helpers
@@ -200,18 +222,21 @@ class ContactMove:
             return True
         return self.dev.arm.status().state is MotionState.DONE
 
-    def _failed(self) -> str | None:
-        st = self.dev.arm.status()
-        if st.state is MotionState.FAULT:
-            return f"arm fault: {st.message}"
-        if st.state is MotionState.STOPPED and not self.contact:
-            return f"arm stopped: {st.message}"
-        return None
+    def _failed(self) -> Failed | None:
+        return arm_failure(self.dev.arm, self.contact)
 
 
-def check(name: str, dev: Devices, guard: Guard, test: Callable[[], str | None]) -> GuardedMotion:
+def check(
+    name: str,
+    dev: Devices,
+    guard: Guard,
+    test: Callable[[], str | None],
+    failure: Failure = Failure.CHECK_FAILED,
+) -> GuardedMotion:
     """A step that moves nothing and fails with ``test()``'s reason (a sensed condition)."""
-    return GuardedMotion(name, lambda: None, lambda: True, dev.arm, dev.ft, dev.clock, guard, test)
+    return GuardedMotion(
+        name, lambda: None, lambda: True, dev.arm, dev.ft, dev.clock, guard, test, failure
+    )
 
 
 class SequenceSkill:
@@ -475,7 +500,7 @@ class PickFromSlot(SequenceSkill):
 
         seeing = [
             dev.move("camera over the slot", g, view),
-            check("find the part in the slot", dev, g, look),
+            check("find the part in the slot", dev, g, look, Failure.NOTHING_FOUND),
         ]
         self.sequence = Sequence(
             "pick from slot",
@@ -488,9 +513,9 @@ class PickFromSlot(SequenceSkill):
                 check("read the empty gripper", dev, g, reference),
                 dev.move("beside the wall", p.descent_guard, beside_wall),
                 dev.grip("pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3),
-                check("holding the part", dev, g, pinched),
+                check("holding the part", dev, g, pinched, Failure.MISSED),
                 dev.move("lift out of the slot", p.insert_guard, lift_out),
                 wait("settle", dev, g, p.settle),
-                check("part in the hand", dev, g, weight_felt),
+                check("part in the hand", dev, g, weight_felt, Failure.MISSED),
             ],
         )

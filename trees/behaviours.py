@@ -18,21 +18,21 @@ Blackboard keys, each written by one behaviour only:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
+from drivers.events import EventKind, SlotState
 from drivers.health import DeviceError
-from drivers.pose import Pose
-from skills.motion import Guard, Sequence
+from skills.home import go_home, put_back
+from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
+from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
-from skills.status import StepResult
 from trees.context import CellContext
 
 Status = common.Status
@@ -49,22 +49,52 @@ class SetupError(Exception):
 
 
 class SkillBehaviour(Behaviour):
-    """Adapter: builds its skill in ``initialise()``, ticks it in ``update()``."""
+    """Adapter: builds its skill in ``initialise()``, ticks it in ``update()``.
+
+    Its skill's parameters are the configuration's ``skills.<section>`` with this node's
+    overrides (``overrides``: configuration keys, e.g. ``tilt_speed_m_s``), and every motion of
+    the skill runs under this node's abort limits ``max_force_n`` and ``max_torque_nm`` (default:
+    the cell's safety section) -- the same limits as the FT guard the tree builder puts around
+    the leaf, so a limit changed in the YAML is the one the skill stops at."""
 
     #: True for leaves that move the arm or gripper: the tree builder wraps them in an FT guard
     #: and a timeout.
     moves = True
+    #: The ``skills:`` section this leaf's skill reads (None: it has no parameters).
+    section: str | None = None
 
-    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+    def __init__(
+        self,
+        name: str,
+        ctx: CellContext,
+        max_force_n: float | None = None,
+        max_torque_nm: float | None = None,
+        **overrides: float,
+    ) -> None:
         super().__init__(name=name)
         self.ctx = ctx
-        self.params = params
+        self.max_force = ctx.default_guard.max_force if max_force_n is None else max_force_n
+        self.max_torque = ctx.default_guard.max_torque if max_torque_nm is None else max_torque_nm
+        if overrides and self.section is None:
+            raise TypeError(f"{type(self).__name__} takes no skill parameters: {list(overrides)}")
+        self.overrides = overrides
+        if self.section is not None:
+            self.settings()  # an unknown override fails here, when the tree is built
         self.skill: Skill | None = None
         self._setup_error: str | None = None
         self._running = False
         self.bb = self.attach_blackboard_client(name=name)
         for key, access in self.keys().items():
             self.bb.register_key(key=key, access=access)
+
+    def settings(self, section: str | None = None) -> Any:
+        """The parameters of ``section`` (default: this leaf's) as this node runs them."""
+        name = section or self.section
+        assert name is not None
+        base = self.ctx.section(name)
+        if name == self.section and self.overrides:
+            base = apply_config(base, self.overrides)
+        return with_limits(base, self.max_force, self.max_torque)
 
     # -- for subclasses --------------------------------------------------------------------
     def keys(self) -> dict[str, common.Access]:
@@ -84,11 +114,13 @@ class SkillBehaviour(Behaviour):
         except SetupError as exc:
             self._setup_error = str(exc)
         self._running = self.skill is not None
+        self.failure: Failure | None = None  #: why the last run failed
         self.feedback_message = "starting"
 
     def update(self) -> Status:
         if self.skill is None:
             self.feedback_message = f"{self.name}: cannot start: {self._setup_error}"
+            self.failure = Failure.CANNOT_START
             return Status.FAILURE
         result = self.skill.tick()
         if result.message:
@@ -99,7 +131,8 @@ class SkillBehaviour(Behaviour):
         if result.status is SkillStatus.SUCCESS:
             self.on_success()
             return Status.SUCCESS
-        self.ctx.events.abort(self.feedback_message)
+        self.failure = result.code
+        self.ctx.events.abort(self.feedback_message, result.code)
         return Status.FAILURE
 
     def terminate(self, new_status: Status) -> None:
@@ -114,6 +147,8 @@ class SkillBehaviour(Behaviour):
 class Perceive(SkillBehaviour):
     """Look down on the bin with the wrist camera; publish what it found."""
 
+    section = "perceive"
+
     def keys(self) -> dict[str, common.Access]:
         return {
             "/part/detections": common.Access.WRITE,
@@ -122,15 +157,14 @@ class Perceive(SkillBehaviour):
 
     def make_skill(self) -> Skill:
         g = self.ctx.geometry
-        near = self.params.get("near_xy") or _nearest_robot_corner(g.bin_roi)
+        near = _nearest_robot_corner(g.bin_roi)
         self.look = Look(
             self.ctx.devices,
             self.ctx.catalogue or [self.ctx.part],
             g.bin_roi,
             g.bin_view_xy,
             (float(near[0]), float(near[1])),
-            height=float(self.params.get("view_height_m", 0.5)),
-            guard=self.ctx.default_guard,
+            self.settings(),
         )
         return _TolerantLook(self.look)
 
@@ -149,7 +183,7 @@ class _TolerantLook:
 
     def tick(self) -> StepResult:
         r = self.look.tick()
-        if r.status is SkillStatus.FAILURE and "no part found" in r.message:
+        if r.code is Failure.NOTHING_FOUND:
             return StepResult(SkillStatus.SUCCESS, "look: no part found in the bin")
         return r
 
@@ -206,7 +240,7 @@ class PlanPick(Behaviour):
             self.bb.set("/cell/bin_empty", True)
             extra = f" ({skipped} skipped after failed picks)" if skipped else ""
             self.feedback_message = f"plan pick: no {ctx.part.name} left to pick{extra}"
-            ctx.events.event("bin_empty", skipped=skipped)
+            ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped)
             return Status.FAILURE
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
         if seen is not None and any(d is seen for d in usable):
@@ -241,19 +275,23 @@ def _target_frame(bb: Any) -> PivotFrame:
 
 
 class GraspBehaviour(SkillBehaviour):
+    section = "pivot"
+
     def keys(self) -> dict[str, common.Access]:
         return {"/part/target": common.Access.READ}
 
     def make_skill(self) -> Skill:
-        return Grasp(_target_frame(self.bb), self.ctx.params, self.ctx.devices)
+        return Grasp(_target_frame(self.bb), self.settings(), self.ctx.devices)
 
 
 class TiltBehaviour(SkillBehaviour):
+    section = "pivot"
+
     def keys(self) -> dict[str, common.Access]:
         return {"/part/target": common.Access.READ, "/part/pivot_frame": common.Access.WRITE}
 
     def make_skill(self) -> Skill:
-        self.tilt = Tilt(_target_frame(self.bb), self.ctx.params, self.ctx.devices)
+        self.tilt = Tilt(_target_frame(self.bb), self.settings(), self.ctx.devices)
         return self.tilt
 
     def on_success(self) -> None:
@@ -261,6 +299,7 @@ class TiltBehaviour(SkillBehaviour):
 
 
 class AlignBehaviour(SkillBehaviour):
+    section = "pivot"
     skill_type: type[Align] | type[PickFromAbove] = Align
     recovered = False  #: picks journaled as the recovery's, counted apart
 
@@ -271,14 +310,14 @@ class AlignBehaviour(SkillBehaviour):
         if not self.bb.exists("/part/pivot_frame"):
             raise SetupError("no pivot frame from a Tilt")
         frame = self.bb.get("/part/pivot_frame")
-        return self.skill_type(frame, self.ctx.part, self.ctx.params, self.ctx.devices)
+        return self.skill_type(frame, self.ctx.part, self.settings(), self.ctx.devices)
 
     def on_success(self) -> None:
         data: dict[str, object] = {"recovered": True} if self.recovered else {}
         if self.bb.exists("/part/target"):  # where it lay: the journal's record of the bin
             c = self.bb.get("/part/target")["detection"].center
             data.update(x=round(float(c[0]), 4), y=round(float(c[1]), 4))
-        self.ctx.events.event("picked", **data)
+        self.ctx.events.event(EventKind.PICKED, **data)
 
 
 class PickFromAboveBehaviour(AlignBehaviour):
@@ -295,34 +334,18 @@ class PutBack(SkillBehaviour):
     remember the failure against the part's location -- then FAIL, so a Retry above tries again
     from a fresh look."""
 
+    section = "put_back"
+
     def keys(self) -> dict[str, common.Access]:
         return {"/part/target": common.Access.READ}
 
     def make_skill(self) -> Skill:
-        ctx, dev = self.ctx, self.ctx.devices
+        ctx = self.ctx
         if self.bb.exists("/part/target"):
             key = location_key(self.bb.get("/part/target")["detection"].center)
             ctx.failures[key] = ctx.failures.get(key, 0) + 1
-        # After an abort the fingers may still press hard on the part: opening must be allowed
-        # under that load, or no recovery could ever start.
-        guard = Guard(
-            max_force=float(self.params.get("max_force_n", 250.0)),
-            max_torque=50.0,
-            timeout=ctx.default_guard.timeout,
-        )
-        rise = float(self.params.get("rise_m", 0.10))
-
-        def up() -> None:
-            tool = dev.arm.tool_pose()
-            dev.arm.move_to(Pose(tool.position + np.array([0, 0, rise]), tool.rotation), 0.1, 0.5)
-
-        return Sequence(
-            "put back",
-            [
-                dev.grip("open", guard, lambda: dev.gripper.open()),
-                dev.move("rise", guard, up),
-                dev.move("home", guard, lambda: _go_home(ctx)),
-            ],
+        return put_back(
+            ctx.devices, ctx.geometry.home_joints, self.settings(), self.settings("go_home")
         )
 
     def update(self) -> Status:
@@ -333,18 +356,11 @@ class PutBack(SkillBehaviour):
         return status
 
 
-def _go_home(ctx: CellContext) -> None:
-    """A joint move to the home joints: it also unwinds the wrist that Cartesian moves wind up
-    (a straight TCP line that keeps the tool's yaw turns the last joint towards its limit)."""
-    ctx.devices.arm.move_joints(ctx.geometry.home_joints, 1.0, 2.0)
-
-
 class GoHome(SkillBehaviour):
+    section = "go_home"
+
     def make_skill(self) -> Skill:
-        ctx = self.ctx
-        return Sequence(
-            "go home", [ctx.devices.move("home", ctx.default_guard, lambda: _go_home(ctx))]
-        )
+        return go_home(self.ctx.devices, self.ctx.geometry.home_joints, self.settings())
 
 
 class WaitMachining(Behaviour):
@@ -370,27 +386,27 @@ class WaitMachining(Behaviour):
             self.feedback_message = f"machining: {elapsed:.1f} s"
             return Status.RUNNING
         self.feedback_message = f"machined in {elapsed:.1f} s"
-        self.ctx.slot_state = "machined"
-        self.ctx.events.event("machined")
+        self.ctx.slot_state = SlotState.MACHINED
+        self.ctx.events.event(EventKind.MACHINED)
         return Status.SUCCESS
 
 
 class SlotHolds(Behaviour):
-    """Condition: SUCCESS when the slot holds a part (``state`` "fed": fed or machined;
-    "machined": machined). Lets a resumed cell go on with the part in the slot instead of
-    feeding a second one."""
+    """Condition: SUCCESS when the slot holds a part in one of ``states`` (default: fed or
+    machined). Lets a resumed cell go on with the part in the slot instead of feeding a second
+    one."""
 
     moves = False
+    states: frozenset[SlotState] = frozenset({SlotState.FED, SlotState.MACHINED})
 
-    def __init__(self, name: str, ctx: CellContext, state: str = "fed", **params: Any) -> None:
+    def __init__(self, name: str, ctx: CellContext) -> None:
         super().__init__(name=name)
-        self.ctx, self.state = ctx, state
+        self.ctx = ctx
 
     def update(self) -> Status:
         slot = self.ctx.slot_state
-        held = slot in ("fed", "machined") if self.state == "fed" else slot == "machined"
         self.feedback_message = f"slot: {slot}"
-        return Status.SUCCESS if held else Status.FAILURE
+        return Status.SUCCESS if slot in self.states else Status.FAILURE
 
 
 class HoldingPart(Behaviour):
@@ -424,15 +440,13 @@ class HoldingPart(Behaviour):
 
 
 class SlotMachined(SlotHolds):
-    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
-        super().__init__(name, ctx, state="machined")
+    states = frozenset({SlotState.MACHINED})
 
 
 # ------------------------------------------------------------------ slot and box (skills/)
-SkillFactory = Callable[[SkillBehaviour], Skill]
-
-
 class FeedSlotBehaviour(SkillBehaviour):
+    section = "slot"
+
     def make_skill(self) -> Skill:
         from skills.slot import FeedSlot
 
@@ -441,15 +455,17 @@ class FeedSlotBehaviour(SkillBehaviour):
             np.asarray(g.slot_center, float),
             self.ctx.part,
             self.ctx.devices,
-            **_skill_kwargs(self.params),
+            self.settings(),
         )
 
     def on_success(self) -> None:
-        self.ctx.slot_state = "fed"
-        self.ctx.events.event("fed")
+        self.ctx.slot_state = SlotState.FED
+        self.ctx.events.event(EventKind.FED)
 
 
 class PickFromSlotBehaviour(SkillBehaviour):
+    section = "slot"
+
     def make_skill(self) -> Skill:
         from skills.slot import PickFromSlot
 
@@ -458,15 +474,17 @@ class PickFromSlotBehaviour(SkillBehaviour):
             np.asarray(g.slot_center, float),
             self.ctx.part,
             self.ctx.devices,
-            **_skill_kwargs(self.params),
+            self.settings(),
         )
 
     def on_success(self) -> None:
-        self.ctx.slot_state = "empty"
-        self.ctx.events.event("picked_from_slot")
+        self.ctx.slot_state = SlotState.EMPTY
+        self.ctx.events.event(EventKind.PICKED_FROM_SLOT)
 
 
 class PackInBoxBehaviour(SkillBehaviour):
+    section = "pack_in_box"
+
     def keys(self) -> dict[str, common.Access]:
         return {"/cell/place": common.Access.WRITE}
 
@@ -483,21 +501,12 @@ class PackInBoxBehaviour(SkillBehaviour):
             np.asarray(places[self.index], float),
             self.ctx.part,
             self.ctx.devices,
-            **_skill_kwargs(self.params),
+            self.settings(),
         )
 
     def on_success(self) -> None:
         self.ctx.filled.add(self.index)
-        self.ctx.events.event("packed", place=self.index)
-
-
-def _skill_kwargs(params: dict[str, Any]) -> dict[str, Any]:
-    """Leaf parameters that belong to the skill, not to the tree's guard/timeout."""
-    return {k: v for k, v in params.items() if k not in TREE_PARAMS}
-
-
-#: Parameters of a leaf that the tree builder turns into decorators around it.
-TREE_PARAMS = ("timeout_s", "max_force_n", "max_torque_nm", "name")
+        self.ctx.events.event(EventKind.PACKED, place=self.index)
 
 
 __all__ = [

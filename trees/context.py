@@ -8,17 +8,42 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from drivers.devices import Devices
+from drivers.events import EventKind, SlotState, StopKind
 from drivers.machine import Machine
 from drivers.parts import Part
+from skills.home import HomeParams, PutBackParams
 from skills.mechanics.planner import PivotPlan
 from skills.motion import Guard
+from skills.packing import PackParams
+from skills.perception.look import LookParams
 from skills.pivot import PivotParams
+from skills.slot import SlotParams
+from skills.status import Failure
+
+#: The ``skills:`` sections of a cell's configuration: name -> the parameter dataclass whose
+#: :func:`~skills.params.si` fields are its keys. A leaf of the tree names the section it reads.
+SKILL_SECTIONS: dict[str, type] = {
+    "pivot": PivotParams,
+    "perceive": LookParams,
+    "slot": SlotParams,
+    "pack_in_box": PackParams,
+    "put_back": PutBackParams,
+    "go_home": HomeParams,
+}
+SECTION_DOCS: dict[str, str] = {
+    "pivot": "Grasp, Tilt, Align and the recovery's pick from above (the paper's maneuver)",
+    "perceive": "the look over the bin",
+    "slot": "feeding the machine's slot and picking the part back out of it",
+    "pack_in_box": "packing in the box by force-guided pushes",
+    "put_back": "the recovery after a failed pick",
+    "go_home": "the joint move home",
+}
 
 
 @dataclass(frozen=True)
@@ -40,14 +65,15 @@ class CellGeometry:
 class Events(Protocol):
     """Where behaviours report what the cell's state and log must remember."""
 
-    def abort(self, reason: str) -> None:
-        """A guard or a timeout stopped a motion."""
+    def abort(self, reason: str, code: Failure | None = None) -> None:
+        """A guard, a timeout or a skill's check stopped a motion; ``code`` says which."""
 
-    def event(self, kind: str, **data: object) -> None:
-        """A step of the workflow finished (``picked``, ``fed``, ``packed`` ...)."""
+    def event(self, kind: EventKind, **data: object) -> None:
+        """A step of the workflow finished."""
 
-    def stop(self, reason: str) -> None:
-        """The cell must stop and wait for a person."""
+    def stop(self, reason: str, code: StopKind | None = None, cause: str | None = None) -> None:
+        """The cell must stop and wait for a person; ``cause``: the configured reason of the
+        node that stopped it (a fixed text from the tree YAML), if any."""
 
     @property
     def stopped(self) -> str | None:
@@ -75,7 +101,11 @@ class CellContext:
     params: PivotParams
     events: Events
     limits: WorkflowLimits = field(default_factory=WorkflowLimits)
+    #: The safety section's abort force and torque, for leaves whose node gives none.
     default_guard: Guard = field(default_factory=Guard)
+    #: Each skill section's parameters as configured (SI), before a node's overrides and limits;
+    #: a section missing here has its dataclass defaults. The pivot's is ``params``.
+    skill_params: dict[str, Any] = field(default_factory=dict)
     #: Tray places already filled (by index); the cell restores it from its saved state.
     filled: set[int] = field(default_factory=set)
     #: Failed picks per remembered part location (x, y rounded to 1 cm).
@@ -83,7 +113,15 @@ class CellContext:
     #: Called once per tick by the loop before the tree ticks (sim stepping is not here).
     on_tick: list[Callable[[], None]] = field(default_factory=list)
     tick: int = 0
-    #: What the machine's slot holds: "empty", "fed" or "machined" (restored on resume).
-    slot_state: str = "empty"
+    #: What the machine's slot holds (restored on resume).
+    slot_state: SlotState = SlotState.EMPTY
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
+
+    def section(self, name: str) -> Any:
+        """The configured parameters of one ``skills:`` section."""
+        if name == "pivot":
+            return self.params
+        if name in self.skill_params:
+            return self.skill_params[name]
+        return SKILL_SECTIONS[name]()

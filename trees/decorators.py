@@ -17,7 +17,9 @@ from py_trees.behaviour import Behaviour
 from py_trees.decorators import Decorator
 
 from drivers.clock import Clock
+from drivers.events import EventKind, StopKind
 from drivers.health import DeviceError
+from skills.status import Failure
 from trees.context import CellContext
 
 Status = common.Status
@@ -78,6 +80,7 @@ class FTGuard(_CheckFirst):
         super().__init__(name=name, child=child)
         self.ctx, self.max_force, self.max_torque = ctx, max_force, max_torque
         self._over_since: float | None = None
+        self.trip_code = Failure.FORCE_TORQUE  #: why the last trip (set by check())
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key=WRENCH_KEY, access=common.Access.READ)
 
@@ -128,10 +131,12 @@ class FTGuard(_CheckFirst):
         except KeyError:
             return None
         if raw is None:  # the sampler lost the stream: nothing moves unwatched
+            self.trip_code = Failure.FT_LINK_LOST
             return f"{self.decorated.name}: force-torque link lost: no wrench; arm stopped"
         over = self._over_limits(raw)
         if over is not None:
             force, torque = over
+            self.trip_code = Failure.FORCE_TORQUE
             return (
                 f"{self.decorated.name}: force-torque abort: |F| {force:.1f} N (limit "
                 f"{self.max_force:g}), |T| {torque:.2f} N*m (limit {self.max_torque:g}); "
@@ -141,7 +146,7 @@ class FTGuard(_CheckFirst):
 
     def on_trip(self, reason: str) -> None:
         self.ctx.devices.arm.stop()  # also when the child was not running a motion
-        self.ctx.events.abort(reason)
+        self.ctx.events.abort(reason, self.trip_code)
 
 
 class Timeout(_CheckFirst):
@@ -168,7 +173,7 @@ class Timeout(_CheckFirst):
 
     def on_trip(self, reason: str) -> None:
         self.ctx.devices.arm.stop()
-        self.ctx.events.abort(reason)
+        self.ctx.events.abort(reason, Failure.TIMEOUT)
 
 
 class Retry(Decorator):
@@ -257,7 +262,7 @@ class StopOnFailure(Decorator):
                     why = f"{why} (first attempt: {node.first_reason})"
                     break
             self.feedback_message = why
-            self.ctx.events.stop(why)
+            self.ctx.events.stop(why, StopKind.PERSON_NEEDED, self.reason)
         return status
 
 
@@ -291,11 +296,11 @@ class Cycles(Decorator):
             self.done += 1
             self.failed_in_a_row = 0
             self.bb.set("/cell/cycles_done", self.done)
-            self.ctx.events.event("cycle_done", cycle=self.done)
+            self.ctx.events.event(EventKind.CYCLE_DONE, cycle=self.done)
         else:
             self.failed_in_a_row += 1
             reason = _deepest_feedback(self.decorated)
-            self.ctx.events.event("cycle_failed", reason=reason)
+            self.ctx.events.event(EventKind.CYCLE_FAILED, reason=reason)
             if self.ctx.events.stopped:
                 self.feedback_message = f"cell stopped: {self.ctx.events.stopped}"
                 return Status.FAILURE
@@ -307,7 +312,7 @@ class Cycles(Decorator):
             return Status.SUCCESS
         if self.failed_in_a_row >= limits.max_failed_cycles:
             why = f"{self.failed_in_a_row} cycles in a row failed; last: {reason}"
-            self.ctx.events.stop(why)
+            self.ctx.events.stop(why, StopKind.FAILED_CYCLES)
             self.feedback_message = f"cell stopped: {why}"
             return Status.FAILURE
         return Status.RUNNING  # the child restarts afresh on its next tick
@@ -339,14 +344,14 @@ class FTSampler(Behaviour):
             if self._lost_since is None:
                 self._lost_since = now
                 self.ctx.devices.arm.stop()
-                self.ctx.events.abort(f"{why}; arm stopped")
+                self.ctx.events.abort(f"{why}; arm stopped", Failure.FT_LINK_LOST)
             self.bb.set(WRENCH_KEY, None)
             lost = now - self._lost_since
             if lost >= self.ctx.limits.ft_link_grace:
                 if self.ctx.limits.ft_link_grace > 0:
                     why = f"{why} (lost for {lost:.2f} s)"
                 self.feedback_message = why
-                self.ctx.events.stop(why)
+                self.ctx.events.stop(why, StopKind.FT_LINK_LOST)
                 return Status.FAILURE
             self.feedback_message = f"{why}; waiting {lost:.2f} s so far"
             return Status.RUNNING

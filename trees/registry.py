@@ -19,8 +19,9 @@ import py_trees
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
+from skills.params import config_keys
 from trees import behaviours as lv
-from trees.context import CellContext
+from trees.context import SECTION_DOCS, SKILL_SECTIONS, CellContext
 from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 from trees.yaml_lines import ConfigError, KeyPath, LinedDocument, load_yaml
 
@@ -50,6 +51,31 @@ class NodeType:
     doc: str
     params: dict[str, Param] = field(default_factory=dict)
     leaf: type[Behaviour] | None = None
+
+    @property
+    def section(self) -> str | None:
+        """The ``skills:`` section whose keys this leaf takes as per-node overrides."""
+        return getattr(self.leaf, "section", None)
+
+    def all_params(self) -> dict[str, Param]:
+        """Its own parameters and, for a skill leaf, its section's keys."""
+        if self.section is None:
+            return dict(self.params)
+        return self.params | section_params(self.section)
+
+
+def section_params(section: str) -> dict[str, Param]:
+    """A ``skills:`` section's keys as node parameters (configured units, e.g. degrees)."""
+    out: dict[str, Param] = {}
+    for k in config_keys(SKILL_SECTIONS[section]):
+        unit = k.shown_unit
+        out[k.key] = Param(
+            float,
+            low=k.shown(k.low),
+            high=k.shown(k.high),
+            doc=f"{k.doc} ({unit}; default {k.shown(k.default):g})",
+        )
+    return out
 
 
 REGISTRY: dict[str, NodeType] = {
@@ -85,10 +111,7 @@ REGISTRY: dict[str, NodeType] = {
         {"reason": Param(str, required=True)},
     ),
     "perceive": NodeType(
-        "leaf",
-        "wrist camera over the bin, find the parts",
-        {**MOTION, "view_height_m": Param(float, low=0.2, high=1.0)},
-        lv.Perceive,
+        "leaf", "wrist camera over the bin, find the parts", dict(MOTION), lv.Perceive
     ),
     "plan_pick": NodeType("leaf", "choose the part and its pivot frame", {}, lv.PlanPick),
     "grasp": NodeType("leaf", "the pivot's Grasp (Sec. III-C)", dict(MOTION), lv.GraspBehaviour),
@@ -108,7 +131,7 @@ REGISTRY: dict[str, NodeType] = {
     "put_back": NodeType(
         "leaf",
         "recovery: open, rise, home; then fails so a retry above tries again",
-        {**MOTION, "rise_m": Param(float, low=0.0, high=0.3)},
+        dict(MOTION),
         lv.PutBack,
     ),
     "feed_slot": NodeType(
@@ -183,7 +206,7 @@ class TreeBuilder:
                 f"unknown behaviour type {kind!r}; valid types: {', '.join(REGISTRY)}",
             )
         nt = REGISTRY[kind]
-        allowed = dict(NAME) | nt.params
+        allowed = dict(NAME) | nt.all_params()
         structural = {"composite": ("children",), "decorator": ("child",), "leaf": ()}[nt.kind]
         params: dict[str, Any] = {}
         for key, value in spec.items():
@@ -210,21 +233,16 @@ class TreeBuilder:
             return self._decorator(kind, name, child, params)
         assert nt.leaf is not None
         motion = {k: params.pop(k) for k in list(params) if k in MOTION}
-        leaf_params = dict(params)
-        if "max_force_n" in motion:
-            leaf_params["max_force_n"] = motion["max_force_n"]  # some leaves size inner guards
-        node = nt.leaf(name, self.ctx, **leaf_params)
-        if getattr(nt.leaf, "moves", False):
-            timeout = motion.get("timeout_s", self.defaults["timeout_s"])
-            node = Timeout(f"{name} timeout", node, self.ctx, timeout)
-            node = FTGuard(
-                self._name(f"{name} ft guard"),
-                node,
-                self.ctx,
-                motion.get("max_force_n", self.defaults["max_force_n"]),
-                motion.get("max_torque_nm", self.defaults["max_torque_nm"]),
-            )
-        return node
+        if not getattr(nt.leaf, "moves", False):
+            return nt.leaf(name, self.ctx, **params)
+        # One source for the limits: the node's (or the safety section's) force and torque are
+        # both the FT guard around the leaf and the guard of every motion of its skill.
+        force = motion.get("max_force_n", self.defaults["max_force_n"])
+        torque = motion.get("max_torque_nm", self.defaults["max_torque_nm"])
+        node: Behaviour = nt.leaf(name, self.ctx, max_force_n=force, max_torque_nm=torque, **params)
+        timeout = motion.get("timeout_s", self.defaults["timeout_s"])
+        node = Timeout(self._name(f"{name} timeout"), node, self.ctx, timeout)
+        return FTGuard(self._name(f"{name} ft guard"), node, self.ctx, force, torque)
 
     def _decorator(
         self, kind: str, name: str, child: Behaviour, params: dict[str, Any]
@@ -295,12 +313,31 @@ def build_root(
 
 
 def describe_types() -> str:
-    """The registry as text, for `cell tree --types` and error messages."""
+    """The registry and the skill sections as text, for `cell tree --types`: every parameter
+    with its range and, for a skill's, its unit and default."""
     lines = []
     for name, nt in REGISTRY.items():
         extra = ", ".join(nt.params) if nt.params else "-"
-        lines.append(f"{name:16s} {nt.kind:10s} {nt.doc}  [params: {extra}]")
+        section = f"; and the keys of skills.{nt.section}" if nt.section else ""
+        lines.append(f"{name:16s} {nt.kind:10s} {nt.doc}  [params: {extra}{section}]")
+        for key, p in nt.params.items():
+            lines.append(f"    {key:30s} {_range(p)}  {p.doc}")
+    lines.append("")
+    lines.append(
+        "skills: sections (cell YAML `skills.<section>.<key>`; a leaf of that skill may "
+        "override any key):"
+    )
+    for section in SKILL_SECTIONS:
+        lines.append(f"  {section}: {SECTION_DOCS[section]}")
+        for key, p in section_params(section).items():
+            lines.append(f"    {key:30s} {_range(p)}  {p.doc}")
     return "\n".join(lines)
+
+
+def _range(p: Param) -> str:
+    if p.low is None and p.high is None:
+        return f"{'':17s}"
+    return f"[{p.low:g}, {p.high:g}]".ljust(17)
 
 
 TreeFactory = Callable[[CellContext], Behaviour]

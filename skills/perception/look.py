@@ -4,6 +4,7 @@ whose open end the first view could not tell, look again from beyond one of its 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -11,8 +12,9 @@ from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.motion import Guard, GuardedMotion, Sequence
+from skills.params import si
 from skills.perception.bin_parts import Detection, detect_parts
-from skills.status import Status, StepResult
+from skills.status import Failure, Status, StepResult
 
 DOWN = np.diag([1.0, -1.0, -1.0])
 
@@ -22,6 +24,20 @@ def camera_over(xy: tuple[float, float], height: float, dev: Devices) -> Pose:
     assert dev.camera is not None
     offset = DOWN @ dev.camera.tool_T_camera().position
     return Pose(np.array([xy[0], xy[1], height]) - offset, DOWN)
+
+
+@dataclass(frozen=True)
+class LookParams:
+    """The ``skills.perceive`` section of a cell's configuration (SI)."""
+
+    view_height: float = si(0.5, "m", 0.2, 1.0, "of the camera over the bin, the wide view")
+    second_height: float = si(0.35, "m", 0.15, 1.0, "of the camera for the look at an end")
+    second_offset: float = si(
+        0.10, "m", 0.0, 0.3, "beyond the part's end the second view looks from"
+    )
+    speed: float = si(0.25, "m/s", 0.01, 1.0, "of the TCP between views")
+    acceleration: float = si(1.0, "m/s^2", 0.05, 3.0, "of the TCP between views")
+    guard: Guard = field(default_factory=Guard)
 
 
 class Look:
@@ -34,13 +50,11 @@ class Look:
         roi: tuple[float, float, float, float],
         view_xy: tuple[float, float],
         near_xy: tuple[float, float],
-        height: float = 0.5,
-        speed: float = 0.25,
-        second_height: float = 0.35,
-        second_offset: float = 0.10,
-        guard: Guard | None = None,
+        params: LookParams | None = None,
     ) -> None:
-        guard = guard if guard is not None else Guard()
+        p = params if params is not None else LookParams()
+        guard, height, speed = p.guard, p.view_height, p.speed
+        second_height, second_offset = p.second_height, p.second_offset
         self.dev, self.catalogue, self.roi = dev, catalogue, roi
         self.result: Detection | None = None
         self.detections: list[Detection] = []
@@ -49,7 +63,7 @@ class Look:
 
         def go(xy_source) -> None:  # type: ignore[no-untyped-def]
             xy = xy_source()
-            arm.move_to(camera_over(xy, height, dev), speed, 1.0)
+            arm.move_to(camera_over(xy, height, dev), speed, p.acceleration)
 
         def detect() -> None:
             assert dev.camera is not None
@@ -89,17 +103,19 @@ class Look:
             [
                 dev.move("camera over the bin", guard, lambda: go(lambda: view_xy)),
                 GuardedMotion(
-                    "find the parts", detect, done, arm, dev.ft, dev.clock, guard, none_found
+                    "find the parts", detect, done, arm, dev.ft, dev.clock, guard, none_found,
+                    Failure.NOTHING_FOUND,
                 ),
                 dev.move(
                     "camera beyond its end",
                     guard,
                     lambda: arm.move_to(
-                        camera_over(second_view_xy(), second_height, dev), speed, 1.0
+                        camera_over(second_view_xy(), second_height, dev), speed, p.acceleration
                     ),
                 ),
                 GuardedMotion(
-                    "look at its end", detect, done, arm, dev.ft, dev.clock, guard, none_found
+                    "look at its end", detect, done, arm, dev.ft, dev.clock, guard, none_found,
+                    Failure.NOTHING_FOUND,
                 ),
             ],
         )
@@ -107,7 +123,7 @@ class Look:
     def tick(self) -> StepResult:
         result = self.sequence.tick()
         if result.status is Status.FAILURE:
-            return StepResult(Status.FAILURE, f"look: {result.message}")
+            return result.failed(f"look: {result.message}")
         return result
 
     def halt(self) -> None:

@@ -37,7 +37,7 @@ from skills.compliance import Compliance, CompliantPath
 from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
-from skills.status import Status, StepResult
+from skills.status import Failure, Status, StepResult
 
 
 def pinched_span(part: Part, finger_width: float) -> tuple[float, float]:
@@ -96,7 +96,9 @@ class HoleGraspSkill:
             self._checked = True
             if not self.dev.gripper.object_detected():
                 self.sequence.halt()
-                return StepResult(Status.FAILURE, f"{self.name}: the hole grasp closed on nothing")
+                return StepResult(
+                    Status.FAILURE, f"{self.name}: the hole grasp closed on nothing", Failure.MISSED
+                )
         return result
 
     def halt(self) -> None:

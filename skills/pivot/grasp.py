@@ -10,7 +10,7 @@ from drivers.pose import Pose
 from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
-from skills.status import Status, StepResult
+from skills.status import Failure, Status, StepResult
 
 
 class Grasp:
@@ -91,7 +91,9 @@ class Grasp:
         if result.status is Status.SUCCESS:
             self.dev.arm.stop()
             if not self.dev.gripper.object_detected():
-                return StepResult(Status.FAILURE, "grasp: missed, the fingers closed on nothing")
+                return StepResult(
+                    Status.FAILURE, "grasp: missed, the fingers closed on nothing", Failure.MISSED
+                )
         return result
 
     def halt(self) -> None:

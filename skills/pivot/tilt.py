@@ -26,7 +26,7 @@ import numpy as np
 from drivers.devices import Devices
 from drivers.pose import Pose
 from skills.compliance import Compliance, CompliantPath
-from skills.motion import Sequence, wait
+from skills.motion import Guard, Sequence, wait
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import StepResult
@@ -51,10 +51,12 @@ class Tilt:
         self.angle = p.tilt_angle if p.tilt_angle is not None else 0.5 * math.pi  #: theta (rad)
         self.start_width = 0.0  #: m, jaw opening when the arc started
         self.eased = False  #: the jaws have eased past the tip-over angle
+        #: the node's force and torque limits over the arc's own time
+        self.guard = Guard(p.guard.max_force, p.guard.max_torque, p.tilt_timeout)
         self.arc = CompliantPath(
             "arc about P_c",
             dev,
-            p.tilt_guard,
+            self.guard,
             self._path,
             self._length,
             p.tilt_speed,
@@ -69,7 +71,7 @@ class Tilt:
         )
         self.sequence = Sequence(
             "tilt",
-            [self.arc.motion(), wait("let the part stand", dev, p.tilt_guard, p.settle)],
+            [self.arc.motion(), wait("let the part stand", dev, self.guard, p.settle)],
         )
 
     def _path(self) -> Callable[[float], Pose]:

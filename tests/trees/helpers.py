@@ -8,12 +8,14 @@ from py_trees.common import Status
 
 from cell.catalogue import load_catalogue
 from drivers.devices import Devices
+from drivers.events import StopKind
 from drivers.machine import TimedMachine
 from drivers.parts import Gripper
 from drivers.pose import Pose
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import plan_pivot
 from skills.pivot import PivotParams
+from skills.status import Failure
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
 from trees.context import CellContext, CellGeometry
 
@@ -24,16 +26,20 @@ class Recorder:
     def __init__(self) -> None:
         self.events: list[tuple[str, dict]] = []
         self.aborts: list[str] = []
+        self.codes: list[Failure | None] = []
         self._stopped: str | None = None
+        self.stop_code: StopKind | None = None
 
-    def abort(self, reason: str) -> None:
+    def abort(self, reason: str, code: Failure | None = None) -> None:
         self.aborts.append(reason)
+        self.codes.append(code)
 
     def event(self, kind: str, **data: object) -> None:
         self.events.append((kind, data))
 
-    def stop(self, reason: str) -> None:
-        self._stopped = self._stopped or reason
+    def stop(self, reason: str, code: StopKind | None = None, cause: str | None = None) -> None:
+        if self._stopped is None:
+            self._stopped, self.stop_code = reason, code
 
     @property
     def stopped(self) -> str | None:

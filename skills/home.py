@@ -1,0 +1,79 @@
+"""The cell's plain moves: home, and putting a failed pick back. Skills like the others, so their
+speeds and limits come from the configuration (``skills.go_home``, ``skills.put_back``) and the
+tree node's guard, never from a behaviour."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from drivers.pose import Pose
+from skills.motion import Devices, Guard, Sequence
+from skills.params import si
+
+
+@dataclass(frozen=True)
+class HomeParams:
+    """A joint move to the home joints: it also unwinds the wrist that Cartesian moves wind up
+    (a straight TCP line that keeps the tool's yaw turns the last joint towards its limit)."""
+
+    joint_speed: float = si(1.0, "rad/s", 0.05, 3.0, "of the joints on the way home")
+    joint_acceleration: float = si(2.0, "rad/s^2", 0.1, 10.0, "of the joints on the way home")
+    guard: Guard = field(default_factory=Guard)
+
+
+@dataclass(frozen=True)
+class PutBackParams:
+    rise: float = si(0.10, "m", 0.0, 0.3, "up, jaws open, before going home")
+    rise_speed: float = si(0.1, "m/s", 0.01, 0.5, "of the TCP rising")
+    rise_acceleration: float = si(0.5, "m/s^2", 0.05, 3.0, "of the TCP rising")
+    guard: Guard = field(default_factory=Guard)
+
+
+def go_home(dev: Devices, home_joints: ArrayLike, params: HomeParams) -> Sequence:
+    joints = np.asarray(home_joints, float)
+    g = params.guard
+    return Sequence(
+        "go home",
+        [
+            dev.move(
+                "home",
+                g,
+                lambda: dev.arm.move_joints(joints, params.joint_speed, params.joint_acceleration),
+            )
+        ],
+    )
+
+
+def put_back(
+    dev: Devices, home_joints: ArrayLike, params: PutBackParams, home: HomeParams
+) -> Sequence:
+    """Open the jaws (the part stays in the bin), rise, go home.
+
+    After an abort the fingers may still press hard on the part: the tree gives this skill a
+    high force limit so that opening is allowed under that load, or no recovery could start."""
+    joints = np.asarray(home_joints, float)
+    g = params.guard
+
+    def up() -> None:
+        tool = dev.arm.tool_pose()
+        lifted = Pose(tool.position + np.array([0.0, 0.0, params.rise]), tool.rotation)
+        dev.arm.move_to(lifted, params.rise_speed, params.rise_acceleration)
+
+    return Sequence(
+        "put back",
+        [
+            dev.grip("open", g, lambda: dev.gripper.open()),
+            dev.move("rise", g, up),
+            dev.move(
+                "home",
+                g,
+                lambda: dev.arm.move_joints(joints, home.joint_speed, home.joint_acceleration),
+            ),
+        ],
+    )
+
+
+__all__ = ["HomeParams", "PutBackParams", "go_home", "put_back"]
