@@ -23,6 +23,7 @@ from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
 from skills.perception.bin_parts import Detection
 from skills.pivot import PivotFrame
+from skills.status import Failure
 from tests.trees.helpers import make_ctx
 from trees import behaviours as lv
 
@@ -533,3 +534,21 @@ def test_pack_in_box_force_spike_and_halt_stop_the_arm(ctx) -> None:
     node2 = lv.PackInBoxBehaviour("pack in box", ctx2)
     stops = start_then_halt(node2, ctx2)
     assert ctx2.devices.arm.stops == stops + 1 and ctx2.filled == set()
+
+
+def test_perceive_decides_on_the_failure_code_not_the_words(ctx, seeing) -> None:
+    """A lost camera whose message happens to read like an empty bin is still a failure, and
+    its abort carries the device-lost code the soak and the reports count by."""
+    camera, _ = seeing
+    monkey_message = "no part found in the bin (camera timeout)"
+    camera.capture = lambda: (_ for _ in ()).throw(TimeoutError(monkey_message))  # type: ignore[method-assign]
+    node = lv.Perceive("perceive", ctx)
+    assert run(node, ctx)[-1] == Status.FAILURE
+    assert ctx.events.codes == [Failure.DEVICE_LOST]
+    assert monkey_message in ctx.events.aborts[0]
+
+
+def test_an_empty_bin_is_an_answer_by_its_code(ctx, seeing) -> None:
+    node = lv.Perceive("perceive", ctx)
+    assert run(node, ctx)[-1] == Status.SUCCESS
+    assert node.failure is None and ctx.events.codes == []
