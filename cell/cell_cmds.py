@@ -534,4 +534,4 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["add_parser", "math"]
+__all__ = ["add_parser", "load_prepared", "math"]

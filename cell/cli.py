@@ -17,7 +17,6 @@ Contract forms (scripts rely on them; keep them exactly):
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -26,6 +25,8 @@ from typing import Any
 import numpy as np
 
 from cell.catalogue import Catalogue, load_catalogue
+from cell.errors import UserError
+from cell.output import write_json
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, PlannerOptions, plan_pivot
@@ -39,9 +40,6 @@ from skills.mechanics.region import (
 )
 
 DEFAULT_LA = [0.3, 0.5, 0.7, 0.9]
-
-
-from cell.errors import UserError  # noqa: E402 -- re-exported for the commands
 
 
 def _deg(x: float | None) -> str:
@@ -73,14 +71,6 @@ def _frictions(args: argparse.Namespace) -> Frictions:
     return Frictions(mu_s=args.mu_s, mu_h=args.mu_h, mu_g=args.mu_g)
 
 
-def _write_json(path: Path, payload: Any) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, indent=1) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"cannot write {path}: {exc.strerror}") from None
-
-
 def cmd_analyze(args: argparse.Namespace) -> int:
     if not 2 <= args.grid <= 2001:
         raise UserError(f"--grid must lie in [2, 2001], got {args.grid}")
@@ -96,7 +86,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
     equation = resolve_equation(args.equation, frictions)
 
-    from cell.figures import plot_region_map
+    from cell.experiments.figures import plot_region_map
 
     tag = f"muS{args.mu_s:g}_muH{args.mu_h:g}_muG{args.mu_g:g}"
     try:
@@ -136,7 +126,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
         )
     print(f"wrote {png}")
     if args.json is not None:
-        _write_json(
+        write_json(
             args.json,
             {
                 "part": part.name,
@@ -202,7 +192,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         payload: Any = (
             plans[0].to_json() if not args.all else {"plans": [p.to_json() for p in plans]}
         )
-        _write_json(args.json, payload)
+        write_json(args.json, payload)
         print(f"wrote {args.json}")
     return 0
 
@@ -310,27 +300,27 @@ def build_parser() -> argparse.ArgumentParser:
     _add_physics_options(p)
     p.set_defaults(func=cmd_check_tilt)
 
-    from cell.pivot_cmd import add_parser as add_pivot
+    from cell.experiments.pivot_cmd import add_parser as add_pivot
 
     add_pivot(sub)
 
-    from cell.sweep_cmd import add_parser as add_sweep
+    from cell.experiments.sweep_cmd import add_parser as add_sweep
 
     add_sweep(sub)
 
-    from cell.calibrate_cmd import add_parser as add_calibrate
+    from cell.experiments.calibrate_cmd import add_parser as add_calibrate
 
     add_calibrate(sub)
 
-    from cell.perceive_cmd import add_parser as add_perceive
+    from cell.experiments.perceive_cmd import add_parser as add_perceive
 
     add_perceive(sub)
 
-    from cell.train_perception_cmd import add_parser as add_train_perception
+    from cell.experiments.train_perception_cmd import add_parser as add_train_perception
 
     add_train_perception(sub)
 
-    from cell.compare_cmd import add_parser as add_compare
+    from cell.experiments.compare_cmd import add_parser as add_compare
 
     add_compare(sub)
 
@@ -338,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_cell(sub)
 
-    from cell.soak_cmd import add_parser as add_soak
+    from cell.experiments.soak_cmd import add_parser as add_soak
 
     add_soak(sub)
     return parser

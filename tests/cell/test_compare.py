@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from cell.cli import main
-from cell.regrasp_run import Solid, SweptVolume
+from cell.experiments.regrasp_run import Solid, SweptVolume
 from drivers.pose import Pose, rot_z
 
 
@@ -92,14 +92,14 @@ def test_compare_one_trial(tmp_path: Path, capsys) -> None:
     ],
 )
 def test_bad_input_exits_2_before_any_trial(argv, needle, capsys, monkeypatch) -> None:
-    import cell.pivot_run
-    import cell.regrasp_run
+    import cell.experiments.pivot_run
+    import cell.experiments.regrasp_run
 
     def trap(*args, **kwargs):
         raise AssertionError("a trial was simulated")
 
-    monkeypatch.setattr(cell.pivot_run, "run_trial", trap)
-    monkeypatch.setattr(cell.regrasp_run, "run_regrasp_trial", trap)
+    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", trap)
+    monkeypatch.setattr(cell.experiments.regrasp_run, "run_regrasp_trial", trap)
     code, out, err = run_cli(["compare", *argv], capsys)
     assert code == 2
     assert err.startswith("cell compare: error:") and needle in err

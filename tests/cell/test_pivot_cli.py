@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-import cell.pivot_run
+import cell.experiments.pivot_run
 from cell.cli import main
 
 
@@ -30,7 +30,7 @@ def no_simulation(monkeypatch: pytest.MonkeyPatch) -> list[int]:
         started.append(1)
         raise AssertionError("a trial was simulated")
 
-    monkeypatch.setattr(cell.pivot_run, "run_trial", trap)
+    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", trap)
     return started
 
 
@@ -56,13 +56,13 @@ def test_contract_form_writes_the_summary(tmp_path: Path, capsys) -> None:
 
 def test_mu_ground_is_used_exactly(tmp_path: Path, capsys, monkeypatch) -> None:
     seen = []
-    real = cell.pivot_run.run_trial
+    real = cell.experiments.pivot_run.run_trial
 
     def spy(setup, seed, **kw):
         seen.append(setup.mu_ground)
         return real(setup, seed, **kw)
 
-    monkeypatch.setattr(cell.pivot_run, "run_trial", spy)
+    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
     out_json = tmp_path / "r.json"
     args = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "11", "--mu-ground", "0.7"]
     code, _, err = run_cli([*args, "--json", str(out_json)], capsys)

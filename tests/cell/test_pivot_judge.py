@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
-from cell.pivot_run import TrialSetup, run_trial
+from cell.experiments.pivot_run import TrialSetup, run_trial
 from drivers.devices import Devices
 from drivers.parts import Gripper as GripperSpec
 from drivers.pose import Pose

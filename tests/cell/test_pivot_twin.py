@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
-from cell.pivot_run import TrialSetup, run_trial
+from cell.experiments.pivot_run import TrialSetup, run_trial
 from drivers.arm import Arm, MotionState
 from drivers.camera import Camera
 from drivers.devices import Devices

@@ -2,7 +2,7 @@
 
 import pytest
 
-from cell.stats import wilson_interval
+from cell.experiments.stats import wilson_interval
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-import cell.sweep_cmd
+import cell.experiments.sweep_cmd
 from cell.cli import main
 from cell.errors import UserError
 
@@ -97,8 +97,8 @@ def test_refused_part_is_in_the_table_not_run(sweep: dict[str, Any]) -> None:
 
 def test_same_seeds_same_results_as_a_serial_run(sweep: dict[str, Any]) -> None:
     """Every Ray trial equals run_trial(setup, seed) called here, one after another."""
-    from cell.pivot_cmd import build_setup
-    from cell.pivot_run import run_trial
+    from cell.experiments.pivot_cmd import build_setup
+    from cell.experiments.pivot_run import run_trial
 
     assert sweep["proc"].returncode == 0, sweep["proc"].stderr
     for part in sweep["json"]["parts"][:2]:
@@ -130,7 +130,7 @@ def no_ray(monkeypatch: pytest.MonkeyPatch) -> None:
     def trap(*args: object, **kwargs: object) -> bool:
         raise AssertionError("Ray was started")
 
-    monkeypatch.setattr(cell.sweep_cmd, "connect_ray", trap)
+    monkeypatch.setattr(cell.experiments.sweep_cmd, "connect_ray", trap)
 
 
 @pytest.mark.parametrize(
@@ -201,12 +201,12 @@ def test_a_silent_cluster_is_given_up_after_the_timeout(monkeypatch: pytest.Monk
     import ray
 
     release = threading.Event()
-    monkeypatch.setattr(cell.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", lambda **kw: release.wait(10))
     t0 = time.perf_counter()
     with pytest.raises(UserError, match=r"--address 10\.1\.2\.3:6379: no Ray cluster answered"):
-        cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=0.5)
+        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=0.5)
     assert time.perf_counter() - t0 < 3
     release.set()
 
@@ -217,12 +217,12 @@ def test_failed_handshake_is_one_line_naming_the_address(monkeypatch: pytest.Mon
     def refuse(**kw: object) -> None:
         raise ConnectionError("Failed to connect to Ray cluster at 10.1.2.3:6379\nmore detail")
 
-    monkeypatch.setattr(cell.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", refuse)
     monkeypatch.setenv("RAY_AUTH_MODE", "token")
     with pytest.raises(UserError) as info:
-        cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
+        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
     assert str(info.value) == (
         "--address 10.1.2.3:6379: cannot connect to a Ray cluster there: "
         "Failed to connect to Ray cluster at 10.1.2.3:6379"
@@ -239,17 +239,17 @@ def test_a_refused_handshake_hints_at_token_authentication(
     def refuse(**kw: object) -> None:
         raise ConnectionError("Failed to connect to Ray cluster at 10.1.2.3:6379")
 
-    monkeypatch.setattr(cell.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", refuse)
     monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
     with pytest.raises(UserError, match="set RAY_AUTH_MODE=token"):
-        cell.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
+        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
 
 
 def test_spread_keeps_crowded_points_apart_in_order_around_their_mean() -> None:
     xs = [0.9, 0.5, 0.9, 0.9, 0.2]
-    out = cell.sweep_cmd.spread(xs, 0.02)
+    out = cell.experiments.sweep_cmd.spread(xs, 0.02)
     assert out[1] == 0.5 and out[4] == 0.2  # alone: not moved
     crowd = [out[0], out[2], out[3]]
     assert crowd == sorted(crowd) and sum(crowd) / 3 == pytest.approx(0.9)

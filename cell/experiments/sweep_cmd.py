@@ -6,9 +6,10 @@ Contract (scripts rely on it)::
 
 Why Ray: the same command runs on this machine (a local Ray instance it starts and stops itself,
 nothing to set up) and on an existing Ray cluster (``--address``), so a sweep too large for one
-box needs no other code. Each trial is one task running :func:`cell.pivot_run.run_trial` with
-seed ``S + i`` for trial ``i`` of every part, exactly as ``cell pivot`` seeds them: a seed fixes a
-trial, so the sweep's outcomes equal a serial run's whatever the order the tasks finish in.
+box needs no other code. Each trial is one task running
+:func:`cell.experiments.pivot_run.run_trial` with seed ``S + i`` for trial ``i`` of every part,
+exactly as ``cell pivot`` seeds them: a seed fixes a trial, so the sweep's outcomes equal a
+serial run's whatever the order the tasks finish in.
 
 Parts the planner declines are not run; they appear in the table as refused, with the reason.
 Everything the user gives is checked before Ray starts (unknown part, bad ``--trials``, a cell
@@ -34,13 +35,13 @@ from typing import TYPE_CHECKING, Any
 
 from cell.catalogue import load_catalogue
 from cell.errors import UserError
-from cell.stats import wilson_interval
+from cell.experiments.stats import wilson_interval
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only where trials run
-    from cell.pivot_run import TrialResult, TrialSetup
+    from cell.experiments.pivot_run import TrialResult, TrialSetup
 
 #: Longest wait (s) for an existing cluster to answer ``--address``: a TCP probe first (refused,
 #: unroutable, unknown host), then Ray's own handshake, which otherwise retries for minutes.
@@ -119,14 +120,14 @@ class PartSweep:
 
 
 def _pivot_namespace(args: argparse.Namespace, part: str) -> argparse.Namespace:
-    from cell.pivot_cmd import pivot_args
+    from cell.experiments.pivot_cmd import pivot_args
 
     return pivot_args(part, args.trials, args.catalogue, args.cell, args.nominal)
 
 
 def prepare(args: argparse.Namespace) -> list[PartSweep]:
     """Everything checked, nothing simulated, Ray not started: one :class:`PartSweep` per part."""
-    from cell.pivot_cmd import PivotInputError, build_setup
+    from cell.experiments.pivot_cmd import PivotInputError, build_setup
 
     if args.trials < 1:
         raise UserError(f"--trials: must be >= 1, got {args.trials}")
@@ -159,7 +160,7 @@ def prepare(args: argparse.Namespace) -> list[PartSweep]:
 
 def _trial_task(setup: TrialSetup, seed: int) -> TrialResult:
     """The body of one Ray task; module level so workers import it by name."""
-    from cell.pivot_run import run_trial
+    from cell.experiments.pivot_run import run_trial
 
     return run_trial(setup, seed)
 

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cell.stats import wilson_interval
+from cell.experiments.stats import wilson_interval
 from drivers.devices import Devices
 from drivers.layout import CellLayout
 from drivers.parts import Part

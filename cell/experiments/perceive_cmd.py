@@ -20,6 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from cell.errors import UserError
+from cell.output import write_json
+
 
 def add_parser(sub: Any) -> None:
     p = sub.add_parser(
@@ -47,7 +50,8 @@ def add_parser(sub: Any) -> None:
 
 
 def default_weights() -> Path:
-    return Path(__file__).resolve().parent / "data" / "perception_unet.pt"
+    """The shipped weights, in the cell's data folder (``cell/data``, one level up)."""
+    return Path(__file__).resolve().parents[1] / "data" / "perception_unet.pt"
 
 
 def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
@@ -64,7 +68,6 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
 
 def cmd_perceive(args: argparse.Namespace) -> int:
     from cell.catalogue import load_catalogue
-    from cell.cli import UserError, _write_json
     from drivers.layout import CellLayout
     from sim.camera import SimCamera
     from sim.cell_layout import build_cell
@@ -161,7 +164,7 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         "missed_by_part": missed_names,
         "failure_images": failed,
     }
-    _write_json(args.json, result)
+    write_json(args.json, result)
     print(
         f"pipeline    {args.pipeline}\n"
         f"scenes      {args.scenes} ({total} parts)\n"

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from cell.errors import UserError
+
 #: Views allowed (the calibration needs 3; more than this adds time, not accuracy).
 MIN_VIEWS, MAX_VIEWS = 3, 32
 #: Half-widths of the default random offset of the true mount from the configured one.
@@ -110,7 +112,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     import yaml
     from scipy.spatial.transform import Rotation
 
-    from cell.cli import UserError
     from drivers.layout import CellLayout
     from drivers.pose import Pose
     from sim.camera import SimCamera

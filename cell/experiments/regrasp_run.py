@@ -1,10 +1,10 @@
 """Regrasp trials in the twin, and what ``cell compare`` measures on any trial: tact time and the
 volume swept by the gripper.
 
-:func:`run_regrasp_trial` is :func:`cell.pivot_run.run_trial` with the baseline in place of the
-pivot: the same :class:`TrialSetup`, the same seeded perturbation drawn in the same order (so a
-seed gives both methods the same true pose, frictions and mass), the same finger frictions, the
-same nominal pose given to the skills, the same 0.3 s hold before the same judge
+:func:`run_regrasp_trial` is :func:`cell.experiments.pivot_run.run_trial` with the baseline in
+place of the pivot: the same :class:`TrialSetup`, the same seeded perturbation drawn in the same
+order (so a seed gives both methods the same true pose, frictions and mass), the same finger
+frictions, the same nominal pose given to the skills, the same 0.3 s hold before the same judge
 (:func:`sim.judge.judge`) looks at the simulated state. Physics decides: nothing is welded or
 moved by hand.
 
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cell.pivot_run import (
+from cell.experiments.pivot_run import (
     TrialResult,
     TrialSetup,
     _run_skill,
@@ -235,8 +235,8 @@ def run_regrasp_trial(
 ) -> RegraspResult:
     """One perturbed regrasp trial (Regrasp, then Align), judged from the simulated state.
 
-    The perturbation is drawn exactly as :func:`cell.pivot_run.run_trial` draws it, in the same
-    order from ``numpy.random.default_rng(seed)``; the skills get the nominal pose (the
+    The perturbation is drawn exactly as :func:`cell.experiments.pivot_run.run_trial` draws it, in
+    the same order from ``numpy.random.default_rng(seed)``; the skills get the nominal pose (the
     comparison is of manipulation, not perception: ``setup.perceive`` is ignored).
     """
     tw = open_trial_world(setup, seed)

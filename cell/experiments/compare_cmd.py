@@ -7,7 +7,7 @@
 Trial ``i`` uses seed ``S + i`` for both methods, so both meet the same perturbed part (true pose,
 frictions, mass). The pivot runs as ``cell pivot --nominal`` runs it (:func:`run_trial`: the
 skills get the nominal pose, not the camera's -- the comparison is of manipulation); the
-baseline is :func:`cell.regrasp_run.run_regrasp_trial`. Both are judged by
+baseline is :func:`cell.experiments.regrasp_run.run_regrasp_trial`. Both are judged by
 :func:`sim.judge.judge` after the lift and measured by the same :class:`GripperProbe`: tact time
 (first motion to the end of the lift of the hole grasp, simulated seconds) and the volume swept
 by the gripper's collision geometry (5 mm voxels, cm^3). Means and medians are over successful
@@ -23,6 +23,9 @@ import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from cell.errors import UserError
+from cell.output import write_json
 
 GOAL_RATIO = 0.70  #: pivot tact / regrasp tact the issue asks for (at least 30 % faster)
 
@@ -58,7 +61,7 @@ def _stats(values: list[float]) -> dict[str, float | None]:
 
 def summarize_method(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Success k/N with its Wilson interval; tact time and swept volume over the successes."""
-    from cell.stats import wilson_interval
+    from cell.experiments.stats import wilson_interval
 
     ok = [r for r in rows if r["success"]]
     k, n = len(ok), len(rows)
@@ -80,8 +83,8 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 
 def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, Any]:
     """Both methods on every seed; the summary dict ``cell compare --json`` writes."""
-    from cell.pivot_run import run_trial
-    from cell.regrasp_run import GripperProbe, run_regrasp_trial
+    from cell.experiments.pivot_run import run_trial
+    from cell.experiments.regrasp_run import GripperProbe, run_regrasp_trial
 
     rows: dict[str, list[dict[str, Any]]] = {"pivot": [], "regrasp": []}
     wall0 = time.perf_counter()
@@ -175,8 +178,7 @@ def format_table(summary: dict[str, Any]) -> str:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from cell.cli import UserError, _write_json
-    from cell.pivot_cmd import PivotInputError, build_setup, pivot_args
+    from cell.experiments.pivot_cmd import PivotInputError, build_setup, pivot_args
     from sim.robot_model import FINGER_TRAVEL
     from skills.pivot import PivotParams
 
@@ -195,7 +197,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     seeds = [args.seed + i for i in range(args.trials)]
     summary = compare(setup, seeds)
     if args.json is not None:
-        _write_json(args.json, summary)
+        write_json(args.json, summary)
     print(format_table(summary))
     print(f"wall {summary['wall_time_s']:.0f} s" + (f"; wrote {args.json}" if args.json else ""))
     return 0

@@ -27,12 +27,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cell.catalogue import load_catalogue
+from cell.errors import UserError
+from cell.output import write_json
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
-    from cell.pivot_run import TrialResult, TrialSetup
+    from cell.experiments.pivot_run import TrialResult, TrialSetup
 
 
 class PivotInputError(ValueError):
@@ -91,7 +93,7 @@ def _progress(done: int, total: int, ok: int, wall: float) -> None:
 
 
 def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
-    from cell.pivot_run import run_trial
+    from cell.experiments.pivot_run import run_trial
 
     setup, seed = args
     return run_trial(setup, seed)
@@ -110,7 +112,7 @@ def pivot_args(
 
 def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     """Everything checked, nothing simulated: the trial setup, the plan, whether forced."""
-    from cell.pivot_run import TrialSetup
+    from cell.experiments.pivot_run import TrialSetup
     from drivers.layout import CellLayout
 
     if args.trials < 1:
@@ -174,8 +176,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
 
 
 def cmd_pivot(args: argparse.Namespace) -> int:
-    from cell.cli import UserError, _write_json
-    from cell.pivot_run import summarize
+    from cell.experiments.pivot_run import summarize
 
     try:
         setup, plan, forced = build_setup(args)
@@ -226,7 +227,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
             "recorded": None if recorded is None else str(recorded),
         }
     )
-    _write_json(args.json, summary)
+    write_json(args.json, summary)
     print(_format_summary(summary, results, wall))
     print(
         f"wrote {args.json}"
@@ -236,7 +237,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
 
 
 def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
-    from cell.pivot_run import run_trial
+    from cell.experiments.pivot_run import run_trial
     from sim.recorder import Recorder
 
     rec: dict[str, Recorder] = {}
@@ -259,7 +260,7 @@ def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
     if "r" in rec:
         rec["r"].save_gif(path, fps=12)
     if traced.get("samples"):
-        from cell.figures import plot_contact_trace
+        from cell.experiments.figures import plot_contact_trace
 
         verdict = "success" if result.success else f"failed: {result.failure}"
         plot_contact_trace(
