@@ -9,8 +9,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from drivers.devices import Devices
 from drivers.pose import Pose
-from skills.motion import Devices, Guard, Sequence
+from skills.motion import Guard, Sequence
 from skills.params import si
 
 
