@@ -3,6 +3,11 @@
 These wrap leaves instead of living inside them, so an integrator sees and changes them in the
 tree's YAML. The guard and the timeout check *before* the child ticks: a wrench over the limit
 stops the arm in the same tick it is read, before the child commands another step.
+
+Every one of them runs on every tick of the cell (125 Hz), so each keeps its per-tick path lean:
+a blackboard key is resolved once (:class:`_BoardKey`), ``tick()`` formats no debug message
+unless py_trees logs at debug level, and the walk for the most specific feedback
+(:func:`_deepest_feedback`) is a plain recursion, not py_trees' nested generators.
 """
 
 from __future__ import annotations
@@ -24,9 +29,88 @@ from trees.context import CellContext
 
 Status = common.Status
 WRENCH_KEY = "/ft/wrench"
+_INFO = py_trees.logging.Level.INFO
 
 
-class _CheckFirst(Decorator):
+class _BoardKey:
+    """One blackboard key of one client, resolved once.
+
+    Why: a client's ``get()``/``set()`` splits the name, checks the client's access sets and
+    looks up the remapping on every call, a few microseconds each, and the sampler writes and
+    every running guard reads the wrench on every tick. The key is registered with the client as
+    before (access, remapping, the blackboard's metadata); while py_trees' activity stream is on,
+    every read and write still goes through the client so that the stream records it.
+    """
+
+    __slots__ = ("client", "key", "_stored_as")
+
+    def __init__(self, client: py_trees.blackboard.Client, key: str, access: common.Access) -> None:
+        client.register_key(key=key, access=access)
+        self.client, self.key = client, key
+        name = py_trees.blackboard.Blackboard.absolute_name(client.namespace, key)
+        self._stored_as: str = client.remappings[name]
+
+    def get(self) -> Any:
+        """The value; ``KeyError`` when it was never set (as the client)."""
+        board = py_trees.blackboard.Blackboard
+        if board.activity_stream is None:
+            return board.storage[self._stored_as]
+        return self.client.get(self.key)
+
+    def exists(self) -> bool:
+        board = py_trees.blackboard.Blackboard
+        if board.activity_stream is None:
+            return self._stored_as in board.storage
+        return bool(self.client.exists(self.key))
+
+    def set(self, value: Any) -> None:
+        board = py_trees.blackboard.Blackboard
+        if board.activity_stream is None:
+            board.storage[self._stored_as] = value
+        else:
+            self.client.set(self.key, value)
+
+
+class _LeanDecorator(Decorator):
+    """py_trees' :class:`Decorator` with the same ``tick()`` steps, leaner.
+
+    py_trees formats a debug message on every tick whether or not it is logged, and checks the
+    new status against ``list(Status)``, which iterates the enum: together about as much as the
+    rest of a pass-through's tick. Here the message is formatted only at debug level and the
+    check is a type test (the same test: ``Status`` members are its only instances)."""
+
+    def paused(self) -> bool:
+        """True to skip the child this tick and stay RUNNING (only asked while RUNNING)."""
+        return False
+
+    def tick(self) -> Iterator[Behaviour]:
+        running = self.status is Status.RUNNING
+        if running and self.paused():
+            yield self
+            return
+        if py_trees.logging.level < _INFO:
+            self.logger.debug(f"{self.__class__.__name__}.tick()")
+        if not running:
+            self.initialise()
+        yield from self.decorated.tick()
+        new_status = _checked(self, self.update())
+        if new_status is not Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        yield self
+
+
+def _checked(node: Behaviour, status: Any) -> Status:
+    """``status`` if it is a :class:`Status`, else INVALID with the error py_trees logs."""
+    if type(status) is Status:
+        return status
+    node.logger.error(
+        f"A behaviour returned an invalid status, setting to INVALID [{status}][{node.name}]"
+    )
+    return Status.INVALID
+
+
+class _CheckFirst(_LeanDecorator):
     """A decorator that may end its child before ticking it (guard, timeout)."""
 
     def check(self) -> str | None:  # pragma: no cover - abstract
@@ -40,7 +124,7 @@ class _CheckFirst(Decorator):
         return None
 
     def tick(self) -> Iterator[Behaviour]:
-        if self.status != Status.RUNNING:
+        if self.status is not Status.RUNNING:
             self.initialise()
         waiting = self.hold()
         if waiting is not None:
@@ -57,14 +141,15 @@ class _CheckFirst(Decorator):
             return
         yield from self.decorated.tick()
         new_status = self.update()
-        if new_status != Status.RUNNING:
+        if new_status is not Status.RUNNING:
             self.stop(new_status)
         self.status = new_status
         yield self
 
     def update(self) -> Status:
-        self.feedback_message = self.decorated.feedback_message
-        return self.decorated.status
+        child = self.decorated
+        self.feedback_message = child.feedback_message
+        return child.status
 
 
 class FTGuard(_CheckFirst):
@@ -82,14 +167,15 @@ class FTGuard(_CheckFirst):
         self._over_since: float | None = None
         self.trip_code = Failure.FORCE_TORQUE  #: why the last trip (set by check())
         self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key=WRENCH_KEY, access=common.Access.READ)
+        self._wrench = _BoardKey(self.bb, WRENCH_KEY, common.Access.READ)
 
     def _over_limits(self, raw: Any) -> tuple[float, float] | None:
         """(|F|, |T|) when the wrench is over either limit, else None. Squared magnitudes
-        against squared limits: this runs every tick on every active guard."""
-        w = np.asarray(raw, float)
-        f2 = float(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-        t2 = float(w[3] * w[3] + w[4] * w[4] + w[5] * w[5])
+        against squared limits, on plain floats (the same double arithmetic as numpy's scalars,
+        without their per-operation cost): this runs every tick on every active guard."""
+        w = np.asarray(raw, float).tolist()
+        f2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        t2 = w[3] * w[3] + w[4] * w[4] + w[5] * w[5]
         if f2 > self.max_force * self.max_force or t2 > self.max_torque * self.max_torque:
             return f2**0.5, t2**0.5
         return None
@@ -104,11 +190,11 @@ class FTGuard(_CheckFirst):
         :attr:`SETTLE_S`, while the wrench reads over the limits: a recovery right after a spike
         (put back, a retry) would otherwise be failed by the same spike. One already running
         is failed by :meth:`check` instead."""
-        if self.decorated.status == Status.RUNNING:
+        if self.decorated.status is Status.RUNNING:
             self._over_since = None
             return None
         try:
-            raw = self.bb.get(WRENCH_KEY)
+            raw = self._wrench.get()
         except KeyError:
             return None
         if raw is None:
@@ -127,7 +213,7 @@ class FTGuard(_CheckFirst):
 
     def check(self) -> str | None:
         try:
-            raw = self.bb.get(WRENCH_KEY)
+            raw = self._wrench.get()
         except KeyError:
             return None
         if raw is None:  # the sampler lost the stream: nothing moves unwatched
@@ -166,7 +252,7 @@ class Timeout(_CheckFirst):
         self._t0 = self.clock.now()
 
     def check(self) -> str | None:
-        elapsed = self.clock.now() - self._t0
+        elapsed = self.ctx.devices.clock.now() - self._t0  # self.clock, without the property
         if elapsed > self.seconds:
             return f"{self.decorated.name}: timeout after {elapsed:.1f} s (limit {self.seconds:g})"
         return None
@@ -176,7 +262,7 @@ class Timeout(_CheckFirst):
         self.ctx.events.abort(reason, Failure.TIMEOUT)
 
 
-class Retry(Decorator):
+class Retry(_LeanDecorator):
     """Run the child again after a failure, up to ``attempts`` runs in all.
 
     A retry starts the child afresh on the next tick (its ``initialise()`` runs again), so a
@@ -198,19 +284,20 @@ class Retry(Decorator):
         self.first_reason = ""
         self._resume_at: float | None = None
         self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
+        self._bin_empty = _BoardKey(self.bb, "/cell/bin_empty", common.Access.READ)
 
     def initialise(self) -> None:
         self.failures = 0
         self._resume_at = None
 
-    def tick(self) -> Iterator[Behaviour]:
-        if self.status == Status.RUNNING and self._resume_at is not None:
-            if self.ctx.devices.clock.now() < self._resume_at:
-                yield self  # pausing: the child is not ticked, nothing moves
-                return
-            self._resume_at = None
-        yield from super().tick()
+    def paused(self) -> bool:
+        """Pausing before the next attempt: the child is not ticked, nothing moves."""
+        if self._resume_at is None:
+            return False
+        if self.ctx.devices.clock.now() < self._resume_at:
+            return True
+        self._resume_at = None
+        return False
 
     def update(self) -> Status:
         status = self.decorated.status
@@ -219,7 +306,7 @@ class Retry(Decorator):
             self.last_reason = _deepest_feedback(self.decorated)
             if self.failures == 1:
                 self.first_reason = self.last_reason
-            bin_empty = self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty")
+            bin_empty = self._bin_empty.exists() and self._bin_empty.get()
             if self.failures >= self.attempts or self.ctx.events.stopped or bin_empty:
                 self.feedback_message = (
                     f"gave up after {self.failures} of {self.attempts} attempts: {self.last_reason}"
@@ -236,7 +323,7 @@ class Retry(Decorator):
         return status
 
 
-class StopOnFailure(Decorator):
+class StopOnFailure(_LeanDecorator):
     """A failure here needs a person (a part stuck in the slot, a part dropped outside the bin):
     tell the cell to stop, with the reason."""
 
@@ -247,7 +334,7 @@ class StopOnFailure(Decorator):
     def update(self) -> Status:
         status = self.decorated.status
         self.feedback_message = self.decorated.feedback_message
-        if status == Status.FAILURE:
+        if status is Status.FAILURE:
             why = f"{self.reason}: {_deepest_feedback(self.decorated)}"
             # A retry's last attempt may fail on its precondition ("the hand is empty"): the
             # person needs what went wrong first.
@@ -266,7 +353,7 @@ class StopOnFailure(Decorator):
         return status
 
 
-class Cycles(Decorator):
+class Cycles(_LeanDecorator):
     """Run the workflow's cycle again and again: SUCCESS when the count is reached or the bin is
     empty; FAILURE when the cell was told to stop or too many cycles in a row failed."""
 
@@ -276,18 +363,18 @@ class Cycles(Decorator):
         self.done = 0
         self.failed_in_a_row = 0
         self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key="/cell/cycles_done", access=common.Access.WRITE)
-        self.bb.register_key(key="/cell/bin_empty", access=common.Access.READ)
-        self.bb.set("/cell/cycles_done", 0)
+        self._cycles_done = _BoardKey(self.bb, "/cell/cycles_done", common.Access.WRITE)
+        self._bin_empty = _BoardKey(self.bb, "/cell/bin_empty", common.Access.READ)
+        self._cycles_done.set(0)
 
     def initialise(self) -> None:
         self.done = self.ctx.limits.cycles_done  # a resumed cell goes on counting
-        self.bb.set("/cell/cycles_done", self.done)
+        self._cycles_done.set(self.done)
 
     def update(self) -> Status:
         status = self.decorated.status
         limits = self.ctx.limits
-        if status == Status.RUNNING:
+        if status is Status.RUNNING:
             self.feedback_message = (
                 f"cycle {self.done + 1} of {limits.cycles}: {_deepest_feedback(self.decorated)}"
             )
@@ -295,7 +382,7 @@ class Cycles(Decorator):
         if status == Status.SUCCESS:
             self.done += 1
             self.failed_in_a_row = 0
-            self.bb.set("/cell/cycles_done", self.done)
+            self._cycles_done.set(self.done)
             self.ctx.events.event(EventKind.CYCLE_DONE, cycle=self.done)
         else:
             self.failed_in_a_row += 1
@@ -304,7 +391,7 @@ class Cycles(Decorator):
             if self.ctx.events.stopped:
                 self.feedback_message = f"cell stopped: {self.ctx.events.stopped}"
                 return Status.FAILURE
-        if self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty"):
+        if self._bin_empty.exists() and self._bin_empty.get():
             self.feedback_message = f"bin empty after {self.done} cycles"
             return Status.SUCCESS
         if self.done >= limits.cycles:
@@ -331,9 +418,22 @@ class FTSampler(Behaviour):
         super().__init__(name=name)
         self.ctx = ctx
         self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key=WRENCH_KEY, access=common.Access.WRITE)
+        self._wrench = _BoardKey(self.bb, WRENCH_KEY, common.Access.WRITE)
         self.feedback_message = f"sampling the wrench into {WRENCH_KEY}"
         self._lost_since: float | None = None
+
+    def tick(self) -> Iterator[Behaviour]:
+        """:meth:`Behaviour.tick`'s steps without its per-tick costs (see :class:`_LeanDecorator`):
+        the sampler runs on every tick of the cell."""
+        if py_trees.logging.level < _INFO:
+            self.logger.debug(f"{self.__class__.__name__}.tick()")
+        if self.status is not Status.RUNNING:
+            self.initialise()
+        new_status = _checked(self, self.update())
+        if new_status is not Status.RUNNING:
+            self.stop(new_status)
+        self.status = new_status
+        yield self
 
     def update(self) -> Status:
         try:
@@ -345,7 +445,7 @@ class FTSampler(Behaviour):
                 self._lost_since = now
                 self.ctx.devices.arm.stop()
                 self.ctx.events.abort(f"{why}; arm stopped", Failure.FT_LINK_LOST)
-            self.bb.set(WRENCH_KEY, None)
+            self._wrench.set(None)
             lost = now - self._lost_since
             if lost >= self.ctx.limits.ft_link_grace:
                 if self.ctx.limits.ft_link_grace > 0:
@@ -358,18 +458,34 @@ class FTSampler(Behaviour):
         if self._lost_since is not None:
             self._lost_since = None
             self.feedback_message = f"sampling the wrench into {WRENCH_KEY} (link back)"
-        self.bb.set(WRENCH_KEY, wrench)
+        self._wrench.set(wrench)
         return Status.RUNNING
 
 
 def _deepest_feedback(node: Behaviour) -> str:
     """The most specific reason under ``node``: for a failure, the first node that failed in
     depth-first order (the leaf, or the guard that stopped it); while running, the tip."""
-    wanted = Status.FAILURE if node.status == Status.FAILURE else Status.RUNNING
-    for child in node.iterate():
-        if child.status == wanted and child.feedback_message:
+    wanted = Status.FAILURE if node.status is Status.FAILURE else Status.RUNNING
+    return _first_feedback(node, wanted) or node.feedback_message
+
+
+def _first_feedback(node: Behaviour, wanted: Status) -> str | None:
+    """The feedback of the first node in ``node.iterate()`` order (children first, depth-first,
+    then the node) whose status is ``wanted`` and whose feedback is not empty, or None.
+
+    The same nodes in the same order as ``iterate()``, as a plain recursion: ``iterate()``
+    resumes one generator per level for every node it yields, and :class:`Cycles` asks this on
+    every tick while the cycle runs."""
+    for child in node.children:
+        if child.children:
+            found = _first_feedback(child, wanted)
+            if found is not None:
+                return found
+        elif child.status is wanted and child.feedback_message:  # a leaf, without a call
             return child.feedback_message
-    return node.feedback_message
+    if node.status is wanted and node.feedback_message:
+        return node.feedback_message
+    return None
 
 
 __all__ = [
