@@ -81,6 +81,34 @@ def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
 
 
 @dataclass(frozen=True)
+class Frictions:
+    """Coulomb friction coefficients at S, H and G (dimensionless, >= 0): the planner's model
+    and the twin's contacts use the same set.
+
+    Defaults are the set the paper infers from its experiments (Sec. IV-B).
+    """
+
+    mu_s: float = 0.2
+    mu_h: float = 0.4
+    mu_g: float = 0.4
+
+    def __post_init__(self) -> None:
+        for name in ("mu_s", "mu_h", "mu_g"):
+            value = _finite(name, getattr(self, name))
+            if value < 0.0:
+                raise ValueError(f"{name} must be >= 0 (a friction coefficient), got {value:g}")
+
+    @property
+    def gammas(self) -> tuple[float, float, float]:
+        """Friction-cone half angles ``gamma = atan(mu)`` at S, H, G (rad)."""
+        return (math.atan(self.mu_s), math.atan(self.mu_h), math.atan(self.mu_g))
+
+    @property
+    def frictionless(self) -> bool:
+        return self.mu_s == 0.0 and self.mu_h == 0.0 and self.mu_g == 0.0
+
+
+@dataclass(frozen=True)
 class Section:
     """The constant geometry of Table 1 for one part and finger: ``a``, ``b``, ``delta`` (m)."""
 
@@ -191,6 +219,7 @@ class Gripper:
 
 __all__ = [
     "HOLE_SHAPES",
+    "Frictions",
     "Gripper",
     "Part",
     "Section",

@@ -21,14 +21,13 @@ from drivers.devices import Devices
 from drivers.events import EventKind, SlotState
 from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
-from drivers.parts import Part
+from drivers.parts import Frictions, Part
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.judge import judge
 from sim.part_body import PartBody, lying_pose, spawn_part
 from sim.robot import SimRobot
 from sim.world import PhysicsSettings, SimWorld
-from skills.mechanics.contact import Frictions
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,8 @@ import cv2
 import numpy as np
 
 from drivers.pose import Pose, rot_z
+from drivers.tag_board import TagBoard, render_board
 from sim.world import SimWorld
-from skills.perception.calibration import TagBoard, render_board
 
 #: Plate thickness (m): a printed board glued on a stiff sheet.
 BOARD_THICKNESS = 0.003

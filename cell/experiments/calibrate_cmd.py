@@ -114,16 +114,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     from drivers.layout import CellLayout
     from drivers.pose import Pose
+    from drivers.tag_board import TagBoard
     from sim.camera import SimCamera
     from sim.cell_layout import build_cell
     from sim.robot import SimRobot
     from sim.tag_board import place_tag_board
     from sim.world import SimWorld
-    from skills.perception.calibration import (
-        HandEyeRoutine,
-        TagBoard,
-        calibration_views,
-    )
+    from skills.perception.calibration import HandEyeRoutine, calibration_views
     from skills.status import Status
 
     if not MIN_VIEWS <= args.views <= MAX_VIEWS:

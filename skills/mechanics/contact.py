@@ -34,12 +34,11 @@ give ``delta`` are part geometry and live with :class:`drivers.parts.Part`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from drivers.parts import Section
+from drivers.parts import Frictions, Section
 
 #: Column order of the 3x6 wrench matrix, as in Table 2.
 WRENCH_NAMES: tuple[str, ...] = ("S1", "S2", "H1", "H2", "G1", "G2")
@@ -50,33 +49,6 @@ def _check_finite(name: str, value: float) -> float:
     if not math.isfinite(value):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     return value
-
-
-@dataclass(frozen=True)
-class Frictions:
-    """Coulomb friction coefficients at S, H and G (dimensionless, >= 0).
-
-    Defaults are the set the paper infers from its experiments (Sec. IV-B).
-    """
-
-    mu_s: float = 0.2
-    mu_h: float = 0.4
-    mu_g: float = 0.4
-
-    def __post_init__(self) -> None:
-        for name in ("mu_s", "mu_h", "mu_g"):
-            value = _check_finite(name, getattr(self, name))
-            if value < 0.0:
-                raise ValueError(f"{name} must be >= 0 (a friction coefficient), got {value:g}")
-
-    @property
-    def gammas(self) -> tuple[float, float, float]:
-        """Friction-cone half angles ``gamma = atan(mu)`` at S, H, G (rad)."""
-        return (math.atan(self.mu_s), math.atan(self.mu_h), math.atan(self.mu_g))
-
-    @property
-    def frictionless(self) -> bool:
-        return self.mu_s == 0.0 and self.mu_h == 0.0 and self.mu_g == 0.0
 
 
 def check_la(l_a: ArrayLike) -> NDArray[np.float64]:

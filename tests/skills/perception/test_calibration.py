@@ -16,6 +16,7 @@ from cell.cli import main
 from drivers.camera import Intrinsics
 from drivers.layout import CellLayout
 from drivers.pose import Pose
+from drivers.tag_board import TagBoard, render_board
 from sim.camera import SimCamera, default_tool_T_camera
 from sim.cell_layout import build_cell
 from sim.robot import SimRobot
@@ -23,14 +24,12 @@ from sim.tag_board import place_tag_board
 from sim.world import SimWorld
 from skills.perception.calibration import (
     HandEyeRoutine,
-    TagBoard,
     board_pose_from_frame,
     calibrate_hand_eye,
     calibration_views,
     detect_board,
     hand_eye_residuals,
     park_martin,
-    render_board,
 )
 from skills.status import Status
 
