@@ -5,11 +5,12 @@ The cell's tree is built from the shipped configuration exactly as `cell sim` bu
 devices are fakes and every leaf's skill is replaced by one that stays RUNNING at no cost, so
 what is timed is the tree itself: composites, the FT guards and timeouts checking before their
 child, the retry and cycle decorators, the FT sampler writing the blackboard. The plain tree has
-py_trees' own nodes in the same places (PassThrough decorators, Running leaves).
+py_trees' own nodes in the same places (PassThrough decorators; leaves that return what the
+cell's leaf returned on its first tick: Running, or Failure for a condition that failed), so
+both trees tick the same path down to the same tip (checked), the first leaf of the cycle.
 
-    python bench/tick.py [--ticks 20000] [--leaf N]
+    python bench/tick.py [--ticks 20000]
 
-``--leaf`` picks which leaf is active (the tip), default the deepest guarded one (grasp).
 Targets: median <= 200 us and <= 1.5x the plain tree.
 """
 
@@ -45,7 +46,13 @@ class _Idle:
 
 
 def _plain_copy(node: Behaviour) -> Behaviour:
-    """Same shape with py_trees' own nodes."""
+    """Same shape with py_trees' own nodes, taking the same path as ``node`` after its first
+    tick: a leaf that failed (a condition such as "slot holds part") fails, one that succeeded
+    succeeds, any other keeps running.
+
+    Why not Running everywhere: the shipped tree starts its cycle with a selector whose first
+    child is a condition that fails; a Running leaf there stops the plain tree's selector at it,
+    six levels above the cell tree's tip, and the comparison times two different paths."""
     kids = list(node.children)
     if isinstance(node, py_trees.composites.Parallel):
         copies = [_plain_copy(c) for c in kids]
@@ -60,6 +67,10 @@ def _plain_copy(node: Behaviour) -> Behaviour:
         return py_trees.composites.Selector(node.name, True, [_plain_copy(c) for c in kids])
     if isinstance(node, py_trees.decorators.Decorator):
         return py_trees.decorators.PassThrough(node.name, _plain_copy(kids[0]))
+    if node.status == Status.FAILURE:
+        return py_trees.behaviours.Failure(node.name)
+    if node.status == Status.SUCCESS:
+        return py_trees.behaviours.Success(node.name)
     return py_trees.behaviours.Running(node.name)
 
 
@@ -94,19 +105,22 @@ def main() -> None:
             node.update = lambda: Status.RUNNING  # type: ignore[method-assign]
     root = prep.root
     root.setup_with_descendants()
+    root.tick_once()  # the path the cell tree takes, for the plain copy to take too
     plain = _plain_copy(root)
     count = sum(1 for _ in root.iterate())
     assert count == sum(1 for _ in plain.iterate())
 
     for r in (root, plain):  # warm-up
         _time_ticks(r, 500)
+    tip, plain_tip = root.tip(), plain.tip()
+    names = (tip.name if tip else None, plain_tip.name if plain_tip else None)
+    assert tip is not None and names[0] == names[1], f"the trees tick different paths: {names}"
     cell = _time_ticks(root, args.ticks)
     base = _time_ticks(plain, args.ticks)
     log = TickLog(None)
     with_log = _time_ticks(root, args.ticks, lambda i, r: log.record(i, 0.0, r, None))
     m_cell, m_base, m_log = (statistics.median(x) for x in (cell, base, with_log))
-    tip = root.tip()
-    print(f"nodes: {count} (tip: {tip.name if tip else '-'}); {args.ticks} ticks each")
+    print(f"nodes: {count} (tip of both: {names[0]}); {args.ticks} ticks each")
     print(f"plain py_trees tree       median {m_base:7.1f} us   p95 "
           f"{sorted(base)[int(0.95 * len(base))]:7.1f} us")
     print(f"cell tree (faked devices) median {m_cell:7.1f} us   p95 "
