@@ -5,7 +5,7 @@ Run by hand:  python bench/sim_rtf.py [--part bushing] [--trials 5] [--seed 0]
 Runs whole trials as ``cell pivot`` does and splits each one's wall time into: setting the
 world up (URDF, cell, part, settling), stepping the physics with the skills ticking (the pivot
 itself, camera off), and rendering the one wrist-camera frame Align takes. Prints the real-time
-factor (simulated seconds per wall second) of the stepping alone -- the issue's target is >= 20x
+factor (simulated seconds per wall second) of the stepping alone -- the target is >= 20x
 -- and of the whole trial, and the wall time of one pivot. Numbers are for this machine only.
 """
 

@@ -32,6 +32,7 @@ from cell.output import write_json
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
+from skills.pivot import PivotParams
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
     from cell.experiments.pivot_run import TrialResult, TrialSetup
@@ -62,6 +63,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--json", type=Path, required=True, help="where to write the results")
     p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
+    add_config_argument(p)
     p.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (1)")
     p.add_argument(
         "--nominal",
@@ -99,14 +101,55 @@ def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
     return run_trial(setup, seed)
 
 
+def add_config_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="cell configuration YAML whose skills.pivot section and safety limits the skills "
+        "run with (default: the skills' defaults and the safety section's)",
+    )
+
+
+def pivot_overrides(config_path: Path | None) -> dict[str, Any]:
+    """The :class:`PivotParams` fields a configuration changes: its ``skills.pivot`` keys, and
+    its ``safety`` force and torque as the guard of every motion (as a tree node would give)."""
+    from cell.config import CellConfig, load_config, skill_settings
+    from skills.params import apply_config, with_limits
+
+    from trees.yaml_lines import ConfigError
+
+    try:
+        config = load_config(config_path)[0] if config_path is not None else CellConfig()
+    except ConfigError as exc:
+        raise UserError(str(exc)) from None
+    base = PivotParams(l_a=0.5, alpha=0.3)
+    safety = config.safety
+    tuned = with_limits(
+        apply_config(base, skill_settings(config)["pivot"]),
+        safety.ft_abort_force_n,
+        safety.ft_abort_torque_nm,
+    )
+    return {
+        f.name: getattr(tuned, f.name)
+        for f in dataclasses.fields(tuned)
+        if getattr(tuned, f.name) != getattr(base, f.name)
+    }
+
+
 def pivot_args(
-    part: str, trials: int, catalogue: Path | None, cell: Path | None, nominal: bool
+    part: str,
+    trials: int,
+    catalogue: Path | None,
+    cell: Path | None,
+    nominal: bool,
+    config: Path | None = None,
 ) -> argparse.Namespace:
     """The arguments ``cell pivot`` would get for one part, so other commands (sweep, compare)
     reuse its checks and setup unchanged: one source of truth for what a trial is."""
     return argparse.Namespace(
         part=part, trials=trials, jobs=1, mu_ground=None, record=None, catalogue=catalogue,
-        cell=cell, nominal=nominal, force=False, la=None, alpha=None,
+        cell=cell, nominal=nominal, force=False, la=None, alpha=None, config=config,
     )
 
 
@@ -163,7 +206,13 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         plan = dataclasses.replace(plan, l_a=l_a, alpha=alpha, delta_m=section.delta)
     elif args.la is not None or args.alpha is not None:
         raise PivotInputError("--la/--alpha: only with --force on a part the planner declines")
-    setup = TrialSetup(part=part, plan=plan, frictions=frictions, layout=layout)
+    setup = TrialSetup(
+        part=part,
+        plan=plan,
+        frictions=frictions,
+        layout=layout,
+        params=pivot_overrides(getattr(args, "config", None)),
+    )
     if args.mu_ground is not None:
         setup = dataclasses.replace(setup, mu_ground=args.mu_ground)
     if args.nominal:

@@ -153,3 +153,19 @@ def test_cli_bad_skill_value_exits_2_without_traceback(tmp_path, capsys) -> None
     assert main(["tree", "--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert "cell.yaml:4" in err and "insert_speed_m_s" in err and "Traceback" not in err
+
+
+def test_the_experiments_take_the_skills_from_a_configuration(tmp_path, capsys) -> None:
+    """`cell pivot --config` and `cell compare --config` run the skills with a file's
+    skills.pivot section and safety limits; no code edit tunes a skill."""
+    from cell.experiments.pivot_cmd import pivot_overrides
+
+    path = tmp_path / "cell.yaml"
+    path.write_text("skills:\n  pivot: {tilt_speed_m_s: 0.02}\nsafety: {ft_abort_force_n: 70}\n")
+    over = pivot_overrides(path)
+    assert over["tilt_speed"] == 0.02 and over["guard"].max_force == 70.0
+    assert pivot_overrides(None) == {}  # the defaults: nothing changed
+    path.write_text("skills:\n  pivot: {tilt_speed_m_s: 2}\n")
+    code = main(["pivot", "--part", "bushing", "--config", str(path), "--json", "x.json"])
+    err = capsys.readouterr().err
+    assert code == 2 and "skills.pivot.tilt_speed_m_s" in err and "Traceback" not in err
