@@ -116,7 +116,6 @@ def pivot_overrides(config_path: Path | None) -> dict[str, Any]:
     its ``safety`` force and torque as the guard of every motion (as a tree node would give)."""
     from cell.config import CellConfig, load_config, skill_settings
     from skills.params import apply_config, with_limits
-
     from trees.yaml_lines import ConfigError
 
     try:
