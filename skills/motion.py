@@ -169,6 +169,28 @@ def arm_motion(
     )
 
 
+class Settled:
+    """Completion test of a gripper motion: the fingers have been still for ``seconds``.
+
+    A class, not a closure over a dict: when the fingers stopped is this motion's own state,
+    cleared by :meth:`reset` each time the motion (re)starts, so a second start waits again."""
+
+    def __init__(self, gripper: Gripper, clock: Clock, seconds: float) -> None:
+        self.gripper, self.clock, self.seconds = gripper, clock, seconds
+        self.since: float | None = None  #: s (clock time) the fingers were first seen still
+
+    def reset(self) -> None:
+        self.since = None
+
+    def __call__(self) -> bool:
+        if self.gripper.moving():
+            self.since = None
+            return False
+        if self.since is None:
+            self.since = self.clock.now()
+        return self.clock.now() - self.since >= self.seconds
+
+
 def gripper_motion(
     name: str,
     gripper: Gripper,
@@ -180,25 +202,17 @@ def gripper_motion(
     settle: float = 0.1,
 ) -> GuardedMotion:
     """A guarded gripper motion that finishes once the fingers stop moving (after ``settle`` s)."""
-    state = {"t": None}
-
-    def finished() -> bool:
-        if gripper.moving():
-            state["t"] = None
-            return False
-        if state["t"] is None:
-            state["t"] = clock.now()
-        return clock.now() - state["t"] >= settle
+    settled = Settled(gripper, clock, settle)
 
     def failed() -> Failed | None:
         fault = gripper.fault()
         return (Failure.GRIPPER_FAULT, f"gripper fault: {fault}") if fault else None
 
     def command_and_reset() -> None:
-        state["t"] = None
+        settled.reset()
         command()
 
-    return GuardedMotion(name, command_and_reset, finished, arm, ft, clock, guard, failed)
+    return GuardedMotion(name, command_and_reset, settled, arm, ft, clock, guard, failed)
 
 
 class Sequence:
@@ -224,20 +238,35 @@ class Sequence:
         if self.index < len(self.steps):
             self.steps[self.index].halt()
 
+    @property
+    def current(self) -> str:
+        """Name of the step in progress (``done`` once every step succeeded)."""
+        return self.steps[self.index].name if self.index < len(self.steps) else "done"
+
+    def passed(self, name: str) -> bool:
+        """Whether the step named ``name`` has succeeded (the sequence went past it).
+
+        Skills ask by name, not by position: a step inserted before it (a test's, a variant's)
+        moves it without changing what is asked."""
+        return any(step.name == name for step in self.steps[: self.index])
+
+
+class _Timer:
+    """A hold's clock: started with the motion, done ``seconds`` after that."""
+
+    def __init__(self, clock: Clock, seconds: float) -> None:
+        self.clock, self.seconds = clock, seconds
+        self.t0: float | None = None  #: s (clock time) the hold began
+
+    def start(self) -> None:
+        self.t0 = self.clock.now()
+
+    def done(self) -> bool:
+        assert self.t0 is not None, "a hold is done only once started"
+        return self.clock.now() - self.t0 >= self.seconds
+
 
 def wait(name: str, dev: Devices, guard: Guard, seconds: float) -> GuardedMotion:
     """Hold still for ``seconds`` under the guard (let a part settle)."""
-    state: dict[str, float] = {}
-
-    def start() -> None:
-        state["t0"] = dev.clock.now()
-
-    return GuardedMotion(
-        name,
-        start,
-        lambda: dev.clock.now() - state["t0"] >= seconds,
-        dev.arm,
-        dev.ft,
-        dev.clock,
-        guard,
-    )
+    timer = _Timer(dev.clock, seconds)
+    return GuardedMotion(name, timer.start, timer.done, dev.arm, dev.ft, dev.clock, guard)
