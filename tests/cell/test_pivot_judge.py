@@ -46,7 +46,6 @@ class LetsGoAlign(Align):
             wait("free", dev, g, 1.5),
             dev.move("back", g, rise(-0.03)),
         ]
-        self._pinch_step += 4
 
 
 class LooksAlign(Align):
@@ -60,7 +59,6 @@ class LooksAlign(Align):
             "look", dev.camera.capture, lambda: True, dev.arm, dev.ft, dev.clock, self.params.guard
         )
         self.sequence.steps.insert(0, look)
-        self._pinch_step += 1
 
 
 class OuterPinch:
