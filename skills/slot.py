@@ -176,6 +176,31 @@ def world_force(dev: Devices) -> NDArray[np.float64]:
     return dev.arm.tool_pose().rotation @ np.asarray(dev.ft.wrench()[:3], float)
 
 
+class WrenchReference:
+    """The force on the tool read once, holding still, before a part is let go or taken (the
+    part hanging, or the empty gripper): the weight check afterwards compares with it, so the
+    sensor's offset and the tool's own weight cancel out."""
+
+    def __init__(self, dev: Devices) -> None:
+        self.dev = dev
+        self.force: NDArray[np.float64] | None = None  #: N, base frame; None until read
+
+    def read(self) -> str | None:
+        """Take the reference now (a :func:`check`'s test: it never fails)."""
+        self.force = world_force(self.dev)
+        return None
+
+    def lost(self) -> float:
+        """N of downward pull the tool lost since the reference (a part let go: its weight)."""
+        assert self.force is not None
+        return float(world_force(self.dev)[2] - self.force[2])
+
+    def gained(self) -> float:
+        """N of downward pull the tool gained since the reference (a part taken: its weight)."""
+        assert self.force is not None
+        return float(self.force[2] - world_force(self.dev)[2])
+
+
 class ContactMove:
     """A guarded straight move that ends at its target or as soon as the force *against* the
     motion rises ``threshold`` (N) above its value when the move started; ``contact`` says which.
@@ -253,12 +278,53 @@ class SequenceSkill:
     @property
     def step(self) -> str:
         """Name of the step in progress (or ``done``)."""
-        s = self.sequence
-        return s.steps[s.index].name if s.index < len(s.steps) else "done"
+        return self.sequence.current
+
+
+class _SlotSkill(SequenceSkill):
+    """The start FeedSlot and PickFromSlot share: their parameters (with overrides), where the
+    slot's floor and the machine's top are, and the wrench reference of the weight check."""
+
+    def __init__(
+        self,
+        slot_center: ArrayLike,
+        part: Part,
+        dev: Devices,
+        params: SlotParams | None,
+        overrides: dict[str, Any],
+    ) -> None:
+        p = replace(params or SlotParams(), **overrides)
+        self.part, self.dev, self.params = part, dev, p
+        slot = np.asarray(slot_center, float)
+        self.slot_xy, self.slot_floor_z = slot[:2].copy(), float(slot[2])
+        self.machine_top_z = self.slot_floor_z + p.slot_depth
+        self.reference = WrenchReference(dev)
+
+    def _hold_still_and_read(self, what: str) -> list[GuardedMotion]:
+        """Hold still ``settle`` s, then read the reference wrench with ``what`` on the tool."""
+        dev, p = self.dev, self.params
+        return [
+            wait("hold still", dev, p.guard, p.settle),
+            check(f"read the {what}", dev, p.guard, self.reference.read),
+        ]
+
+    def _settle_and_check(
+        self, name: str, test: Callable[[], str | None], failure: Failure
+    ) -> list[GuardedMotion]:
+        """Let the part settle ``settle`` s, then check ``test`` (the weight check)."""
+        dev, p = self.dev, self.params
+        return [wait("settle", dev, p.guard, p.settle), check(name, dev, p.guard, test, failure)]
+
+    def _weight_checked(self) -> bool:
+        return self.params.weight_check > 0 and self.reference.force is not None
+
+    def _weight(self) -> float:
+        """N, the part's weight."""
+        return self.part.mass * GRAVITY
 
 
 # ------------------------------------------------------------------------------ FeedSlot
-class FeedSlot(SequenceSkill):
+class FeedSlot(_SlotSkill):
     """Put the part held in the hole grasp into the slot, let go, drag the gripper out.
 
     Before: the part hangs in the hole grasp (Align's, or :class:`PickFromSlot`'s), fingers down,
@@ -266,6 +332,9 @@ class FeedSlot(SequenceSkill):
     are open by ``release`` more than they held it, the fingertips are ``clear_height`` above the
     machine's top, over the slot. ``on_floor`` says whether the floor was felt (else the part was
     let go ``drop`` metres above it).
+
+    Steps: over the slot, down to it, read the hanging part; into the slot until the floor
+    pushes back, check where it landed; let go, drag the gripper out, check the weight is gone.
     """
 
     def __init__(
@@ -278,124 +347,152 @@ class FeedSlot(SequenceSkill):
     ) -> None:
         """``slot_center``: (x, y, z) of the centre of the pocket's floor (m, base frame);
         ``overrides``: fields of :class:`SlotParams` to change (``grip_depth=0.02``)."""
-        p = replace(params or SlotParams(), **overrides)
-        self.part, self.dev, self.params = part, dev, p
-        slot = np.asarray(slot_center, float)
-        self.slot_xy, self.slot_floor_z = slot[:2].copy(), float(slot[2])
-        self.machine_top_z = self.slot_floor_z + p.slot_depth
-        offset = grasp_offset(part, dev.gripper.finger_width)
-        arm, g = dev.arm, p.guard
+        super().__init__(slot_center, part, dev, params, overrides)
+        p = self.params
+        self._offset = grasp_offset(part, dev.gripper.finger_width)
         # Lowest the part's bottom may go: the outer fingertip stays above the machine.
         lowest = self.machine_top_z + p.finger_clearance - part.length + p.grip_depth
         self.drop = max(0.0, lowest - self.slot_floor_z)  #: m above the floor it is let go
-        bottom_goal = max(self.slot_floor_z - p.overshoot, lowest)
-        st: dict[str, object] = {}
+        self._bottom_goal = max(self.slot_floor_z - p.overshoot, lowest)
+        self._above = self.machine_top_z + p.clear_height  #: m, the part's bottom over the slot
+        self._x: NDArray[np.float64] | None = None  #: tool x over the slot, fixed at the start
         self.on_floor = False
         self.reason: str | None = None
-
-        def x_dir() -> NDArray[np.float64]:
-            if "x" not in st:
-                st["x"] = horizontal(
-                    p.finger_dir + (0.0,) if p.finger_dir else arm.tool_pose().rotation[:, 0]
-                )
-            return st["x"]  # type: ignore[return-value]
-
-        def pose(bottom_z: float) -> Pose:
-            return hold_pose(self.slot_xy, bottom_z, part, x_dir(), offset, p.grip_depth,
-                             p.tip_offset)
-
-        above = self.machine_top_z + p.clear_height
-
-        def over_slot() -> None:
-            target = pose(max(above, p.travel_z))
-            arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed,
-                          p.acceleration)
-
-        def down_to_slot() -> None:
-            arm.move_to(pose(above), p.approach_speed, p.acceleration)
-
-        def reference() -> str | None:
-            st["held"] = world_force(dev)
-            return None
-
         self.insert = ContactMove(
-            "into the slot", dev, p.insert_guard, lambda: pose(bottom_goal), p.insert_speed,
-            p.acceleration, p.contact_force,
+            "into the slot", dev, p.insert_guard, lambda: self._pose(self._bottom_goal),
+            p.insert_speed, p.acceleration, p.contact_force,
         )
-
-        def landed() -> str | None:
-            bottom = arm.tool_pose().position[2] - p.tip_offset + p.grip_depth - part.length
-            above_floor = bottom - self.slot_floor_z
-            if self.insert.contact:
-                if above_floor > p.depth_tolerance:
-                    return (
-                        f"the part met resistance {1e3 * above_floor:.1f} mm above the slot "
-                        f"floor ({self.insert.resisting:.1f} N): it is on the machine or the "
-                        "pocket's edge, not in the slot"
-                    )
-                self.on_floor = True
-                return None
-            if above_floor > p.max_drop:
-                return (
-                    f"the grasp is too deep to reach the slot floor: the part would be let go "
-                    f"{1e3 * above_floor:.0f} mm above it (max_drop {1e3 * p.max_drop:.0f} mm; "
-                    f"grip_depth {1e3 * p.grip_depth:.0f} mm)"
-                )
-            if above_floor < p.depth_tolerance - p.overshoot:
-                return (
-                    f"no slot floor felt {1e3 * -above_floor:.0f} mm below where it should be: "
-                    f"the grasp is deeper than grip_depth ({1e3 * p.grip_depth:.0f} mm) or "
-                    "nothing is held"
-                )
-            return None
-
-        def release() -> None:
-            dev.gripper.open(dev.gripper.width() + p.release)
-
-        def drag_out() -> None:
-            # The finger in the hole slides up out of it; the pocket holds the part down.
-            tool = arm.tool_pose()
-            rise = p.grip_depth + p.clear_height
-            target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
-            arm.move_to(target, p.approach_speed, p.acceleration)
-
-        def let_go_of_weight() -> str | None:
-            if p.weight_check <= 0 or "held" not in st:
-                return None
-            lost = float(world_force(dev)[2] - st["held"][2])  # type: ignore[index]
-            need = p.weight_check * part.mass * GRAVITY
-            if lost < need:
-                return (
-                    f"the part came out with the gripper: the wrench lost {lost:.2f} N of its "
-                    f"{part.mass * GRAVITY:.2f} N weight"
-                )
-            return None
-
         self.sequence = Sequence(
-            "feed slot",
-            [
-                dev.move("over the slot", g, over_slot),
-                dev.move("down to the slot", g, down_to_slot),
-                wait("hold still", dev, g, p.settle),
-                check("read the hanging part", dev, g, reference),
-                self.insert.motion,
-                check("on the slot floor", dev, g, landed),
-                dev.grip("let go", g, release),
-                dev.move("drag the gripper out", g, drag_out),
-                wait("settle", dev, g, p.settle),
-                check("part left in the slot", dev, g, let_go_of_weight),
-            ],
+            "feed slot", [*self._carry_steps(), *self._insert_steps(), *self._let_go_steps()]
         )
+
+    # --- the phases --------------------------------------------------------------------------
+    def _carry_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.move("over the slot", g, self._over_slot),
+            dev.move("down to the slot", g, self._down_to_slot),
+            *self._hold_still_and_read("hanging part"),
+        ]
+
+    def _insert_steps(self) -> list[GuardedMotion]:
+        return [
+            self.insert.motion,
+            check("on the slot floor", self.dev, self.params.guard, self._landed),
+        ]
+
+    def _let_go_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.grip("let go", g, self._release),
+            dev.move("drag the gripper out", g, self._drag_out),
+            *self._settle_and_check(
+                "part left in the slot", self._let_go_of_weight, Failure.CHECK_FAILED
+            ),
+        ]
+
+    # --- where the part goes -----------------------------------------------------------------
+    def _x_dir(self) -> NDArray[np.float64]:
+        """Tool x over the slot: ``finger_dir``, or the held grasp's when the feed starts."""
+        if self._x is None:
+            p = self.params
+            self._x = horizontal(
+                p.finger_dir + (0.0,) if p.finger_dir else self.dev.arm.tool_pose().rotation[:, 0]
+            )
+        return self._x
+
+    def _pose(self, bottom_z: float) -> Pose:
+        p = self.params
+        return hold_pose(
+            self.slot_xy, bottom_z, self.part, self._x_dir(), self._offset, p.grip_depth,
+            p.tip_offset,
+        )
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _over_slot(self) -> None:
+        arm, p = self.dev.arm, self.params
+        target = self._pose(max(self._above, p.travel_z))
+        arm.move_path(
+            travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed, p.acceleration
+        )
+
+    def _down_to_slot(self) -> None:
+        p = self.params
+        self.dev.arm.move_to(self._pose(self._above), p.approach_speed, p.acceleration)
+
+    def _landed(self) -> str | None:
+        """Where the insertion ended: on the slot floor, or let go within ``max_drop`` of it."""
+        p = self.params
+        bottom = (
+            self.dev.arm.tool_pose().position[2] - p.tip_offset + p.grip_depth - self.part.length
+        )
+        above_floor = bottom - self.slot_floor_z
+        if self.insert.contact:
+            if above_floor > p.depth_tolerance:
+                return (
+                    f"the part met resistance {1e3 * above_floor:.1f} mm above the slot "
+                    f"floor ({self.insert.resisting:.1f} N): it is on the machine or the "
+                    "pocket's edge, not in the slot"
+                )
+            self.on_floor = True
+            return None
+        return self._no_floor(above_floor)
+
+    def _no_floor(self, above_floor: float) -> str | None:
+        """Arrived without contact ``above_floor`` m over the slot floor: too deep a grasp to
+        reach it, or below where the floor should be; else a drop short enough to let go."""
+        p = self.params
+        if above_floor > p.max_drop:
+            return (
+                f"the grasp is too deep to reach the slot floor: the part would be let go "
+                f"{1e3 * above_floor:.0f} mm above it (max_drop {1e3 * p.max_drop:.0f} mm; "
+                f"grip_depth {1e3 * p.grip_depth:.0f} mm)"
+            )
+        if above_floor < p.depth_tolerance - p.overshoot:
+            return (
+                f"no slot floor felt {1e3 * -above_floor:.0f} mm below where it should be: "
+                f"the grasp is deeper than grip_depth ({1e3 * p.grip_depth:.0f} mm) or "
+                "nothing is held"
+            )
+        return None
+
+    def _release(self) -> None:
+        gripper = self.dev.gripper
+        gripper.open(gripper.width() + self.params.release)
+
+    def _drag_out(self) -> None:
+        # The finger in the hole slides up out of it; the pocket holds the part down.
+        arm, p = self.dev.arm, self.params
+        tool = arm.tool_pose()
+        rise = p.grip_depth + p.clear_height
+        target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
+        arm.move_to(target, p.approach_speed, p.acceleration)
+
+    def _let_go_of_weight(self) -> str | None:
+        if not self._weight_checked():
+            return None
+        lost = self.reference.lost()
+        need = self.params.weight_check * self.part.mass * GRAVITY
+        if lost < need:
+            return (
+                f"the part came out with the gripper: the wrench lost {lost:.2f} N of its "
+                f"{self._weight():.2f} N weight"
+            )
+        return None
 
 
 # --------------------------------------------------------------------------- PickFromSlot
-class PickFromSlot(SequenceSkill):
+class PickFromSlot(_SlotSkill):
     """Take the hole grasp on the part standing in the slot and lift it out.
 
     Before: the gripper is empty, anywhere above the cell's fixtures. After SUCCESS: the part
     hangs in the hole grasp (fingertips ``grip_depth`` below its rim, the outer finger towards
     ``finger_dir``), its bottom ``clear_height`` above the machine's top, over the slot.
     ``seen`` holds what the camera found (None: the slot's centre was assumed).
+
+    Steps: (with the camera) look at the slot and find the rim; over the wall, open, down to the
+    rim, read the empty gripper; beside the wall, pinch, check something is held; lift out,
+    check the weight came along.
     """
 
     def __init__(
@@ -407,115 +504,137 @@ class PickFromSlot(SequenceSkill):
         **overrides: Any,
     ) -> None:
         """As :class:`FeedSlot`."""
-        p = replace(params or SlotParams(), **overrides)
-        self.part, self.dev, self.params = part, dev, p
-        slot = np.asarray(slot_center, float)
-        self.slot_xy, self.slot_floor_z = slot[:2].copy(), float(slot[2])
-        self.machine_top_z = self.slot_floor_z + p.slot_depth
-        arm, gripper, camera, g = dev.arm, dev.gripper, dev.camera, p.guard
-        outer, inner = pinched_span(part, gripper.finger_width)
-        offset = 0.5 * (outer + inner)
-        rim_z = self.slot_floor_z + part.length
+        super().__init__(slot_center, part, dev, params, overrides)
+        p = self.params
+        self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
+        self._offset = 0.5 * (self._outer + self._inner)
+        self._rim_z = self.slot_floor_z + part.length
         self.seen: UprightPart | None = None
-        st: dict[str, object] = {}
-        looking = p.use_camera and camera is not None
-
-        x = horizontal(p.finger_dir + (0.0,) if p.finger_dir else -np.array([*self.slot_xy, 0]))
-        rotation = hole_grasp_rotation(x)
-
-        def axis_xy() -> NDArray[np.float64]:
-            return self.seen.center if self.seen is not None else self.slot_xy
-
-        def tcp(tips_z: float) -> Pose:
-            return Pose(np.array([*(axis_xy() + offset * x[:2]), tips_z + p.tip_offset]),
-                        rotation)
-
-        def view() -> None:
-            if not looking:
-                return
-            assert camera is not None
-            cam = camera.tool_T_camera().position
-            target = np.array([*self.slot_xy, rim_z + p.view_height]) - rotation @ cam
-            pose = Pose(target, rotation)
-            arm.move_path(travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed,
-                          p.acceleration)
-
-        def look() -> str | None:
-            if not looking:
-                return None
-            assert camera is not None
-            frame = camera.capture()
-            world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
-            self.seen = locate_upright_part(
-                frame, camera.intrinsics(), world_T_camera, part, self.slot_xy,
-                self.slot_floor_z, search=p.view_search,
-            )
-            if self.seen is None:
-                return "no part seen standing in the slot"
-            return None
-
-        def over_wall() -> None:
-            target = tcp(max(rim_z + p.clear_height, p.travel_z))
-            if looking:
-                arm.move_to(target, p.travel_speed, p.acceleration)
-            else:
-                arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius),
-                              p.travel_speed, p.acceleration)
-
-        def reference() -> str | None:
-            st["empty"] = world_force(dev)
-            return None
-
-        def open_over_wall() -> None:
-            gripper.open(outer - inner + 2.0 * p.wall_gap)
-
-        def down_to_rim() -> None:
-            arm.move_to(tcp(rim_z + p.clear_height), p.approach_speed, p.acceleration)
-
-        def beside_wall() -> None:
-            depth = min(p.grip_depth, rim_z - self.machine_top_z - p.finger_clearance)
-            arm.move_to(tcp(rim_z - depth), 0.5 * p.approach_speed, p.acceleration)
-
-        def pinched() -> str | None:
-            if not gripper.object_detected():
-                return "the hole grasp closed on nothing"
-            return None
-
-        def lift_out() -> None:
-            tool = arm.tool_pose()
-            rise = (self.machine_top_z + p.clear_height) - self.slot_floor_z
-            target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
-            arm.move_to(target, p.approach_speed, p.acceleration)
-
-        def weight_felt() -> str | None:
-            if p.weight_check <= 0 or "empty" not in st:
-                return None
-            gained = float(st["empty"][2] - world_force(dev)[2])  # type: ignore[index]
-            if gained < p.weight_check * part.mass * GRAVITY:
-                return (
-                    f"the part stayed behind: the wrench gained {gained:.2f} N of its "
-                    f"{part.mass * GRAVITY:.2f} N weight"
-                )
-            return None
-
-        seeing = [
-            dev.move("camera over the slot", g, view),
-            check("find the part in the slot", dev, g, look, Failure.NOTHING_FOUND),
-        ]
+        self._looking = p.use_camera and dev.camera is not None
+        self._x = horizontal(
+            p.finger_dir + (0.0,) if p.finger_dir else -np.array([*self.slot_xy, 0])
+        )
+        self._rotation = hole_grasp_rotation(self._x)
         self.sequence = Sequence(
             "pick from slot",
             [
-                *(seeing if looking else []),
-                dev.move("over the wall", g, over_wall),
-                dev.grip("open over the wall", g, open_over_wall),
-                dev.move("down to the rim", g, down_to_rim),
-                wait("hold still", dev, g, p.settle),
-                check("read the empty gripper", dev, g, reference),
-                dev.move("beside the wall", p.descent_guard, beside_wall),
-                dev.grip("pinch the wall", g, lambda: gripper.close(p.hold_force), settle=0.3),
-                check("holding the part", dev, g, pinched, Failure.MISSED),
-                dev.move("lift out of the slot", p.insert_guard, lift_out),
-                wait("settle", dev, g, p.settle),
-                check("part in the hand", dev, g, weight_felt, Failure.MISSED),
+                *(self._look_steps() if self._looking else []),
+                *self._approach_steps(),
+                *self._grasp_steps(),
+                *self._lift_steps(),
             ],
         )
+
+    # --- the phases --------------------------------------------------------------------------
+    def _look_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.move("camera over the slot", g, self._view),
+            check("find the part in the slot", dev, g, self._look, Failure.NOTHING_FOUND),
+        ]
+
+    def _approach_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.move("over the wall", g, self._over_wall),
+            dev.grip("open over the wall", g, self._open_over_wall),
+            dev.move("down to the rim", g, self._down_to_rim),
+            *self._hold_still_and_read("empty gripper"),
+        ]
+
+    def _grasp_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            dev.move("beside the wall", p.descent_guard, self._beside_wall),
+            dev.grip("pinch the wall", g, lambda: dev.gripper.close(p.hold_force), settle=0.3),
+            check("holding the part", dev, g, self._pinched, Failure.MISSED),
+        ]
+
+    def _lift_steps(self) -> list[GuardedMotion]:
+        p = self.params
+        return [
+            self.dev.move("lift out of the slot", p.insert_guard, self._lift_out),
+            *self._settle_and_check("part in the hand", self._weight_felt, Failure.MISSED),
+        ]
+
+    # --- where the grasp is ------------------------------------------------------------------
+    def _axis_xy(self) -> NDArray[np.float64]:
+        return self.seen.center if self.seen is not None else self.slot_xy
+
+    def _tcp(self, tips_z: float) -> Pose:
+        position = np.array(
+            [*(self._axis_xy() + self._offset * self._x[:2]), tips_z + self.params.tip_offset]
+        )
+        return Pose(position, self._rotation)
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _view(self) -> None:
+        camera, p = self.dev.camera, self.params
+        assert camera is not None
+        cam = camera.tool_T_camera().position
+        target = np.array([*self.slot_xy, self._rim_z + p.view_height]) - self._rotation @ cam
+        pose = Pose(target, self._rotation)
+        arm = self.dev.arm
+        arm.move_path(
+            travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed, p.acceleration
+        )
+
+    def _look(self) -> str | None:
+        camera, arm = self.dev.camera, self.dev.arm
+        assert camera is not None
+        frame = camera.capture()
+        world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
+        self.seen = locate_upright_part(
+            frame, camera.intrinsics(), world_T_camera, self.part, self.slot_xy,
+            self.slot_floor_z, search=self.params.view_search,
+        )
+        if self.seen is None:
+            return "no part seen standing in the slot"
+        return None
+
+    def _over_wall(self) -> None:
+        arm, p = self.dev.arm, self.params
+        target = self._tcp(max(self._rim_z + p.clear_height, p.travel_z))
+        if self._looking:
+            arm.move_to(target, p.travel_speed, p.acceleration)
+        else:
+            arm.move_path(
+                travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed, p.acceleration
+            )
+
+    def _open_over_wall(self) -> None:
+        self.dev.gripper.open(self._outer - self._inner + 2.0 * self.params.wall_gap)
+
+    def _down_to_rim(self) -> None:
+        p = self.params
+        self.dev.arm.move_to(self._tcp(self._rim_z + p.clear_height), p.approach_speed,
+                             p.acceleration)
+
+    def _beside_wall(self) -> None:
+        p = self.params
+        depth = min(p.grip_depth, self._rim_z - self.machine_top_z - p.finger_clearance)
+        self.dev.arm.move_to(self._tcp(self._rim_z - depth), 0.5 * p.approach_speed,
+                             p.acceleration)
+
+    def _pinched(self) -> str | None:
+        if not self.dev.gripper.object_detected():
+            return "the hole grasp closed on nothing"
+        return None
+
+    def _lift_out(self) -> None:
+        arm, p = self.dev.arm, self.params
+        tool = arm.tool_pose()
+        rise = (self.machine_top_z + p.clear_height) - self.slot_floor_z
+        target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
+        arm.move_to(target, p.approach_speed, p.acceleration)
+
+    def _weight_felt(self) -> str | None:
+        if not self._weight_checked():
+            return None
+        gained = self.reference.gained()
+        if gained < self.params.weight_check * self.part.mass * GRAVITY:
+            return (
+                f"the part stayed behind: the wrench gained {gained:.2f} N of its "
+                f"{self._weight():.2f} N weight"
+            )
+        return None
