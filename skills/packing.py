@@ -21,6 +21,7 @@ walls and parts already packed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -30,18 +31,18 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
-from skills.motion import Guard, Sequence, wait
+from skills.motion import Guard, GuardedMotion, Sequence, wait
 from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
     ContactMove,
     SequenceSkill,
+    WrenchReference,
     check,
     grasp_offset,
     hold_pose,
     horizontal,
     travel_path,
-    world_force,
 )
 
 
@@ -97,6 +98,9 @@ class PackInBox(SequenceSkill):
     whatever is on its ``+x`` and ``+y`` sides; the jaws are open; the fingertips are
     ``clear_height`` above its rim. ``contacts`` holds the TCP pose at each contact (``floor``,
     ``+x``, ``+y``) and ``placed_xy`` where the part's axis ended (m, from the arm's pose).
+
+    Steps: over the place, read the hanging part; down into the box and onto its floor; push
+    ``+x``, ``+y`` and ``+x`` again; let go, withdraw up, check the weight stayed in the box.
     """
 
     def __init__(
@@ -115,129 +119,163 @@ class PackInBox(SequenceSkill):
         self.part, self.dev, self.params = part, dev, p
         target = np.asarray(place, float)
         self.place_xy, self.floor_z = target[:2].copy(), float(target[2])
-        top = self.floor_z + part.length if top_z is None else float(top_z)
-        offset = grasp_offset(part, dev.gripper.finger_width)
-        x = horizontal((*p.trail_dir, 0.0))
-        start_xy = self.place_xy - p.offset
-        arm, g = dev.arm, p.guard
+        self._top = self.floor_z + part.length if top_z is None else float(top_z)
+        self._offset = grasp_offset(part, dev.gripper.finger_width)
+        self._x = horizontal((*p.trail_dir, 0.0))  #: tool x: the outer finger's side
+        self._start_xy = self.place_xy - p.offset
+        self._reach = p.offset + p.push_range  #: m a push may go before nothing is felt
         self.contacts: dict[str, Pose] = {}
         self.placed_xy: NDArray[np.float64] | None = None
-
-        def pose(bottom_z: float) -> Pose:
-            return hold_pose(start_xy, bottom_z, part, x, offset, p.grip_depth, p.tip_offset)
-
-        def over_place() -> None:
-            target = pose(max(top + p.clear_height, p.travel_z))
-            arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed,
-                          p.acceleration)
-
-        self.descend = ContactMove(
-            "down into the box", dev, p.push_guard, lambda: pose(self.floor_z + p.floor_gap),
-            p.approach_speed, p.acceleration, p.contact_force,
-        )
-        self.floor = ContactMove(
-            "push -z onto the floor", dev, p.push_guard,
-            lambda: pose(self.floor_z - p.overshoot), p.push_speed, p.acceleration,
-            p.contact_force,
-        )
-
-        def shifted(dx: float, dy: float, dz: float = 0.0) -> Pose:
-            tool = arm.tool_pose()
-            return Pose(tool.position + np.array([dx, dy, dz]), tool.rotation)
-
-        reach = p.offset + p.push_range
-        self.push_x = ContactMove(
-            "push +x", dev, p.push_guard, lambda: shifted(reach, 0.0), p.push_speed,
-            p.acceleration, p.contact_force,
-        )
-        self.push_y = ContactMove(
-            "push +y", dev, p.push_guard, lambda: shifted(0.0, reach), p.push_speed,
-            p.acceleration, p.contact_force,
-        )
-        #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
-        self.push_x_again = ContactMove(
-            "push +x again", dev, p.push_guard, lambda: shifted(p.back_off + 0.002, 0.0),
-            p.push_speed, p.acceleration, p.contact_force,
-        )
-
-        def clear_descent() -> str | None:
-            if self.descend.contact:
-                z = arm.tool_pose().position[2] - p.tip_offset + p.grip_depth - part.length
-                return (
-                    f"the part hit something {1e3 * (z - self.floor_z):.0f} mm above the box "
-                    f"floor ({self.descend.resisting:.1f} N) on the way down"
-                )
-            return None
-
-        def felt(move: ContactMove, what: str) -> str | None:
-            if not move.contact:
-                return f"no {what} felt within {1e3 * reach:.0f} mm"
-            self.contacts[move.motion.name.split()[-1]] = arm.tool_pose()
-            return None
-
-        def on_floor() -> str | None:
-            if not self.floor.contact:
-                return "no box floor felt below the part"
-            self.contacts["floor"] = arm.tool_pose()
-            return None
-
-        def placed() -> str | None:
-            tcp = arm.tool_pose().position[:2]
-            self.placed_xy = tcp - offset * x[:2]
-            return None
-
-        def release() -> None:
-            dev.gripper.open(dev.gripper.width() + p.release)
-
-        def withdraw() -> None:
-            arm.move_to(shifted(0.0, 0.0, p.grip_depth + p.clear_height), p.approach_speed,
-                        p.acceleration)
-
-        st: dict[str, NDArray[np.float64]] = {}
-
-        def reference() -> str | None:
-            st["held"] = world_force(dev)
-            return None
-
-        def let_go() -> str | None:
-            if p.weight_check <= 0 or "held" not in st:
-                return None
-            lost = float(world_force(dev)[2] - st["held"][2])
-            if lost < p.weight_check * part.mass * GRAVITY:
-                return (
-                    f"the part came up with the gripper: the wrench lost {lost:.2f} N of its "
-                    f"{part.mass * GRAVITY:.2f} N weight"
-                )
-            return None
-
+        self.reference = WrenchReference(dev)
+        self._make_contact_moves()
         self.sequence = Sequence(
             "pack in box",
             [
-                dev.move("over the place", g, over_place),
-                wait("hold still", dev, g, p.settle),
-                check("read the hanging part", dev, g, reference),
-                self.descend.motion,
-                check("clear way down", dev, g, clear_descent),
-                wait("hold still above the floor", dev, g, p.settle),
-                self.floor.motion,
-                check("on the floor", dev, g, on_floor),
-                dev.move("lift off the floor", g, lambda: arm.move_to(
-                    shifted(0.0, 0.0, p.lift_off), p.approach_speed, p.acceleration)),
-                self.push_x.motion,
-                check("+x contact", dev, g, lambda: felt(self.push_x, "wall or part on +x")),
-                dev.move("ease off +x", g, lambda: arm.move_to(
-                    shifted(-p.back_off, 0.0), p.approach_speed, p.acceleration)),
-                self.push_y.motion,
-                check("+y contact", dev, g, lambda: felt(self.push_y, "wall or part on +y")),
-                self.push_x_again.motion,
-                check("where it went", dev, g, placed),
-                # Hold where the part actually is, not where the push aimed: letting go under the
-                # push's preload (up to 50 N seen) wedges the fingers.
-                dev.move("relax the push", g, lambda: arm.move_to(
-                    arm.tool_pose(), p.approach_speed, p.acceleration)),
-                dev.grip("let go", g, release),
-                dev.move("withdraw up", g, withdraw),
-                wait("settle", dev, g, p.settle),
-                check("part left in the box", dev, g, let_go),
+                *self._over_place_steps(),
+                *self._onto_floor_steps(),
+                *self._push_steps(),
+                *self._let_go_steps(),
             ],
         )
+
+    def _make_contact_moves(self) -> None:
+        """The guarded moves that end at contact: down, onto the floor, and the three pushes."""
+        p, dev = self.params, self.dev
+
+        def contact_move(name: str, target: Callable[[], Pose], speed: float) -> ContactMove:
+            return ContactMove(
+                name, dev, p.push_guard, target, speed, p.acceleration, p.contact_force
+            )
+
+        self.descend = contact_move(
+            "down into the box", lambda: self._pose(self.floor_z + p.floor_gap), p.approach_speed
+        )
+        self.floor = contact_move(
+            "push -z onto the floor", lambda: self._pose(self.floor_z - p.overshoot), p.push_speed
+        )
+        self.push_x = contact_move("push +x", lambda: self._shifted(self._reach, 0.0), p.push_speed)
+        self.push_y = contact_move("push +y", lambda: self._shifted(0.0, self._reach), p.push_speed)
+        #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
+        self.push_x_again = contact_move(
+            "push +x again", lambda: self._shifted(p.back_off + 0.002, 0.0), p.push_speed
+        )
+
+    # --- the phases --------------------------------------------------------------------------
+    def _over_place_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            dev.move("over the place", g, self._over_place),
+            wait("hold still", dev, g, p.settle),
+            check("read the hanging part", dev, g, self.reference.read),
+        ]
+
+    def _onto_floor_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            self.descend.motion,
+            check("clear way down", dev, g, self._clear_descent),
+            wait("hold still above the floor", dev, g, p.settle),
+            self.floor.motion,
+            check("on the floor", dev, g, self._on_floor),
+        ]
+
+    def _push_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            dev.move("lift off the floor", g, lambda: self._move_by(0.0, 0.0, p.lift_off)),
+            self.push_x.motion,
+            check("+x contact", dev, g, lambda: self._felt(self.push_x, "wall or part on +x")),
+            dev.move("ease off +x", g, lambda: self._move_by(-p.back_off, 0.0)),
+            self.push_y.motion,
+            check("+y contact", dev, g, lambda: self._felt(self.push_y, "wall or part on +y")),
+            self.push_x_again.motion,
+            check("where it went", dev, g, self._placed),
+        ]
+
+    def _let_go_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            # Hold where the part actually is, not where the push aimed: letting go under the
+            # push's preload (up to 50 N seen) wedges the fingers.
+            dev.move("relax the push", g, self._relax),
+            dev.grip("let go", g, self._release),
+            dev.move("withdraw up", g, self._withdraw),
+            wait("settle", dev, g, p.settle),
+            check("part left in the box", dev, g, self._let_go),
+        ]
+
+    # --- where the part goes -----------------------------------------------------------------
+    def _pose(self, bottom_z: float) -> Pose:
+        """The hold pose with the part's bottom at ``bottom_z``, short of its place."""
+        p = self.params
+        return hold_pose(
+            self._start_xy, bottom_z, self.part, self._x, self._offset, p.grip_depth,
+            p.tip_offset,
+        )
+
+    def _shifted(self, dx: float, dy: float, dz: float = 0.0) -> Pose:
+        """The tool's pose now, moved by (dx, dy, dz) m."""
+        tool = self.dev.arm.tool_pose()
+        return Pose(tool.position + np.array([dx, dy, dz]), tool.rotation)
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _over_place(self) -> None:
+        arm, p = self.dev.arm, self.params
+        target = self._pose(max(self._top + p.clear_height, p.travel_z))
+        arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed,
+                      p.acceleration)
+
+    def _move_by(self, dx: float, dy: float, dz: float = 0.0) -> None:
+        p = self.params
+        self.dev.arm.move_to(self._shifted(dx, dy, dz), p.approach_speed, p.acceleration)
+
+    def _clear_descent(self) -> str | None:
+        if self.descend.contact:
+            p, tool = self.params, self.dev.arm.tool_pose()
+            z = tool.position[2] - p.tip_offset + p.grip_depth - self.part.length
+            return (
+                f"the part hit something {1e3 * (z - self.floor_z):.0f} mm above the box "
+                f"floor ({self.descend.resisting:.1f} N) on the way down"
+            )
+        return None
+
+    def _on_floor(self) -> str | None:
+        if not self.floor.contact:
+            return "no box floor felt below the part"
+        self.contacts["floor"] = self.dev.arm.tool_pose()
+        return None
+
+    def _felt(self, move: ContactMove, what: str) -> str | None:
+        if not move.contact:
+            return f"no {what} felt within {1e3 * self._reach:.0f} mm"
+        self.contacts[move.motion.name.split()[-1]] = self.dev.arm.tool_pose()
+        return None
+
+    def _placed(self) -> str | None:
+        tcp = self.dev.arm.tool_pose().position[:2]
+        self.placed_xy = tcp - self._offset * self._x[:2]
+        return None
+
+    def _relax(self) -> None:
+        arm, p = self.dev.arm, self.params
+        arm.move_to(arm.tool_pose(), p.approach_speed, p.acceleration)
+
+    def _release(self) -> None:
+        gripper = self.dev.gripper
+        gripper.open(gripper.width() + self.params.release)
+
+    def _withdraw(self) -> None:
+        p = self.params
+        self._move_by(0.0, 0.0, p.grip_depth + p.clear_height)
+
+    def _let_go(self) -> str | None:
+        p, part = self.params, self.part
+        if p.weight_check <= 0 or self.reference.force is None:
+            return None
+        lost = self.reference.lost()
+        if lost < p.weight_check * part.mass * GRAVITY:
+            return (
+                f"the part came up with the gripper: the wrench lost {lost:.2f} N of its "
+                f"{part.mass * GRAVITY:.2f} N weight"
+            )
+        return None
