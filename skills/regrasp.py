@@ -120,8 +120,24 @@ def upright_turn(frame: PivotFrame) -> NDArray[np.float64]:
     return _rotation_about(-frame.normal, 0.5 * math.pi)
 
 
+@dataclass(frozen=True)
+class _Carry:
+    """The TCP poses of the turn upright, planned from the lying part's frame when the skill is
+    built (module doc, step 2), and where the standing part's centre is from the TCP."""
+
+    lifted: Pose  #: straight up from the pinch, high enough for the part to swing clear
+    carried: Pose  #: over ``place_xy`` at that height (a waypoint only when it is given)
+    turned: Pose  #: turned upright there
+    above_floor: Pose  #: down until the part's bottom is ``place_gap`` above the floor
+    down: Pose  #: the floor contact move's aim, ``place_overshoot`` below the floor
+    rel_centre: NDArray[np.float64]  #: m, the standing part's centre from the TCP (world)
+
+
 class Regrasp:
-    """Pinch, lift, turn upright, set down on the floor, let go, back off (module doc)."""
+    """Pinch, lift, turn upright, set down on the floor, let go, back off (module doc).
+
+    Three phases of named steps: pinch the lying part; lift and turn it upright and set it down
+    until the floor pushes back; let go and back off to where Align looks from."""
 
     def __init__(
         self,
@@ -134,45 +150,69 @@ class Regrasp:
         """``frame``: the lying part's frame (its nominal or perceived pose; ``center`` at the
         axis, ``floor_z`` the floor). Raises ValueError when the part does not fit the jaws."""
         o = options or RegraspOptions()
-        p, arm, gripper, ft = params, dev.arm, dev.gripper, dev.ft
-        self.frame, self.part, self.params, self.options, self.dev = frame, part, p, o, dev
-        opening = part.outer + 2.0 * p.wall_gap
-        if opening > gripper.stroke:
+        self.frame, self.part, self.params, self.options, self.dev = frame, part, params, o, dev
+        self._opening = part.outer + 2.0 * params.wall_gap  #: m, the jaws open across the part
+        if self._opening > dev.gripper.stroke:
             raise ValueError(
-                f"regrasp needs a jaw opening of {opening * 1e3:.1f} mm across the "
-                f"{part.name}, the gripper has {gripper.stroke * 1e3:.1f} mm"
+                f"regrasp needs a jaw opening of {self._opening * 1e3:.1f} mm across the "
+                f"{part.name}, the gripper has {dev.gripper.stroke * 1e3:.1f} mm"
             )
-        a, b = 0.5 * part.length, 0.5 * part.outer
-        floor = frame.floor_z
-        # Pinch point along the axis (from the centre, towards the open end).
-        room = a - 0.5 * gripper.finger_width - 0.002
+        self.grip_offset = self._pinch_offset()
+        if o.closing_sign not in (1, -1):
+            raise ValueError(f"closing_sign must be +1 or -1, got {o.closing_sign}")
+        tilt = o.pinch_tilt if o.pinch_tilt is not None else self._clear_tilt(self.grip_offset)
+        self.tilt = tilt  #: rad the pinch leans
+        tcp_h = self._pinch_height()
+        rot = pinch_rotation(frame, tilt, o.closing_sign)
+        self.grasp = Pose(frame.point(self.grip_offset, tcp_h), rot)  #: TCP pose of the pinch
+        self._pre = Pose(self.grasp.position - params.approach_distance * rot[:, 2], rot)
+        self._carry = self._plan_carry(tcp_h)
+        self.placed: Pose | None = None  #: the TCP's pose when the floor was felt
+        self._contact = ContactMove(
+            "set down on the floor",
+            dev,
+            params.descent_guard,
+            lambda: self._carry.down,
+            0.5 * params.approach_speed,
+            params.acceleration,
+            o.contact_force,
+        )
+        self.sequence = Sequence(
+            "regrasp", [*self._pinch_steps(), *self._set_down_steps(), *self._let_go_steps()]
+        )
+
+    # --- the plan ----------------------------------------------------------------------------
+    def _pinch_offset(self) -> float:
+        """m from the part's centre towards the open end where the pads pinch."""
+        o, part = self.options, self.part
+        a = 0.5 * part.length
+        room = a - 0.5 * self.dev.gripper.finger_width - 0.002
         if o.grip_offset is None:
             offset = min(max(0.0, o.min_place_height - a), room)
         else:
             offset = o.grip_offset
         if not -room <= offset <= room:
             raise ValueError(f"grip_offset {offset:g} m puts the pads off the {part.name}")
-        self.grip_offset = offset
-        if o.closing_sign not in (1, -1):
-            raise ValueError(f"closing_sign must be +1 or -1, got {o.closing_sign}")
-        tilt = o.pinch_tilt if o.pinch_tilt is not None else self._clear_tilt(offset)
-        self.tilt = tilt  #: rad the pinch leans
-        # Pads at the widest; the lowest fingertip corner (the pad leans by ``tilt``) off the floor.
-        tip_drop = p.tip_offset * math.cos(tilt) + 0.5 * gripper.finger_width * math.sin(tilt)
-        tcp_h = max(b, o.tip_floor_clearance + tip_drop)
-        rot = pinch_rotation(frame, tilt, o.closing_sign)
-        self.grasp = Pose(frame.point(offset, tcp_h), rot)  #: TCP pose of the pinch
-        pre = Pose(self.grasp.position - p.approach_distance * rot[:, 2], rot)
+        return offset
 
-        # The turn about the TCP: where the part's centre and bottom end up relative to it.
+    def _pinch_height(self) -> float:
+        """m of the TCP above the floor: pads at the widest, the lowest fingertip corner (the
+        pad leans by ``tilt``) ``tip_floor_clearance`` off the floor."""
+        p, o, tilt = self.params, self.options, self.tilt
+        finger_width = self.dev.gripper.finger_width
+        tip_drop = p.tip_offset * math.cos(tilt) + 0.5 * finger_width * math.sin(tilt)
+        return max(0.5 * self.part.outer, o.tip_floor_clearance + tip_drop)
+
+    def _plan_carry(self, tcp_h: float) -> _Carry:
+        """The turn about the TCP and where it leaves the part; sets ``place_z`` and the
+        predicted ``standing_axis``."""
+        o, frame, rot = self.options, self.frame, self.grasp.rotation
+        a, b = 0.5 * self.part.length, 0.5 * self.part.outer
+        floor = frame.floor_z
         turn = upright_turn(frame)
-        centre = frame.point(0.0, b)
-        rel_centre = turn @ (centre - self.grasp.position)
+        rel_centre = turn @ (frame.point(0.0, b) - self.grasp.position)
         bottom_below = a - rel_centre[2]  # m from the TCP down to the part's bottom, standing
-        # Everything of the part lies within this of the TCP: it can swing through the turn.
-        swing = math.hypot(a + abs(offset), b) + abs(tcp_h - b)
-        lift_z = floor + max(swing + o.turn_clearance, o.min_place_height)
-        lift_z = max(lift_z, self.grasp.position[2])
+        lift_z = self._lift_z(tcp_h)
         lifted = Pose(np.array([*self.grasp.position[:2], lift_z]), rot)
         # The TCP's place: the standing axis lands on place_xy (the turn moves it off the TCP).
         xy = self.grasp.position[:2] if o.place_xy is None else (
@@ -188,87 +228,99 @@ class Regrasp:
             above_floor.position - (o.place_gap + o.place_overshoot) * frame.up, turned_rot
         )
         self.standing_axis: NDArray[np.float64] = (xy + rel_centre[:2]).copy()
-        g = p.guard
-        st: dict[str, Pose] = {}
+        return _Carry(lifted, carried, turned, above_floor, down, rel_centre)
+
+    def _lift_z(self, tcp_h: float) -> float:
+        """m, the TCP's height for the turn: everything of the part lies within ``swing`` of
+        the TCP, so it swings through the turn ``turn_clearance`` above the floor."""
+        o = self.options
+        a, b = 0.5 * self.part.length, 0.5 * self.part.outer
+        swing = math.hypot(a + abs(self.grip_offset), b) + abs(tcp_h - b)
+        lift_z = self.frame.floor_z + max(swing + o.turn_clearance, o.min_place_height)
+        return max(lift_z, self.grasp.position[2])
+
+    # --- the phases --------------------------------------------------------------------------
+    def _pinch_steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        arm, gripper = dev.arm, dev.gripper
+        o = self.options
         pinch_force = p.hold_force if o.pinch_force is None else o.pinch_force
+        return [
+            dev.grip("open across the part", g, lambda: gripper.open(self._opening)),
+            dev.move(
+                "above the part",
+                g,
+                lambda: arm.move_to(self._pre, 2 * p.approach_speed, p.acceleration),
+            ),
+            dev.move(
+                "down beside the wall",
+                p.descent_guard,
+                lambda: arm.move_to(self.grasp, p.approach_speed, p.acceleration),
+            ),
+            dev.grip(
+                "pinch across the diameter", g, lambda: gripper.close(pinch_force), settle=0.3
+            ),
+            check("part in the pinch", dev, g, self._pinched),
+        ]
 
-        self._contact = ContactMove(
-            "set down on the floor",
-            dev,
-            p.descent_guard,
-            lambda: down,
-            0.5 * p.approach_speed,
-            p.acceleration,
-            o.contact_force,
+    def _set_down_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.move("lift and turn upright", g, self._lift_and_turn),
+            wait("hold still", dev, g, self.options.zero_wait),
+            self._zero("zero the wrist sensor"),
+            self._contact.motion,
+            check("on the floor", dev, g, self._floor_felt),
+        ]
+
+    def _let_go_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
+        return [
+            dev.grip("let go", g, lambda: dev.gripper.open(self._opening)),
+            dev.move("back off", g, self._back_off),
+            wait("hold still again", dev, g, self.options.zero_wait),
+            self._zero("zero the wrist sensor again"),
+        ]
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _zero(self, name: str) -> GuardedMotion:
+        """Zero the wrist sensor: the tool's own weight pulls another way now."""
+        dev = self.dev
+        return GuardedMotion(
+            name, dev.ft.bias, lambda: True, dev.arm, dev.ft, dev.clock, self.params.guard
         )
 
-        def carry() -> None:
-            # One profile over lift, turn and descent: the arm does not stop at the waypoints.
-            waypoints = [lifted, turned, above_floor]
-            if o.place_xy is not None:
-                waypoints.insert(1, carried)
-            arm.move_path(waypoints, 2 * p.approach_speed, p.acceleration)
+    def _pinched(self) -> str | None:
+        return None if self.dev.gripper.object_detected() else "the pinch closed on nothing"
 
-        def floor_felt() -> str | None:
-            if not self._contact.contact:
-                return (
-                    f"no floor felt {o.place_overshoot * 1e3:.0f} mm below where it should be"
-                )
-            pose = arm.tool_pose()
-            st["placed"] = pose
-            self.standing_axis = (pose.position + rel_centre)[:2].copy()
-            return None
+    def _lift_and_turn(self) -> None:
+        # One profile over lift, turn and descent: the arm does not stop at the waypoints.
+        c, p = self._carry, self.params
+        waypoints = [c.lifted, c.turned, c.above_floor]
+        if self.options.place_xy is not None:
+            waypoints.insert(1, c.carried)
+        self.dev.arm.move_path(waypoints, 2 * p.approach_speed, p.acceleration)
 
-        def let_go() -> None:
-            gripper.open(opening)
-
-        def back_off() -> None:
-            # Along the fingers until the fingertips are clear of the near side of the wall.
-            tool = arm.tool_pose()
-            z = tool.rotation[:, 2]
-            reach = max(float(np.hypot(z[0], z[1])), 0.3)
-            back = Pose(tool.position - (b + p.tip_offset + o.back_off) / reach * z, tool.rotation)
-            arm.move_path([back, self._hand_over()], 2 * p.approach_speed, p.acceleration)
-
-        def pinched() -> str | None:
-            return None if gripper.object_detected() else "the pinch closed on nothing"
-
-        def zero(name: str) -> GuardedMotion:
-            return GuardedMotion(
-                name, ft.bias, lambda: True, arm, ft, dev.clock, g
+    def _floor_felt(self) -> str | None:
+        if not self._contact.contact:
+            return (
+                f"no floor felt {self.options.place_overshoot * 1e3:.0f} mm below where it "
+                "should be"
             )
+        pose = self.dev.arm.tool_pose()
+        self.placed = pose
+        self.standing_axis = (pose.position + self._carry.rel_centre)[:2].copy()
+        return None
 
-        self.sequence = Sequence(
-            "regrasp",
-            [
-                dev.grip("open across the part", g, lambda: gripper.open(opening)),
-                dev.move(
-                    "above the part", g, lambda: arm.move_to(pre, 2 * p.approach_speed,
-                                                             p.acceleration)
-                ),
-                dev.move(
-                    "down beside the wall",
-                    p.descent_guard,
-                    lambda: arm.move_to(self.grasp, p.approach_speed, p.acceleration),
-                ),
-                dev.grip(
-                    "pinch across the diameter",
-                    g,
-                    lambda: gripper.close(pinch_force),
-                    settle=0.3,
-                ),
-                check("part in the pinch", dev, g, pinched),
-                dev.move("lift and turn upright", g, carry),
-                wait("hold still", dev, g, o.zero_wait),
-                zero("zero the wrist sensor"),
-                self._contact.motion,
-                check("on the floor", dev, g, floor_felt),
-                dev.grip("let go", g, let_go),
-                dev.move("back off", g, back_off),
-                wait("hold still again", dev, g, o.zero_wait),
-                zero("zero the wrist sensor again"),
-            ],
-        )
+    def _back_off(self) -> None:
+        # Along the fingers until the fingertips are clear of the near side of the wall.
+        arm, p, o = self.dev.arm, self.params, self.options
+        b = 0.5 * self.part.outer
+        tool = arm.tool_pose()
+        z = tool.rotation[:, 2]
+        reach = max(float(np.hypot(z[0], z[1])), 0.3)
+        back = Pose(tool.position - (b + p.tip_offset + o.back_off) / reach * z, tool.rotation)
+        arm.move_path([back, self._hand_over()], 2 * p.approach_speed, p.acceleration)
 
     def _hand_over(self) -> Pose:
         """Where the back-off ends: fingers down, turned as Align turns them, ``approach_distance``
@@ -318,8 +370,7 @@ class Regrasp:
     @property
     def step(self) -> str:
         """Name of the step in progress (or ``done``)."""
-        s = self.sequence
-        return s.steps[s.index].name if s.index < len(s.steps) else "done"
+        return self.sequence.current
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
