@@ -175,6 +175,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             max_failed_cycles=config.workflow.max_failed_cycles,
             cycles=config.workflow.cycles,
             ft_link_grace=s.ft_link_grace_s,
+            ft_settle=s.ft_settle_s,
         ),
         default_guard=Guard(s.ft_abort_force_n, s.ft_abort_torque_nm),
         skill_params=settings,

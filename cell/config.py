@@ -160,6 +160,13 @@ class SafetySection(_Section):
     default_timeout_s: float = Field(
         30.0, gt=0.0, le=600.0, description="the longest a motion leaf of the tree may run (s)"
     )
+    ft_settle_s: float = Field(
+        0.5,
+        ge=0.0,
+        le=5.0,
+        description="a motion about to start waits this long for a wrench over its limits to "
+        "fall back (a spike of a few samples) before its guard fails it (s)",
+    )
     ft_link_grace_s: float = Field(
         0.5,
         ge=0.0,

@@ -88,6 +88,9 @@ class WorkflowLimits:
     cycles: int = 10
     #: s a lost force-torque stream may stay lost before the cell stops (0: stop at once).
     ft_link_grace: float = 0.0
+    #: s a motion about to start waits for a wrench over its limits to fall back (a spike of a
+    #: few samples) before its guard fails it without a start.
+    ft_settle: float = 0.5
     cycles_done: int = 0  #: cycles a resumed cell had already done
 
 

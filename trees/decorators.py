@@ -180,16 +180,12 @@ class FTGuard(_CheckFirst):
             return f2**0.5, t2**0.5
         return None
 
-    #: s a motion about to start waits for a wrench over the limits to fall back (a spike of a
-    #: few samples) before the guard trips it without a start.
-    SETTLE_S = 0.5
-
     def hold(self) -> str | None:
         """A motion does not start while the stream is lost (it waits for the link; the
         sampler stops the cell if the link stays lost past its grace), nor, for up to
-        :attr:`SETTLE_S`, while the wrench reads over the limits: a recovery right after a spike
-        (put back, a retry) would otherwise be failed by the same spike. One already running
-        is failed by :meth:`check` instead."""
+        ``ctx.limits.ft_settle`` (``safety.ft_settle_s``), while the wrench reads over the
+        limits: a recovery right after a spike (put back, a retry) would otherwise be failed by
+        the same spike. One already running is failed by :meth:`check` instead."""
         if self.decorated.status is Status.RUNNING:
             self._over_since = None
             return None
@@ -206,7 +202,7 @@ class FTGuard(_CheckFirst):
         now = self.ctx.devices.clock.now()
         if self._over_since is None:
             self._over_since = now
-        if now - self._over_since < self.SETTLE_S:
+        if now - self._over_since < self.ctx.limits.ft_settle:
             return f"{self.decorated.name}: waiting for the wrench to settle (|F| {over[0]:.1f} N)"
         self._over_since = None
         return None  # still over the limits: check() fails the motion before it starts

@@ -330,7 +330,7 @@ def test_a_motion_waits_for_a_spike_to_pass_before_it_starts_and_trips_if_it_sta
     sampler.tick_once()
     stuck.tick_once()
     assert stuck.status == Status.RUNNING
-    ctx.devices.clock.t += FTGuard.SETTLE_S + 0.01
+    ctx.devices.clock.t += ctx.limits.ft_settle + 0.01
     stuck.tick_once()
     assert stuck.status == Status.FAILURE and "force-torque abort" in stuck.feedback_message
     assert not ctx.devices.arm.commands
