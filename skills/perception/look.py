@@ -41,7 +41,10 @@ class LookParams:
 
 
 class Look:
-    """``result``: the detection to pick (nearest ``near_xy``), or a failure."""
+    """``result``: the detection to pick (nearest ``near_xy``), or a failure.
+
+    Steps: camera over the bin, find the parts; camera beyond the chosen part's end, look at
+    its end (for a part whose open end is decided, the second look is from the first view)."""
 
     def __init__(
         self,
@@ -52,73 +55,81 @@ class Look:
         near_xy: tuple[float, float],
         params: LookParams | None = None,
     ) -> None:
-        p = params if params is not None else LookParams()
-        guard, height, speed = p.guard, p.view_height, p.speed
-        second_height, second_offset = p.second_height, p.second_offset
+        self.params = params if params is not None else LookParams()
         self.dev, self.catalogue, self.roi = dev, catalogue, roi
+        self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
         self.detections: list[Detection] = []
-        arm = dev.arm
-        st: dict[str, object] = {}
-
-        def go(xy_source) -> None:  # type: ignore[no-untyped-def]
-            xy = xy_source()
-            arm.move_to(camera_over(xy, height, dev), speed, p.acceleration)
-
-        def detect() -> None:
-            assert dev.camera is not None
-            frame = dev.camera.capture()
-            pose = arm.tool_pose() @ dev.camera.tool_T_camera()
-            dets = detect_parts(frame, dev.camera.intrinsics(), pose, catalogue, roi)
-            st["dets"] = dets
-            if dets:
-                best = min(dets, key=lambda d: math.dist(d.center[:2], near_xy))
-                if self.result is None or best.open_end_seen:
-                    self.result = best
-            # The second, closer view sees less of the bin: it refines the parts it sees again
-            # and adds any new ones, but never forgets what the wide view found.
-            merged = list(dets)
-            for old in self.detections:
-                if all(math.dist(old.center[:2], d.center[:2]) > 0.02 for d in dets):
-                    merged.append(old)
-            self.detections = merged
-
-        def none_found() -> str | None:
-            return None if self.result is not None else "no part found in the bin"
-
-        def second_view_xy() -> tuple[float, float]:
-            d = self.result
-            if d is None or d.open_end_seen:  # decided: look again from where it is
-                return float(view_xy[0]), float(view_xy[1])
-            u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-            # From beyond an end, that end's face is in sight; take the end nearer the robot,
-            # where the arm reaches.
-            ends = [d.center[:2] + s * (0.5 * d.length + second_offset) * u for s in (1.0, -1.0)]
-            xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
-            return float(xy[0]), float(xy[1])
-
-        done = lambda: True  # noqa: E731
+        g = self.params.guard
         self.sequence = Sequence(
             "look",
             [
-                dev.move("camera over the bin", guard, lambda: go(lambda: view_xy)),
-                GuardedMotion(
-                    "find the parts", detect, done, arm, dev.ft, dev.clock, guard, none_found,
-                    Failure.NOTHING_FOUND,
-                ),
-                dev.move(
-                    "camera beyond its end",
-                    guard,
-                    lambda: arm.move_to(
-                        camera_over(second_view_xy(), second_height, dev), speed, p.acceleration
-                    ),
-                ),
-                GuardedMotion(
-                    "look at its end", detect, done, arm, dev.ft, dev.clock, guard, none_found,
-                    Failure.NOTHING_FOUND,
-                ),
+                dev.move("camera over the bin", g, self._over_bin),
+                self._detect_step("find the parts"),
+                dev.move("camera beyond its end", g, self._beyond_end),
+                self._detect_step("look at its end"),
             ],
         )
+
+    def _detect_step(self, name: str) -> GuardedMotion:
+        """Take a frame and find the parts in it; fails NOTHING_FOUND while no part is chosen."""
+        dev = self.dev
+        return GuardedMotion(
+            name, self._detect, lambda: True, dev.arm, dev.ft, dev.clock, self.params.guard,
+            self._none_found, Failure.NOTHING_FOUND,
+        )
+
+    # --- the steps' commands and checks ------------------------------------------------------
+    def _over_bin(self) -> None:
+        p = self.params
+        target = camera_over(self._view_xy, p.view_height, self.dev)
+        self.dev.arm.move_to(target, p.speed, p.acceleration)
+
+    def _beyond_end(self) -> None:
+        p = self.params
+        target = camera_over(self._second_view_xy(), p.second_height, self.dev)
+        self.dev.arm.move_to(target, p.speed, p.acceleration)
+
+    def _detect(self) -> None:
+        camera = self.dev.camera
+        assert camera is not None
+        frame = camera.capture()
+        pose = self.dev.arm.tool_pose() @ camera.tool_T_camera()
+        dets = detect_parts(frame, camera.intrinsics(), pose, self.catalogue, self.roi)
+        self._choose(dets)
+        self._remember(dets)
+
+    def _choose(self, dets: list[Detection]) -> None:
+        """The part nearest ``near_xy``; a later view replaces the choice only when it decided
+        the open end."""
+        if dets:
+            best = min(dets, key=lambda d: math.dist(d.center[:2], self._near_xy))
+            if self.result is None or best.open_end_seen:
+                self.result = best
+
+    def _remember(self, dets: list[Detection]) -> None:
+        """The second, closer view sees less of the bin: it refines the parts it sees again
+        and adds any new ones, but never forgets what the wide view found."""
+        merged = list(dets)
+        for old in self.detections:
+            if all(math.dist(old.center[:2], d.center[:2]) > 0.02 for d in dets):
+                merged.append(old)
+        self.detections = merged
+
+    def _none_found(self) -> str | None:
+        return None if self.result is not None else "no part found in the bin"
+
+    def _second_view_xy(self) -> tuple[float, float]:
+        d = self.result
+        if d is None or d.open_end_seen:  # decided: look again from where it is
+            return float(self._view_xy[0]), float(self._view_xy[1])
+        u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+        # From beyond an end, that end's face is in sight; take the end nearer the robot,
+        # where the arm reaches.
+        offset = self.params.second_offset
+        ends = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
+        xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
+        return float(xy[0]), float(xy[1])
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
