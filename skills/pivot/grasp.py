@@ -26,65 +26,73 @@ class Grasp:
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
         self.frame, self.params, self.dev = frame, params, dev
-        p, arm, gripper = params, dev.arm, dev.gripper
+        p = params
         target = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
         self.target: Pose = Pose(target.position - p.press_depth * frame.up, target.rotation)
         opening = frame.opening(p.l_a, p.alpha)
-        if opening + p.approach_clearance > gripper.stroke:
+        if opening + p.approach_clearance > dev.gripper.stroke:
             raise ValueError(
                 f"grasp needs a jaw opening of {(opening + p.approach_clearance) * 1e3:.1f} mm, "
-                f"the gripper has {gripper.stroke * 1e3:.1f} mm"
+                f"the gripper has {dev.gripper.stroke * 1e3:.1f} mm"
             )
-        z = self.target.rotation[:, 2]
-        pre = Pose(self.target.position - p.approach_distance * z, self.target.rotation)
-        # The approach opening keeps the outer pad's face at S: only the inner finger has the
-        # clearance, so it starts short of H.
-        start_width = opening + p.approach_clearance
-        shift = 0.5 * p.approach_clearance * self.target.rotation[:, 0]
-        self.target = Pose(self.target.position - shift, self.target.rotation)
-        pre = Pose(pre.position - shift, pre.rotation)
-        g = p.guard
-        state: dict[str, float] = {}
+        self._start_width = opening + p.approach_clearance  #: m, the jaws on the approach
+        self._pre = self._keep_outer_pad_at_s()
         # The lead climbs by sin(alpha) along the closing line: keep that within half the press
         # so the outer finger stays on S (the cookie can's 33 deg lifted it off at 1 mm).
-        lead = min(p.close_lead, 0.5 * p.press_depth / max(math.sin(p.alpha), 1e-6))
+        self._lead = min(p.close_lead, 0.5 * p.press_depth / max(math.sin(p.alpha), 1e-6))
+        self._closed_from = 0.0  #: m, the jaw opening when the close began
+        self._moved_at = 0.0  #: s (clock), the last tick the fingers moved, or the close began
+        self.sequence = Sequence("grasp", self._steps())
 
-        def close() -> None:
-            state["w0"] = gripper.width()
-            state["t"] = dev.clock.now()
-            gripper.close(p.grip_force, p.close_speed)
+    def _keep_outer_pad_at_s(self) -> Pose:
+        """The approach opening keeps the outer pad's face at S: only the inner finger has the
+        clearance, so it starts short of H. Shifts ``target`` by half the clearance and returns
+        the pose ``approach_distance`` before it along the fingers, shifted alike."""
+        p = self.params
+        z = self.target.rotation[:, 2]
+        pre = Pose(self.target.position - p.approach_distance * z, self.target.rotation)
+        shift = 0.5 * p.approach_clearance * self.target.rotation[:, 0]
+        self.target = Pose(self.target.position - shift, self.target.rotation)
+        return Pose(pre.position - shift, pre.rotation)
 
-        def closed() -> bool:
-            # Keep the outer (+x) finger where it is: closing moves it by half the closing
-            # towards the TCP, so the TCP follows it that far along +x -- and leads by
-            # ``close_lead``, since a finger held on S by friction only closes when the palm
-            # moves. When the inner finger stops at H the lead is all S is dragged.
-            closing = state["w0"] - gripper.width()
-            x = self.target.rotation[:, 0]
-            position = self.target.position + (0.5 * closing + lead) * x
-            arm.servo(Pose(position, self.target.rotation))
-            if gripper.moving():
-                state["t"] = dev.clock.now()
-                return False
-            return dev.clock.now() - state["t"] >= 0.2
+    def _steps(self) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        arm, gripper = dev.arm, dev.gripper
+        return [
+            dev.grip("open", g, lambda: gripper.open(self._start_width)),
+            dev.move(
+                "above the open end",
+                g,
+                lambda: arm.move_to(self._pre, 2 * p.approach_speed, p.acceleration),
+            ),
+            dev.move(
+                "approach at alpha",
+                g,
+                lambda: arm.move_to(self.target, p.approach_speed, p.acceleration),
+            ),
+            GuardedMotion("close onto H", self._close, self._closed, arm, dev.ft, dev.clock, g),
+        ]
 
-        self.sequence = Sequence(
-            "grasp",
-            [
-                dev.grip("open", g, lambda: gripper.open(start_width)),
-                dev.move(
-                    "above the open end",
-                    g,
-                    lambda: arm.move_to(pre, 2 * p.approach_speed, p.acceleration),
-                ),
-                dev.move(
-                    "approach at alpha",
-                    g,
-                    lambda: arm.move_to(self.target, p.approach_speed, p.acceleration),
-                ),
-                GuardedMotion("close onto H", close, closed, arm, dev.ft, dev.clock, g),
-            ],
-        )
+    def _close(self) -> None:
+        p, gripper = self.params, self.dev.gripper
+        self._closed_from = gripper.width()
+        self._moved_at = self.dev.clock.now()
+        gripper.close(p.grip_force, p.close_speed)
+
+    def _closed(self) -> bool:
+        # Keep the outer (+x) finger where it is: closing moves it by half the closing
+        # towards the TCP, so the TCP follows it that far along +x -- and leads by
+        # ``close_lead``, since a finger held on S by friction only closes when the palm
+        # moves. When the inner finger stops at H the lead is all S is dragged.
+        gripper, clock = self.dev.gripper, self.dev.clock
+        closing = self._closed_from - gripper.width()
+        x = self.target.rotation[:, 0]
+        position = self.target.position + (0.5 * closing + self._lead) * x
+        self.dev.arm.servo(Pose(position, self.target.rotation))
+        if gripper.moving():
+            self._moved_at = clock.now()
+            return False
+        return clock.now() - self._moved_at >= 0.2
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
