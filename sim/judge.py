@@ -22,6 +22,20 @@ import numpy as np
 from sim.part_body import PartBody, hull_vertices
 
 
+class JudgeFailure(StrEnum):
+    """Why the twin judges a pick or a pivot not done: the codes the reports count by."""
+
+    ON_FLOOR = "on_floor"  #: the part lies on the floor after the lift
+    NOT_LIFTED = "not_lifted"  #: held, but still touching the floor
+    NOT_HELD = "not_held"
+    NOT_UPRIGHT = "not_upright"
+    NO_FINGER_IN_HOLE = "no_finger_in_hole"
+    LEFT_HOLE = "left_hole"  #: the inner finger left the hole during the maneuver
+    UNTOUCHED = "untouched"  #: no finger touched the part for longer than allowed
+    NOT_HOLE_GRASP = "not_hole_grasp"  #: the final grasp is a pinch or another
+    CAMERA_USED = "camera_used"  #: a camera frame steered after the Grasp began
+
+
 @dataclass(frozen=True)
 class Verdict:
     success: bool
@@ -30,6 +44,7 @@ class Verdict:
     height_m: float
     held: bool
     finger_in_hole: str | None
+    code: JudgeFailure | None = None
 
 
 def finger_in_hole(part_body: PartBody, tip: np.ndarray, margin: float = 0.0) -> bool:
@@ -260,18 +275,27 @@ class PivotWatch:
 
     def failure(self, max_free_s: float = 1.0) -> str | None:
         """Why the watched maneuver is not the paper's in-hand pivot, or None."""
+        found = self.failure_with_code(max_free_s)
+        return None if found is None else found[1]
+
+    def failure_with_code(self, max_free_s: float = 1.0) -> tuple[JudgeFailure, str] | None:
+        """:meth:`failure` with its code."""
         if not self.inner_in_hole_all_along():
             t = self.first_exit()
-            return "the inner finger left the hole" + (f" at {t:.2f} s" if t is not None else "")
+            at = f" at {t:.2f} s" if t is not None else ""
+            return JudgeFailure.LEFT_HOLE, f"the inner finger left the hole{at}"
         free = self.longest_free_s()
         if free > max_free_s:
-            return f"no finger touched the part for {free:.2f} s (max {max_free_s:g} s)"
+            return (
+                JudgeFailure.UNTOUCHED,
+                f"no finger touched the part for {free:.2f} s (max {max_free_s:g} s)",
+            )
         kind = self.final_grasp()
         if kind is not GraspKind.HOLE:
-            return f"final grasp: {kind.value}, not a hole grasp"
+            return JudgeFailure.NOT_HOLE_GRASP, f"final grasp: {kind.value}, not a hole grasp"
         frames = self.camera_frames_steering()
         if frames:
-            return f"{frames} camera frame(s) used after the Grasp began"
+            return JudgeFailure.CAMERA_USED, f"{frames} camera frame(s) used after the Grasp began"
         return None
 
 
@@ -298,16 +322,17 @@ def judge(
         if p.getContactPoints(bodyA=part_body.body_id, bodyB=gripper_body, linkIndexB=link)
     ]
     inside = [name for name, tip in finger_tips.items() if finger_in_hole(part_body, tip)]
+    code: JudgeFailure | None = None
+    failure: str | None = None
     if on_floor or height < min_height:
+        code = JudgeFailure.ON_FLOOR if not held_by else JudgeFailure.NOT_LIFTED
         failure = "on the floor after the lift" if not held_by else "not lifted off the floor"
     elif not held_by:
-        failure = "not held"
+        code, failure = JudgeFailure.NOT_HELD, "not held"
     elif tilt > max_tilt_deg:
-        failure = f"not upright: axis {tilt:.1f} deg from vertical"
+        code, failure = JudgeFailure.NOT_UPRIGHT, f"not upright: axis {tilt:.1f} deg from vertical"
     elif not inside:
-        failure = "no finger inside the hole"
-    else:
-        failure = None
+        code, failure = JudgeFailure.NO_FINGER_IN_HOLE, "no finger inside the hole"
     return Verdict(
         success=failure is None,
         failure=failure,
@@ -315,6 +340,7 @@ def judge(
         height_m=height,
         held=bool(held_by),
         finger_in_hole=inside[0] if inside else None,
+        code=code,
     )
 
 

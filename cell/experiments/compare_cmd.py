@@ -161,7 +161,8 @@ def format_table(summary: dict[str, Any]) -> str:
         fails: dict[str, int] = {}
         for r in m["per_trial"]:
             if not r["success"]:
-                fails[str(r["failure"])] = fails.get(str(r["failure"]), 0) + 1
+                key = f"{r['phase']}: {r.get('failure_code') or 'uncoded'}"
+                fails[key] = fails.get(key, 0) + 1
         for reason, count in sorted(fails.items(), key=lambda kv: -kv[1]):
             lines.append(f"  failed {count} x {reason}")
     r = summary["tact_ratio_pivot_over_regrasp"]

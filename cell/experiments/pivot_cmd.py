@@ -338,7 +338,7 @@ def _format_summary(summary: dict[str, Any], results: list[TrialResult], wall: f
     failures: dict[str, int] = {}
     for r in results:
         if not r.success and r.failure:
-            key = r.failure.split(":")[0] if "guard" in r.failure else r.failure
+            key = r.failure_key
             failures[key] = failures.get(key, 0) + 1
     for reason, count in sorted(failures.items(), key=lambda kv: -kv[1]):
         lines.append(f"  failed    {count} x {reason}")

@@ -39,7 +39,7 @@ from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
 from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
-from skills.status import Status
+from skills.status import Failure, Status, StepResult
 
 
 @dataclass(frozen=True)
@@ -159,6 +159,14 @@ class TrialResult:
     recovered: bool = False  #: the in-hand Align failed and the pick from above saved the part
     phase_times_s: dict[str, float] = field(default_factory=dict)
     l_a_trace: dict[str, float | None] = field(default_factory=dict)
+    #: what the reports count failures by: a skill's Failure or the judge's JudgeFailure code
+    failure_code: str | None = None
+
+    @property
+    def failure_key(self) -> str:
+        """A failure counted as one kind: its phase and code (never the message's numbers)."""
+        key = f"{self.phase}: {self.failure_code or 'uncoded'}"
+        return f"{key}, recovered" if self.recovered else key
 
     def to_json(self) -> dict[str, object]:
         return dataclasses.asdict(self)
@@ -239,7 +247,7 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
 def judge_trial(
     tw: TrialWorld,
     seed: int,
-    failure: str | None,
+    failure: StepResult | None,
     phase: str,
     on_frame: Callable[[SimWorld, SimRobot], None] | None = None,
     frame_every: int = 6,
@@ -261,10 +269,15 @@ def judge_trial(
         tips,
     )
     success = failure is None and verdict.success
+    if failure is not None:
+        text, code = failure.message, failure.code
+    else:
+        text, code = verdict.failure, verdict.code
     return {
         "seed": seed,
         "success": success,
-        "failure": None if success else (failure or verdict.failure),
+        "failure": None if success else text,
+        "failure_code": None if success or code is None else str(code),
         "phase": phase,
         "tilt_deg": verdict.tilt_deg,
         "height_m": verdict.height_m,
@@ -304,9 +317,9 @@ def run_trial(
         outer="finger_a",
     )
     try:
-        failure: str | None = None
+        failure: StepResult | None = None
         phase_name = "done"
-        recovered_by: str | None = None
+        recovered_by: StepResult | None = None
         t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
         seen: dict[str, float] = {}
         frame = setup.frame()
@@ -318,7 +331,7 @@ def run_trial(
                 (setup.layout.bin_center[0], setup.layout.bin_center[1]),
                 setup.nominal_center(),
             )
-            failure = _run_skill("look", look, world, robot, t_end, on_frame, frame_every)
+            failure = run_skill("look", look, world, robot, t_end, on_frame, frame_every)
             if failure is None and look.result is not None:
                 d = look.result
                 seen = {"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw}
@@ -343,7 +356,7 @@ def run_trial(
                 watch.grasp_began()
             else:
                 watch.enter(phase_name)
-            failure = _run_skill(
+            failure = run_skill(
                 phase_name,
                 skill,
                 world,
@@ -363,18 +376,20 @@ def run_trial(
             watch.enter("recovery")
             recovery = PickFromAbove(lambda: tilt.frame, setup.part, params, dev)
             t_rec = world.clock.now() + setup.max_time
-            if _run_skill("recovery", recovery, world, robot, t_rec, on_frame, frame_every) is None:
+            if run_skill("recovery", recovery, world, robot, t_rec, on_frame, frame_every) is None:
                 recovered_by = failure
                 failure = None
         watch.stop()
         fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
         end_ok = bool(fields["success"])
-        strict = watch.failure()
+        strict = watch.failure_with_code()
         recovered = recovered_by is not None and end_ok
         if recovered:
-            fields["failure"] = f"{recovered_by}; recovered by the pick from above"
+            assert recovered_by is not None
+            fields["failure"] = f"{recovered_by.message}; recovered by the pick from above"
+            fields["failure_code"] = str(recovered_by.code) if recovered_by.code else None
         elif end_ok and strict is not None:
-            fields["failure"] = strict
+            fields["failure_code"], fields["failure"] = str(strict[0]), strict[1]
         fields["success"] = end_ok and strict is None and recovered_by is None
         ends = watch.phase_starts
         phase_times = watch.phase_times(world.clock.now())
@@ -397,10 +412,10 @@ def run_trial(
         world.close()
 
 
-def _run_skill(  # type: ignore[no-untyped-def]
+def run_skill(  # type: ignore[no-untyped-def]
     name, skill, world, robot, t_end, on_frame, frame_every, on_tick=None
-) -> str | None:
-    """Tick ``skill`` with the world until it ends; its failure message, or None."""
+) -> StepResult | None:
+    """Tick ``skill`` with the world until it ends; its failure (message and code), or None."""
     result = skill.tick()
     while not result.done and world.clock.now() < t_end:
         if on_tick is not None:
@@ -411,8 +426,8 @@ def _run_skill(  # type: ignore[no-untyped-def]
         result = skill.tick()
     if not result.done:
         skill.halt()
-        return f"{name}: out of time"
-    return result.message if result.status is Status.FAILURE else None
+        return StepResult(Status.FAILURE, f"{name}: out of time", Failure.TIMEOUT)
+    return result if result.status is Status.FAILURE else None
 
 
 def summarize(part: str, results: list[TrialResult]) -> dict[str, object]:

@@ -36,9 +36,9 @@ from numpy.typing import NDArray
 from cell.experiments.pivot_run import (
     TrialResult,
     TrialSetup,
-    _run_skill,
     judge_trial,
     open_trial_world,
+    run_skill,
 )
 from drivers.arm import MotionState
 from drivers.pose import Pose
@@ -48,6 +48,7 @@ from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH, FT_RADIUS, GRIPPER_B
 from sim.world import SimWorld
 from skills.pivot import PickFromAbove
 from skills.regrasp import Regrasp, RegraspOptions
+from skills.status import StepResult
 
 VOXEL = 0.005  #: m, edge of the swept-volume grid's voxels
 #: m, the dense grid's extent in the world (the UR5 reaches 0.85 m); beyond it a set takes over.
@@ -254,10 +255,10 @@ def run_regrasp_trial(
             ("regrasp", regrasp),
             ("align", PickFromAbove(regrasp.standing_frame, setup.part, params, dev)),
         ]
-        failure: str | None = None
+        failure: StepResult | None = None
         phase_name = "done"
         for phase_name, skill in phases:
-            failure = _run_skill(phase_name, skill, world, robot, t_end, on_frame, frame_every)
+            failure = run_skill(phase_name, skill, world, robot, t_end, on_frame, frame_every)
             if failure is not None:
                 break
         else:

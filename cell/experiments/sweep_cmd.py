@@ -360,7 +360,7 @@ def _failure_counts(results: list[TrialResult]) -> str:
     counts: dict[str, int] = {}
     for r in results:
         if not r.success and r.failure:
-            key = r.failure.split(":")[0] if "guard" in r.failure else r.failure
+            key = r.failure_key
             counts[key] = counts.get(key, 0) + 1
     return "; ".join(f"{c} x {why}" for why, c in sorted(counts.items(), key=lambda kv: -kv[1]))
 

@@ -109,20 +109,22 @@ def test_a_skill_that_lets_go_is_not_a_pivot(setup: TrialSetup) -> None:
     assert not r.inner_in_hole_all_along  # the watch saw the finger leave the hole
     assert r.longest_free_s > 1.0  # and the part untouched while it was out
     assert not r.success
+    # counted by its phase and code, whatever the sentence says
+    assert r.failure_code is not None and r.failure_key == f"{r.phase}: {r.failure_code}"
 
 
 def test_a_skill_that_looks_is_not_a_pivot(setup: TrialSetup) -> None:
     r = run_trial(setup, SEED, make_align=_align(LooksAlign))
     assert r.end_state_ok  # the same hole grasp at the end ...
     assert r.camera_frames_steering == 1  # ... but steered by a frame
-    assert not r.success
+    assert not r.success and r.failure_code == "camera_used"
     assert r.inner_in_hole_all_along and r.final_grasp == "hole"
 
 
 def test_a_skill_that_ends_in_a_pinch_is_not_a_pivot(setup: TrialSetup) -> None:
     r = run_trial(setup, SEED, make_align=OuterPinch)
     assert r.final_grasp == "pinch"
-    assert not r.success
+    assert not r.success and r.failure_code in ("not_hole_grasp", "no_finger_in_hole")
 
 
 def test_the_regrasp_way_is_not_a_pivot_either(setup: TrialSetup) -> None:
