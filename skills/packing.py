@@ -44,6 +44,7 @@ from skills.slot import (
     horizontal,
     travel_path,
 )
+from skills.status import Failure
 
 
 @dataclass(frozen=True)
@@ -173,7 +174,7 @@ class PackInBox(SequenceSkill):
         dev, p, g = self.dev, self.params, self.params.guard
         return [
             self.descend.motion,
-            check("clear way down", dev, g, self._clear_descent),
+            check("clear way down", dev, g, self._clear_descent, Failure.BLOCKED),
             wait("hold still above the floor", dev, g, p.settle),
             self.floor.motion,
             check("on the floor", dev, g, self._on_floor),
@@ -184,10 +185,22 @@ class PackInBox(SequenceSkill):
         return [
             dev.move("lift off the floor", g, lambda: self._move_by(0.0, 0.0, p.lift_off)),
             self.push_x.motion,
-            check("+x contact", dev, g, lambda: self._felt(self.push_x, "wall or part on +x")),
+            check(
+                "+x contact",
+                dev,
+                g,
+                lambda: self._felt(self.push_x, "wall or part on +x"),
+                Failure.NO_CONTACT,
+            ),
             dev.move("ease off +x", g, lambda: self._move_by(-p.back_off, 0.0)),
             self.push_y.motion,
-            check("+y contact", dev, g, lambda: self._felt(self.push_y, "wall or part on +y")),
+            check(
+                "+y contact",
+                dev,
+                g,
+                lambda: self._felt(self.push_y, "wall or part on +y"),
+                Failure.NO_CONTACT,
+            ),
             self.push_x_again.motion,
             check("where it went", dev, g, self._placed),
         ]

@@ -330,7 +330,9 @@ class Soak:
         # A packing that stopped because the box was in the way (a packed part pushed out of
         # its place by an earlier abort): the person sees a box that needs sorting and ships
         # it, as for a full one; otherwise every later packing would stop at the same spot.
-        blocked = bool(info.get("stop_reason")) and Failure.BLOCKED in info["abort_codes"]
+        box_codes = {Failure.BLOCKED, Failure.NO_CONTACT}
+        codes = info["abort_codes"]  # the stop's own cause is the last abort before it
+        blocked = bool(info.get("stop_reason")) and bool(codes) and codes[-1] in box_codes
         if len(self.filled) >= self.places or blocked or not self._box_in_order(in_box):
             for body in in_box:
                 backend.remove_part(body)
