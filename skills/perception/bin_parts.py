@@ -308,6 +308,7 @@ def fit_segments(
     # (1.25 mm at 0.5 m) would otherwise push the 80th percentile 1 mm up, 13 % of a rail.
     smooth = cv2.medianBlur(np.nan_to_num(hm.height, nan=0.0).astype(np.float32), 5).reshape(-1)
     uv_all = np.column_stack([dot_last(pts, e1), dot_last(pts, e2)])
+    inputs = _FitInputs(uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam)
     out: list[Detection] = []
     for _, idx in sorted(_groups(labels).items()):
         if len(idx) < settings.min_pixels and (
@@ -315,252 +316,398 @@ def fit_segments(
             or float(np.percentile(smooth[idx], 80)) >= settings.thin_part
         ):
             continue  # too small for a part, and not the end of a thin one (_hidden_thin_part)
-        for det in _fit_one(
-            idx, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam
-        ):
-            out.append(det)
+        out.extend(_fit_one(idx, inputs))
     return out
 
 
-def _fit_one(
-    idx: NDArray[np.int64],
-    uv_all: NDArray[np.float64],
-    hgt: NDArray[np.float64],
-    smooth: NDArray[np.float32],
-    hm: HeightMap,
-    e1: NDArray[np.float64],
-    e2: NDArray[np.float64],
-    catalogue: list[Part],
-    robot_xy: tuple[float, float],
-    settings: DetectorSettings,
-    cam: NDArray[np.float64],
-    split: bool = True,
-) -> list[Detection]:
-    h = hgt[idx]
+@dataclass(frozen=True)
+class _FitInputs:
+    """What every segment's fit reads besides its own pixels, computed once per frame: each
+    pixel's point in the floor plane's basis (``uv``, m), its height (``hgt``, -1 where
+    invalid) and its 5 x 5 median-filtered height (``smooth``); the basis ``e1``, ``e2``; the
+    catalogue, the robot's place (a tube's hole end is the far one) and the camera's (``cam``,
+    which end a cup shows)."""
+
+    uv: NDArray[np.float64]
+    hgt: NDArray[np.float64]
+    smooth: NDArray[np.float32]
+    hm: HeightMap
+    e1: NDArray[np.float64]
+    e2: NDArray[np.float64]
+    catalogue: list[Part]
+    robot_xy: tuple[float, float]
+    settings: DetectorSettings
+    cam: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One segment measured on its upper half (the points above half its top): the principal
+    axis through their ``mean``, where they lie along (``s``) and across (``c``) it, the
+    width and length they span, the outer size from the heights, and the thin catalogue part
+    of that size (if any)."""
+
+    idx: NDArray[np.int64]  #: flat pixel indices of the whole segment
+    upper: NDArray[np.int64]  #: those of its upper half
+    uv: NDArray[np.float64]  #: the upper half's points (m, plane basis)
+    top: float
+    outer: float
+    mean: NDArray[np.float64]
+    axis: NDArray[np.float64]
+    across: NDArray[np.float64]
+    s: NDArray[np.float64]
+    c: NDArray[np.float64]
+    width: float
+    length: float
+    thin: Part | None
+
+
+@dataclass(frozen=True)
+class _Placement:
+    """A part found in a segment, before its hole end is chosen: the catalogue part, the fit's
+    error, whether it rests on the catalogue length (``partial``: mostly hidden), its axis and
+    the direction across it, its centre (plane basis) and the length seen."""
+
+    part: Part
+    err: float
+    partial: bool
+    axis: NDArray[np.float64]
+    across: NDArray[np.float64]
+    center_uv: NDArray[np.float64]
+    length: float
+
+
+def _fit_one(idx: NDArray[np.int64], inputs: _FitInputs, split: bool = True) -> list[Detection]:
+    """The parts in one segment: one fit, or, when it is as wide as several parts side by side
+    and ``split`` allows, one per strip (or cluster), each fitted on its own."""
+    seg = _measure(idx, inputs)
+    if seg is None:
+        return []
+    if split and _side_by_side(seg, inputs.settings):
+        return _fit_side_by_side(seg, inputs)
+    placed = _place(seg, inputs)
+    if placed is None or not _reported(seg, placed, inputs.settings):
+        return []
+    return [_detection(seg, placed, inputs)]
+
+
+def _measure(idx: NDArray[np.int64], inputs: _FitInputs) -> _Segment | None:
+    """The segment's upper half along its principal axis (None: too few points for a fit)."""
+    h = inputs.hgt[idx]
     # The 80th percentile of a lying cylinder's heights is within 2 % of its diameter, and it
     # keeps the depth noise (1.25 mm at 0.5 m) from inflating thin parts like the rail.
     top = float(np.percentile(h, 80))
-    outer = float(np.percentile(smooth[idx], 80))
+    outer = float(np.percentile(inputs.smooth[idx], 80))
     upper = idx[h > 0.5 * top]
     if len(upper) < 20:
-        return []
-    uv = uv_all[upper].astype(np.float64)
+        return None
+    uv = inputs.uv[upper].astype(np.float64)
     mean, axis = _principal(uv)
     across = np.array([-axis[1], axis[0]])
     s = dot_last(uv - mean, axis)
     c = dot_last(uv - mean, across)
     width = float(np.percentile(c, 99) - np.percentile(c, 1))
-    # Two thin parts side by side, the second partly under a taller neighbour's overhang: a
-    # segment as long as the part but wider by a good part of its width (one alone was at most
-    # 1.2 times as wide in 600 scenes: its top and a little of a side face).
-    thin = _thin_match(outer, catalogue, settings)
+    thin = _thin_match(outer, inputs.catalogue, inputs.settings)
     length = float(np.percentile(s, 99) - np.percentile(s, 1))
+    return _Segment(idx, upper, uv, top, outer, mean, axis, across, s, c, width, length, thin)
+
+
+def _side_by_side(seg: _Segment, settings: DetectorSettings) -> bool:
+    """Touching boxes leave no valley: a segment ``n`` parts wide is ``n`` parts side by side.
+
+    Two thin parts side by side, the second partly under a taller neighbour's overhang: a
+    segment as long as the part but wider by a good part of its width (one alone was at most
+    1.2 times as wide in 600 scenes: its top and a little of a side face)."""
+    thin = seg.thin
     pair = (
         thin is not None
-        and width > settings.thin_pair * thin.outer
-        and abs(length - thin.length) < settings.match_tolerance * thin.length
+        and seg.width > settings.thin_pair * thin.outer
+        and abs(seg.length - thin.length) < settings.match_tolerance * thin.length
     )
-    # Touching boxes leave no valley: a segment n parts wide is n parts side by side; each
-    # strip is then fitted on its own (its own axis and length).
-    if split and (width > 1.6 * outer or pair):
-        # Side by side and offset along their axes, two parts make a blob whose principal axis
-        # is diagonal; the smallest enclosing rectangle stays aligned with them.
-        (_, _), (rw, rh), ang = cv2.minAreaRect((uv * 1e3).astype(np.float32))
-        a = math.radians(ang)
-        cand = np.array([math.cos(a), math.sin(a)])
-        if rh > rw:
-            cand = np.array([-cand[1], cand[0]])
-        axis = cand if float(cand @ axis) >= 0 else -cand
-        across = np.array([-axis[1], axis[0]])
-        c = dot_last(uv - mean, across)
-        width = float(np.percentile(c, 99) - np.percentile(c, 1))
-        strips = max(2, int(round(width / max(outer, 1e-6))))
-        c_all = dot_last(uv_all[idx] - mean, across)
-        c_lo, c_hi = float(np.percentile(c, 1)), float(np.percentile(c, 99))
-        edges = np.linspace(c_lo, c_hi, strips + 1)
-        clipped, c_true = -1, 0.0
-        if thin is not None and width < (strips - 0.25) * thin.outer:
-            # Thin parts narrower together than the catalogue says: the one beside the taller
-            # neighbour is partly under it. The strips are the catalogue's width from the free
-            # side; the last, clipped one's centre is placed a whole width further on.
-            win = _window(idx, hm, 0.01)
-            s_in = (float(np.percentile(s, 5)), float(np.percentile(s, 95)))
-            free = [
-                _side_free(uv_all[win], hgt[win], mean, axis, across, s_in, edge, sign, settings)
-                for edge, sign in ((c_lo, -1.0), (c_hi, 1.0))
-            ]
-            steps = thin.outer * np.arange(strips + 1)
-            if free == [True, False]:
-                edges, clipped = c_lo + steps, strips - 1
-                c_true = c_lo + (strips - 0.5) * thin.outer
-            elif free == [False, True]:
-                edges, clipped = (c_hi - steps)[::-1].copy(), 0
-                c_true = c_hi - (strips - 0.5) * thin.outer
-        edges[0], edges[-1] = -np.inf, np.inf
-        out: list[Detection] = []
-        for j in range(strips):
-            sub = idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
-            if len(sub) >= settings.min_pixels // 2:
-                found = _fit_one(
-                    sub, uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam, False
-                )
-                if j == clipped:
-                    found = [_moved_across(d, mean, across, c_true, e1, e2) for d in found]
-                out += found
-        if len(out) < strips:
-            # Parts touching end to side (a Z of two ducts) are not strips: split the segment
-            # into as many compact clusters instead, and keep that if it explains more of it.
-            centres = _clusters(uv * 1e3, strips)
-            pts_all = uv_all[idx] * 1e3
-            dist = np.stack([np.hypot(*(pts_all - c).T) for c in centres])
-            nearest = np.argmin(dist, axis=0)
-            alt: list[Detection] = []
-            for j in range(strips):
-                sub = idx[nearest == j]
-                if len(sub) >= settings.min_pixels:
-                    alt += _fit_one(
-                        sub,
-                        uv_all,
-                        hgt,
-                        smooth,
-                        hm,
-                        e1,
-                        e2,
-                        catalogue,
-                        robot_xy,
-                        settings,
-                        cam,
-                        False,
-                    )
-            if len(alt) > len(out):
-                out = alt
-        return out
-    dets = []
-    for sel in (np.ones(len(c), bool),):
-        hs = hgt[upper][sel]
-        # The crest: heights near the part's top. Bounded above too, so that a few pixels of a
-        # taller neighbour at the segment's edge do not pull the centre towards it.
-        # Narrow (3 % of the height): seen obliquely, a cylinder's far flank is hidden, so a wide
-        # band would be lopsided towards the camera.
-        crest = (hs > 0.97 * top) & (hs < top + max(0.1 * top, 0.004))
-        if np.count_nonzero(crest) < 5:
-            crest = hs > 0.9 * top
-        # The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
-        # than wide; its whole top only 1.5 times): its direction is the better axis, unless
-        # the whole top is the longer strip. Not for a thin part: its flat top is all crest.
-        pts = uv[sel][crest]
-        if len(pts) >= 30 and outer >= settings.thin_part:
-            _, crest_axis = _principal(pts)
-            rel = pts - pts.mean(axis=0)
-            along = dot_last(rel, crest_axis)
-            side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
-            aspect = float(np.std(along)) / max(float(np.std(side)), 1e-9)
-            if aspect > 2.5 and aspect > float(np.std(s)) / max(float(np.std(c)), 1e-9):
-                axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
-                across = np.array([-axis[1], axis[0]])
-                s = dot_last(uv - mean, axis)
-                c = dot_last(uv - mean, across)
-        c_mid = float(np.median(c[sel][crest]))
-        s_lo, s_hi = float(np.percentile(s[sel], 1)), float(np.percentile(s[sel], 99))
-        s_mid = 0.5 * (s_lo + s_hi)
-        center_uv = mean + s_mid * axis + c_mid * across
-        length = s_hi - s_lo
-        part, err = _match(length, outer, catalogue, settings.match_tolerance)
-        partial = False
-        if part is None and thin is not None:
-            # A thin part partly hidden under a taller one: see _hidden_thin_part.
-            stub = length < settings.min_hidden * thin.length
-            # A stub's rest is looked for under its neighbour, and its axis is uncertain (11 by
-            # 8 mm): the enclosing rectangle's long side is tried after the principal axis.
-            win = _window(idx, hm, thin.length if stub else 0.02)
-            axes = [(axis, s_lo, s_hi, c_mid, width)]
-            if stub:
-                axes.append(_rect_axis(uv, mean, axis))
-            relief = float(np.percentile(smooth[idx], 90) - np.percentile(smooth[idx], 10))
-            for ax, lo, hi, mid, wide in axes:
-                ac = np.array([-ax[1], ax[0]])
-                found = _hidden_thin_part(
-                    uv_all[win],
-                    hgt[win],
-                    mean,
-                    ax,
-                    ac,
-                    lo,
-                    hi,
-                    mid,
-                    outer,
-                    wide,
-                    relief,
-                    catalogue,
-                    settings,
-                )
-                if found is not None:
-                    part, s_mid = found
-                    axis, across, c_mid = ax, ac, mid
-                    center_uv = mean + s_mid * axis + c_mid * across
-                    err, partial = settings.match_tolerance, True
-                    break
-        if part is None:  # matches nothing in the catalogue: not reported as a part
-            continue
-        if len(idx) < settings.min_pixels and not partial:
-            continue  # small segments are only reported as thin parts' stubs
-        if part.outer >= settings.thin_part and width < settings.min_width * part.outer:
-            # As tall and as long as the part but much narrower: a strip of a bigger part's
-            # flank cut off by the watershed (one of a can's gave a cup), not a part.
-            continue
-        center = (
-            center_uv[0] * e1
-            + center_uv[1] * e2
-            + (hm.plane.offset + 0.5 * outer) * (hm.plane.normal)
+    return seg.width > 1.6 * seg.outer or pair
+
+
+# ----------------------------------------------------------- a segment of several parts
+def _fit_side_by_side(seg: _Segment, inputs: _FitInputs) -> list[Detection]:
+    """Each strip across the segment fitted on its own (its own axis and length); compact
+    clusters instead when they explain more of it."""
+    axis, across, c, width = _rect_aligned(seg)
+    strips = max(2, int(round(width / max(seg.outer, 1e-6))))
+    out = _fit_strips(seg, inputs, axis, across, c, width, strips)
+    if len(out) < strips:
+        # Parts touching end to side (a Z of two ducts) are not strips: split the segment
+        # into as many compact clusters instead, and keep that if it explains more of it.
+        alt = _fit_clusters(seg, inputs, strips)
+        if len(alt) > len(out):
+            out = alt
+    return out
+
+
+def _rect_aligned(
+    seg: _Segment,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]:
+    """Side by side and offset along their axes, two parts make a blob whose principal axis
+    is diagonal; the smallest enclosing rectangle stays aligned with them. Its axis (turned
+    like the principal one), the direction across, the points across it and the width."""
+    (_, _), (rw, rh), ang = cv2.minAreaRect((seg.uv * 1e3).astype(np.float32))
+    a = math.radians(ang)
+    cand = np.array([math.cos(a), math.sin(a)])
+    if rh > rw:
+        cand = np.array([-cand[1], cand[0]])
+    axis = cand if float(cand @ seg.axis) >= 0 else -cand
+    across = np.array([-axis[1], axis[0]])
+    c = dot_last(seg.uv - seg.mean, across)
+    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    return axis, across, c, width
+
+
+def _fit_strips(
+    seg: _Segment,
+    inputs: _FitInputs,
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    c: NDArray[np.float64],
+    width: float,
+    strips: int,
+) -> list[Detection]:
+    """The segment cut into ``strips`` equal strips across ``axis`` (or, for thin parts, strips
+    of the catalogue width from the free side), each fitted on its own."""
+    c_all = dot_last(inputs.uv[seg.idx] - seg.mean, across)
+    c_lo, c_hi = float(np.percentile(c, 1)), float(np.percentile(c, 99))
+    edges = np.linspace(c_lo, c_hi, strips + 1)
+    clipped, c_true = -1, 0.0
+    thin = seg.thin
+    if thin is not None and width < (strips - 0.25) * thin.outer:
+        from_free = _strips_from_free_side(seg, inputs, axis, across, (c_lo, c_hi), strips, thin)
+        if from_free is not None:
+            edges, clipped, c_true = from_free
+    edges[0], edges[-1] = -np.inf, np.inf
+    out: list[Detection] = []
+    for j in range(strips):
+        sub = seg.idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
+        if len(sub) >= inputs.settings.min_pixels // 2:
+            found = _fit_one(sub, inputs, False)
+            if j == clipped:
+                e1, e2 = inputs.e1, inputs.e2
+                found = [_moved_across(d, seg.mean, across, c_true, e1, e2) for d in found]
+            out += found
+    return out
+
+
+def _strips_from_free_side(
+    seg: _Segment,
+    inputs: _FitInputs,
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    c_range: tuple[float, float],
+    strips: int,
+    thin: Part,
+) -> tuple[NDArray[np.float64], int, float] | None:
+    """Thin parts narrower together than the catalogue says: the one beside the taller
+    neighbour is partly under it. The strips are the catalogue's width from the free side;
+    the last, clipped one's centre is placed a whole width further on. Returns the strips'
+    edges across, the clipped strip and its centre across; None when no side is the free one.
+    """
+    c_lo, c_hi = c_range
+    win = _window(seg.idx, inputs.hm, 0.01)
+    s_in = (float(np.percentile(seg.s, 5)), float(np.percentile(seg.s, 95)))
+    uv, hgt = inputs.uv[win], inputs.hgt[win]
+    free = [
+        _side_free(uv, hgt, seg.mean, axis, across, s_in, edge, sign, inputs.settings)
+        for edge, sign in ((c_lo, -1.0), (c_hi, 1.0))
+    ]
+    steps = thin.outer * np.arange(strips + 1)
+    if free == [True, False]:
+        return c_lo + steps, strips - 1, c_lo + (strips - 0.5) * thin.outer
+    if free == [False, True]:
+        return (c_hi - steps)[::-1].copy(), 0, c_hi - (strips - 0.5) * thin.outer
+    return None
+
+
+def _fit_clusters(seg: _Segment, inputs: _FitInputs, n: int) -> list[Detection]:
+    """The segment split into ``n`` compact clusters, each fitted on its own."""
+    centres = _clusters(seg.uv * 1e3, n)
+    pts_all = inputs.uv[seg.idx] * 1e3
+    dist = np.stack([np.hypot(*(pts_all - c).T) for c in centres])
+    nearest = np.argmin(dist, axis=0)
+    alt: list[Detection] = []
+    for j in range(n):
+        sub = seg.idx[nearest == j]
+        if len(sub) >= inputs.settings.min_pixels:
+            alt += _fit_one(sub, inputs, False)
+    return alt
+
+
+# ------------------------------------------------------------------ a segment of one part
+def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
+    """The part the segment shows, from its crest's axis and its extent along it; a thin part
+    mostly hidden under a taller one from its free end (None: it matches no catalogue part)."""
+    settings = inputs.settings
+    crest = _crest(seg, inputs.hgt[seg.upper])
+    axis, across, s, c = _crest_axis(seg, crest, settings)
+    c_mid = float(np.median(c[crest]))
+    s_lo, s_hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
+    s_mid = 0.5 * (s_lo + s_hi)
+    center_uv = seg.mean + s_mid * axis + c_mid * across
+    length = s_hi - s_lo
+    part, err = _match(length, seg.outer, inputs.catalogue, settings.match_tolerance)
+    if part is not None:
+        return _Placement(part, err, False, axis, across, center_uv, length)
+    if seg.thin is None:
+        return None
+    # A thin part partly hidden under a taller one: see _hidden_thin_part.
+    hidden = _hidden_under_neighbour(seg, inputs, seg.thin, axis, s_lo, s_hi, c_mid)
+    if hidden is None:
+        return None
+    part, axis, across, center_uv = hidden
+    return _Placement(part, settings.match_tolerance, True, axis, across, center_uv, length)
+
+
+def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the upper half's points (heights ``hs``) are on the crest, near the top.
+
+    Bounded above too, so that a few pixels of a taller neighbour at the segment's edge do not
+    pull the centre towards it. Narrow (3 % of the height): seen obliquely, a cylinder's far
+    flank is hidden, so a wide band would be lopsided towards the camera."""
+    top = seg.top
+    crest = (hs > 0.97 * top) & (hs < top + max(0.1 * top, 0.004))
+    if np.count_nonzero(crest) < 5:
+        crest = hs > 0.9 * top
+    return crest
+
+
+def _crest_axis(
+    seg: _Segment, crest: NDArray[np.bool_], settings: DetectorSettings
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The axis, the direction across and the upper points along and across it: the crest's
+    direction where that is the better axis, else the segment's principal one.
+
+    The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
+    than wide; its whole top only 1.5 times): its direction is the better axis, unless
+    the whole top is the longer strip. Not for a thin part: its flat top is all crest."""
+    axis, across, s, c = seg.axis, seg.across, seg.s, seg.c
+    pts = seg.uv[crest]
+    if len(pts) >= 30 and seg.outer >= settings.thin_part:
+        _, crest_axis = _principal(pts)
+        rel = pts - pts.mean(axis=0)
+        along = dot_last(rel, crest_axis)
+        side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
+        aspect = float(np.std(along)) / max(float(np.std(side)), 1e-9)
+        if aspect > 2.5 and aspect > float(np.std(s)) / max(float(np.std(c)), 1e-9):
+            axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
+            across = np.array([-axis[1], axis[0]])
+            s = dot_last(seg.uv - seg.mean, axis)
+            c = dot_last(seg.uv - seg.mean, across)
+    return axis, across, s, c
+
+
+def _hidden_under_neighbour(
+    seg: _Segment,
+    inputs: _FitInputs,
+    thin: Part,
+    axis: NDArray[np.float64],
+    s_lo: float,
+    s_hi: float,
+    c_mid: float,
+) -> tuple[Part, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None:
+    """A thin part mostly under a taller neighbour (:func:`_hidden_thin_part`): the part, its
+    axis, the direction across and its centre (plane basis); None if the segment is not one.
+
+    A stub's rest is looked for under its neighbour, and its axis is uncertain (11 by 8 mm):
+    the enclosing rectangle's long side is tried after the principal axis."""
+    settings = inputs.settings
+    stub = s_hi - s_lo < settings.min_hidden * thin.length
+    win = _window(seg.idx, inputs.hm, thin.length if stub else 0.02)
+    axes = [(axis, s_lo, s_hi, c_mid, seg.width)]
+    if stub:
+        axes.append(_rect_axis(seg.uv, seg.mean, axis))
+    smooth = inputs.smooth[seg.idx]
+    relief = float(np.percentile(smooth, 90) - np.percentile(smooth, 10))
+    uv, hgt = inputs.uv[win], inputs.hgt[win]
+    for ax, lo, hi, mid, wide in axes:
+        ac = np.array([-ax[1], ax[0]])
+        found = _hidden_thin_part(
+            uv, hgt, seg.mean, ax, ac, lo, hi, mid, seg.outer, wide, relief, inputs.catalogue,
+            settings,
         )
-        direction = axis[0] * e1 + axis[1] * e2
-        half = 0.5 * (part.length if part is not None else length)
-        ends = [center + half * direction, center - half * direction]
-        seen = True
-        if part.open_ends == 1:
-            # One view shows one end face: the end turned towards the camera. Its inside seen
-            # through the opening means it is the open end; its face without an inside means
-            # the closed one, so the open end is the other.
-            cam_uv = np.array([cam @ e1, cam @ e2])
-            facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
-            sign = 1.0 if facing == 0 else -1.0
-            # Only the pixels around this part matter: one pass picks them.
-            near = _window(idx, hm, 0.25 * part.length + part.outer)
-            near = near[
-                np.abs(uv_all[near] - center_uv).max(axis=1) < 0.5 * part.length + part.outer
-            ]
-            inside = _inside_seen(uv_all[near], hgt[near], center_uv, sign * axis, across, part)
-            lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
-            height = float(cam @ hm.plane.normal - hm.plane.offset)
-            # Between a clear view inside and none at all the view is not trusted: undecided.
-            face = _face_seen(uv_all[near], hgt[near], center_uv, sign * axis, across, part)
-            is_open = inside >= settings.min_inside
-            is_closed = inside <= settings.max_closed and face >= settings.min_face
-            seen = lateral / max(height, 1e-6) > settings.min_end_view and (is_open or is_closed)
-            choice = facing if is_open else 1 - facing
-        else:  # a tube: the end farther from the robot
-            d = [math.hypot(e[0] - robot_xy[0], e[1] - robot_xy[1]) for e in ends]
-            choice = 0 if d[0] >= d[1] else 1
-        end = ends[choice]
-        toward = end - center
-        yaw = math.atan2(toward[1], toward[0])
-        conf = float(math.exp(-((err / 0.1) ** 2))) if part is not None else 0.0
-        if partial:  # the centre rests on the catalogue length, not on a seen extent
-            conf = 0.2
-        dets.append(
-            Detection(
-                center=center,
-                yaw=yaw,
-                length=length,
-                outer=outer,
-                part=None if part is None else part.name,
-                open_end=end,
-                open_end_seen=seen,
-                confidence=conf * (1.0 if seen else 0.5),
-                pixels=len(idx),
-            )
-        )
-    return dets
+        if found is not None:
+            part, s_mid = found
+            return part, ax, ac, seg.mean + s_mid * ax + mid * ac
+    return None
+
+
+def _reported(seg: _Segment, placed: _Placement, settings: DetectorSettings) -> bool:
+    """Whether a placed part is reported: a small segment only as a thin part's stub, and not
+    a strip of a bigger part's flank."""
+    if len(seg.idx) < settings.min_pixels and not placed.partial:
+        return False  # small segments are only reported as thin parts' stubs
+    part = placed.part
+    # As tall and as long as the part but much narrower: a strip of a bigger part's flank cut
+    # off by the watershed (one of a can's gave a cup), not a part.
+    return not (part.outer >= settings.thin_part and seg.width < settings.min_width * part.outer)
+
+
+def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detection:
+    """The placed part in the base frame, with the end for the hole finger."""
+    hm, e1, e2, part = inputs.hm, inputs.e1, inputs.e2, placed.part
+    center_uv, axis = placed.center_uv, placed.axis
+    center = center_uv[0] * e1 + center_uv[1] * e2 + (hm.plane.offset + 0.5 * seg.outer) * (
+        hm.plane.normal
+    )
+    direction = axis[0] * e1 + axis[1] * e2
+    half = 0.5 * part.length
+    ends = [center + half * direction, center - half * direction]
+    if part.open_ends == 1:
+        choice, seen = _open_end_in_view(seg, placed, inputs)
+    else:  # a tube: the end farther from the robot
+        d = [math.hypot(e[0] - inputs.robot_xy[0], e[1] - inputs.robot_xy[1]) for e in ends]
+        choice, seen = (0 if d[0] >= d[1] else 1), True
+    end = ends[choice]
+    toward = end - center
+    yaw = math.atan2(toward[1], toward[0])
+    conf = float(math.exp(-((placed.err / 0.1) ** 2)))
+    if placed.partial:  # the centre rests on the catalogue length, not on a seen extent
+        conf = 0.2
+    return Detection(
+        center=center,
+        yaw=yaw,
+        length=placed.length,
+        outer=seg.outer,
+        part=part.name,
+        open_end=end,
+        open_end_seen=seen,
+        confidence=conf * (1.0 if seen else 0.5),
+        pixels=len(seg.idx),
+    )
+
+
+def _open_end_in_view(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> tuple[int, bool]:
+    """A cup's or bottle's open end: 0 the ``+axis`` end, 1 the other; and whether the view
+    decided it.
+
+    One view shows one end face: the end turned towards the camera. Its inside seen through
+    the opening means it is the open end; its face without an inside means the closed one, so
+    the open end is the other. Between a clear view inside and none at all the view is not
+    trusted: undecided."""
+    cam, e1, e2, hm, settings = inputs.cam, inputs.e1, inputs.e2, inputs.hm, inputs.settings
+    part, center_uv, axis, across = placed.part, placed.center_uv, placed.axis, placed.across
+    cam_uv = np.array([cam @ e1, cam @ e2])
+    facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
+    sign = 1.0 if facing == 0 else -1.0
+    # Only the pixels around this part matter: one pass picks them.
+    near = _window(seg.idx, hm, 0.25 * part.length + part.outer)
+    near = near[
+        np.abs(inputs.uv[near] - center_uv).max(axis=1) < 0.5 * part.length + part.outer
+    ]
+    uv, hgt = inputs.uv[near], inputs.hgt[near]
+    inside = _inside_seen(uv, hgt, center_uv, sign * axis, across, part)
+    lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
+    height = float(cam @ hm.plane.normal - hm.plane.offset)
+    face = _face_seen(uv, hgt, center_uv, sign * axis, across, part)
+    is_open = inside >= settings.min_inside
+    is_closed = inside <= settings.max_closed and face >= settings.min_face
+    seen = lateral / max(height, 1e-6) > settings.min_end_view and (is_open or is_closed)
+    return (facing if is_open else 1 - facing), seen
 
 
 def _thin_match(outer: float, catalogue: list[Part], settings: DetectorSettings) -> Part | None:
