@@ -38,6 +38,9 @@ How it moves, and why:
 
 from __future__ import annotations
 
+import bisect
+import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -54,7 +57,9 @@ from drivers.ur5.kinematics import (
     ROTATION_LENGTH,
     TCP_Z,
     dls_step,
+    frame_error_list,
     jacobian,
+    jacobian_frame,
     pose_error,
     residual,
     rotvec_to_matrix,
@@ -105,11 +110,18 @@ class _Path:
             turns.append(turn)
         return cls(tuple(poses), np.cumsum(lengths), np.array(turns), speed, acceleration)
 
-    @property
+    # Cached: the path is frozen, and the follower asks for both every control step.
+    @functools.cached_property
     def length(self) -> float:
         return float(self.cumulative[-1])
 
-    @property
+    @functools.cached_property
+    def _breaks(self) -> list[float]:
+        """``cumulative`` as floats, for :func:`bisect.bisect_right` (numpy's searchsorted
+        with side='right' on a sorted array finds the same index, at several times the cost)."""
+        return self.cumulative.tolist()  # type: ignore[no-any-return]
+
+    @functools.cached_property
     def duration(self) -> float:
         v, a, length = self.speed, self.acceleration, self.length
         if length <= 0.0:
@@ -140,13 +152,25 @@ class _Path:
         formula, with the segment's rotation vector computed once)."""
         if s >= self.length:
             return self.poses[-1]
-        i = int(np.searchsorted(self.cumulative, s, side="right")) - 1
+        return Pose(*self.frame_at(s))
+
+    def frame_at(self, s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`pose_at` as ``(position, rotation)`` arrays, without building a :class:`Pose`
+        (the follower asks every control step; the same numbers, float for float)."""
+        if s >= self.length:
+            end = self.poses[-1]
+            return end.position, end.rotation
+        breaks = self._breaks
+        i = bisect.bisect_right(breaks, s) - 1
         i = min(max(i, 0), len(self.poses) - 2)
-        seg = self.cumulative[i + 1] - self.cumulative[i]
-        u = 0.0 if seg <= 0.0 else float((s - self.cumulative[i]) / seg)
+        seg = breaks[i + 1] - breaks[i]
+        u = 0.0 if seg <= 0.0 else (s - breaks[i]) / seg
         a, b = self.poses[i], self.poses[i + 1]
-        position = a.position + u * (b.position - a.position)
-        return Pose(position, a.rotation @ rotvec_to_matrix(u * self.turns[i]))
+        position = [
+            p + u * (q - p) for p, q in zip(a.position.tolist(), b.position.tolist(), strict=True)
+        ]
+        turn = [u * t for t in self.turns[i].tolist()]
+        return np.array(position), a.rotation @ rotvec_to_matrix(turn)
 
 
 class SimArm:
@@ -187,12 +211,17 @@ class SimArm:
         self._path: _Path | None = None
         self._t = 0.0
         self._servo_target: Pose | None = None
-        self._last_target: Pose | None = None  # the pose commanded for the step just run
+        # The pose commanded for the step just run, as (position, rotation).
+        self._last_target: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._clipped = False  # the last step was slowed to the joint speed limit
         self._over = 0  # control steps in a row with the tool force over the protective limit
         self._protective = False  # the current FAULT is a protective stop
         self._force: dict[str, NDArray[np.float64]] = {}
         self._virtual: Pose | None = None
+        # What _actuate sends, worked out once per control step (see _command_for).
+        self._gains = ([POSITION_GAIN] * 6, [1.0] * 6)
+        self._command_of: tuple[object, object] | None = None
+        self._command: tuple[list[float], list[float], list[float]] = ([], [], [])
         world.before_step(self._control)
         world.before_substep(self._actuate)
 
@@ -402,9 +431,9 @@ class SimArm:
         if self._state is MotionState.FAULT or self._ft is None:
             return False
         # |load - weight| <= |load| + |weight|: most steps need no kinematics to rule it out.
-        load = self._ft.sampled_true_load()[:3]
+        fx, fy, fz = self._ft.sampled_true_load()[:3].tolist()
         weight = TOOL_MASS * self._world.settings.gravity
-        if float(np.sqrt(load @ load)) + weight <= PROTECTIVE_FORCE:
+        if math.sqrt(fx * fx + fy * fy + fz * fz) + weight <= PROTECTIVE_FORCE:
             self._over = 0
             return False
         force = self.contact_force()
@@ -439,7 +468,7 @@ class SimArm:
         """Start a control step from the last target to ``q_next``, within the speed limit."""
         self._q_from = self._q_to.copy()
         dq = q_next - self._q_from
-        biggest = float(np.max(np.abs(dq)))
+        biggest = float(np.abs(dq).max())
         limit = ARM_VELOCITY * self._dt
         self._clipped = biggest > limit
         if self._clipped:
@@ -459,22 +488,31 @@ class SimArm:
         unreachable" otherwise. A servo target the speed limit keeps out of reach for a while
         is not a fault: the arm goes there as fast as it may.
         """
-        jac, pose = jacobian(self._q_to)
+        self._track_frame(target.position, target.rotation, servo)
+
+    def _track_frame(
+        self, position: NDArray[np.float64], rotation: NDArray[np.float64], servo: bool = False
+    ) -> None:
+        """:meth:`_track` to the target ``(position, rotation)``: the arithmetic of
+        :func:`pose_error`, :func:`residual` and :func:`jacobian` on plain floats where it
+        can be, with no :class:`Pose` built (the same numbers; see
+        :func:`drivers.ur5.kinematics.jacobian_frame`)."""
+        jac, here, here_rotation = jacobian_frame(self._q_to)
         if self._last_target is not None:
-            behind = pose_error(self._last_target, pose)
-            if residual(behind) > REACH_TOLERANCE and not (servo and self._clipped):
+            behind = residual(frame_error_list(*self._last_target, here, here_rotation))
+            if behind > REACH_TOLERANCE and not (servo and self._clipped):
                 reason = "joint speed limit" if self._clipped else "target unreachable"
                 self._fault(reason, self._q_to)
                 return
-        err = pose_error(target, pose)
+        err = frame_error_list(position, rotation, here, here_rotation)
         if residual(err) > JUMP:
-            q_next, miss = solve_ik(target, self._q_to)
+            q_next, miss = solve_ik(Pose(position, rotation), self._q_to)
             if miss > REACH_TOLERANCE:
                 self._fault("target unreachable", self._q_to)
                 return
         else:
-            q_next = np.clip(self._q_to + dls_step(jac, err), -ARM_LIMIT, ARM_LIMIT)
-        self._last_target = target
+            q_next = (self._q_to + dls_step(jac, err)).clip(-ARM_LIMIT, ARM_LIMIT)
+        self._last_target = (position, rotation)
         self._advance_to(q_next)
 
     def _follow_path(self) -> None:
@@ -483,7 +521,7 @@ class SimArm:
         self._t += self._dt
         goal = path.poses[-1]
         if self._t <= path.duration + self._dt:
-            self._track(path.pose_at(path.distance_at(self._t)))
+            self._track_frame(*path.frame_at(path.distance_at(self._t)))
             return
         self._q_from = self._q_to.copy()
         d, angle = self.tool_pose().distance(goal)
@@ -503,25 +541,53 @@ class SimArm:
         self._track(self._servo_target, servo=True)
 
     def _actuate(self) -> None:
-        """Before each physics substep: joint targets interpolated through the step, or torques."""
+        """Before each physics substep: joint targets interpolated through the step, or torques.
+
+        The target at substep k of n is ``q_from + (k / n) (q_to - q_from)``, with the step's
+        velocity ``(q_to - q_from) / dt`` as feed-forward.
+        """
         if self._mode == "force":
             self._apply_impedance()
             return
         self._substep += 1
         u = min(self._substep / self._substeps, 1.0)
-        target = self._q_from + u * (self._q_to - self._q_from)
-        self._send(target, (self._q_to - self._q_from) / self._dt)
+        start, change, velocity = self._command_for()
+        self._send_lists([a + u * d for a, d in zip(start, change, strict=True)], velocity)
+
+    def _command_for(self) -> tuple[list[float], list[float], list[float]]:
+        """``(q_from, q_to - q_from, (q_to - q_from) / dt)`` as float lists, worked out once
+        per command rather than on every substep.
+
+        Each of ``_q_from`` and ``_q_to`` is replaced, never changed in place, whenever the
+        command changes, so the pair of objects identifies the command. Float arithmetic
+        element by element gives numpy's elementwise results exactly.
+        """
+        q_from, q_to = self._q_from, self._q_to
+        key = self._command_of
+        if key is None or key[0] is not q_from or key[1] is not q_to:
+            start = q_from.tolist()
+            change = [b - a for a, b in zip(start, q_to.tolist(), strict=True)]
+            dt = self._dt
+            self._command = (start, change, [d / dt for d in change])
+            self._command_of = (q_from, q_to)
+        return self._command
 
     def _send(self, q: NDArray[np.float64], qd: NDArray[np.float64]) -> None:
+        self._send_lists(q.tolist(), qd.tolist())
+
+    def _send_lists(self, q: list[float], qd: list[float]) -> None:
+        """Position control to ``q`` (rad) with ``qd`` (rad/s) feed-forward, every arm joint in
+        one call; the gain lists are built once."""
+        position_gains, velocity_gains = self._gains
         self._p.setJointMotorControlArray(
             self._body,
             self._joints,
             self._p.POSITION_CONTROL,
-            targetPositions=q.tolist(),
-            targetVelocities=qd.tolist(),
+            targetPositions=q,
+            targetVelocities=qd,
             forces=self._effort,
-            positionGains=[POSITION_GAIN] * 6,
-            velocityGains=[1.0] * 6,
+            positionGains=position_gains,
+            velocityGains=velocity_gains,
         )
 
     # --- force mode ----------------------------------------------------------------------
