@@ -266,6 +266,21 @@ def test_a_sequence_stops_at_the_first_failure_and_never_starts_the_rest() -> No
     assert seq.index == 1
 
 
+def test_a_sequence_names_its_current_step_and_the_steps_it_has_passed() -> None:
+    d = devices()
+    steps = [
+        GuardedMotion(n, lambda: None, lambda: True, d["arm"], d["ft"], d["clock"], Guard())
+        for n in ("a", "b")
+    ]
+    seq = Sequence("seq", steps)
+    assert seq.current == "a" and not seq.passed("a")
+    seq.tick()  # "a" finishes: the sequence moves on
+    assert seq.current == "b" and seq.passed("a") and not seq.passed("b")
+    seq.tick()
+    assert seq.current == "done" and seq.passed("b")
+    assert not seq.passed("no such step")
+
+
 def test_halt_stops_the_step_in_progress_and_nothing_once_the_sequence_is_done() -> None:
     d = devices()
     d["arm"].ticks_per_move = 100

@@ -17,9 +17,10 @@ import pytest
 from cell.catalogue import load_catalogue
 from drivers.arm import MotionState
 from drivers.devices import Devices
+from skills.motion import wait
 from skills.pivot import Align, PivotFrame, PivotParams
 from skills.pivot.align import hole_grasp_rotation, pinched_span, turn_centre
-from skills.status import Status
+from skills.status import Failure, Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
 
 PART = load_catalogue().get("bushing")
@@ -139,6 +140,18 @@ def test_a_pinch_on_nothing_fails_before_the_lift_and_the_arm_is_not_lifted() ->
     paths = [c for c in d["arm"].commands if c[0] == "path"]
     assert len(paths) == 1  # the slide; the lift was never commanded
     assert d["arm"].pose.position[2] == pytest.approx(paths[0][1][-1].position[2])
+
+
+def test_the_pinch_is_checked_by_its_name_when_steps_are_inserted_before_it() -> None:
+    d = devices(object_width=None)
+    align = Align(FRAME, PART, PARAMS, dev(d))
+    g = PARAMS.guard
+    extra = [wait(f"pause {k}", dev(d), g, 0.01) for k in range(3)]
+    align.sequence.steps[1:1] = extra  # the pinch moves three places on
+    result, _ = run(align, d)
+    assert result.status is Status.FAILURE and result.code is Failure.MISSED
+    assert align.sequence.current == align.lift_step  # failed after the pinch, before the lift
+    assert len([c for c in d["arm"].commands if c[0] == "path"]) == 1  # no lift commanded
 
 
 def test_a_pad_landing_on_the_rim_trips_the_descent_guard_and_stops_the_arm() -> None:
