@@ -58,9 +58,8 @@ from drivers.ur5.kinematics import (
     TCP_Z,
     dls_step,
     frame_error_list,
-    jacobian,
     jacobian_frame,
-    pose_error,
+    largest_magnitude,
     residual,
     rotvec_to_matrix,
     solve_ik,
@@ -464,16 +463,23 @@ class SimArm:
         else:
             self._q_from = self._q_to.copy()
 
-    def _advance_to(self, q_next: NDArray[np.float64]) -> None:
-        """Start a control step from the last target to ``q_next``, within the speed limit."""
-        self._q_from = self._q_to.copy()
-        dq = q_next - self._q_from
-        biggest = float(np.abs(dq).max())
+    def _advance_to(self, q_next: NDArray[np.float64] | list[float]) -> None:
+        """Start a control step from the last target to ``q_next``, within the speed limit.
+
+        Float arithmetic on lists: numpy's elementwise results exactly, without its per-call
+        cost on six numbers.
+        """
+        start = self._q_to.tolist()
+        goal = q_next.tolist() if isinstance(q_next, np.ndarray) else q_next
+        dq = [b - a for a, b in zip(start, goal, strict=True)]
+        biggest = largest_magnitude(dq)
         limit = ARM_VELOCITY * self._dt
         self._clipped = biggest > limit
         if self._clipped:
-            dq *= limit / biggest
-        self._q_to = self._q_from + dq
+            scale = limit / biggest
+            dq = [d * scale for d in dq]
+        self._q_from = np.array(start)
+        self._q_to = np.array([a + d for a, d in zip(start, dq, strict=True)])
 
     def _track(self, target: Pose, servo: bool = False) -> None:
         """Command the joints towards ``target`` for the end of this control step.
@@ -511,7 +517,12 @@ class SimArm:
                 self._fault("target unreachable", self._q_to)
                 return
         else:
-            q_next = (self._q_to + dls_step(jac, err)).clip(-ARM_LIMIT, ARM_LIMIT)
+            # np.clip(q + dq, -limit, limit) on floats: its max, then min, NaN kept.
+            step = dls_step(jac, err).tolist()
+            q_next = [
+                min(max(a + d, -ARM_LIMIT), ARM_LIMIT)
+                for a, d in zip(self._q_to.tolist(), step, strict=True)
+            ]
         self._last_target = (position, rotation)
         self._advance_to(q_next)
 
@@ -623,9 +634,11 @@ class SimArm:
         q = np.array([q_all[i] for i in arm_cols])
         qd = np.array([qd_all[i] for i in arm_cols])
         bias = self._p.calculateInverseDynamics(self._body, q_all, qd_all, [0.0] * len(movable))
-        jac, pose = jacobian(q)
+        jac, here, here_rotation = jacobian_frame(q)
         twist = jac @ qd
-        wrench = FORCE_STIFFNESS * pose_error(self._virtual, pose) - FORCE_DAMPING * twist
+        v = self._virtual
+        error = np.array(frame_error_list(v.position, v.rotation, here, here_rotation))
+        wrench = FORCE_STIFFNESS * error - FORCE_DAMPING * twist
         tau = np.array([bias[i] for i in arm_cols]) + jac.T @ wrench
         tau = np.clip(tau, -np.asarray(self._effort), self._effort)
         self._q_to = q

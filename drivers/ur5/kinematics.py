@@ -327,6 +327,14 @@ def residual(err: ArrayLike) -> float:
     )
 
 
+def largest_magnitude(values: list[float]) -> float:
+    """``float(np.max(np.abs(values)))`` of a few floats, NaN if any is NaN as numpy's is;
+    without numpy's per-call cost."""
+    if any(map(math.isnan, values)):
+        return math.nan
+    return max(map(abs, values))
+
+
 #: ``damping**2 * I`` for :func:`dls_step`'s default damping, built once (the same array).
 _DEFAULT_DAMPING = 1e-3
 _DAMPED_EYE = _DEFAULT_DAMPING**2 * np.eye(6)
@@ -361,7 +369,7 @@ def dls_step(
     """Damped-least-squares joint step (rad) for a pose error; at most 0.3 rad per joint."""
     damped = _DAMPED_EYE if damping == _DEFAULT_DAMPING else damping**2 * np.eye(6)
     dq = jac.T @ _solve(jac @ jac.T + damped, np.asarray(err, float))
-    biggest = float(np.abs(dq).max())
+    biggest = largest_magnitude(dq.tolist())
     if biggest > 0.3:
         dq *= 0.3 / biggest
     return dq
