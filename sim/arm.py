@@ -217,7 +217,10 @@ class SimArm:
         self._protective = False  # the current FAULT is a protective stop
         self._force: dict[str, NDArray[np.float64]] = {}
         self._virtual: Pose | None = None
-        # What _actuate sends, worked out once per control step (see _command_for).
+        # What _actuate sends, worked out once per control step (see _command_for). PyBullet's
+        # constants read once: BulletClient finds each through __getattr__, microseconds a read.
+        self._position_control: int = self._p.POSITION_CONTROL
+        self._torque_control: int = self._p.TORQUE_CONTROL
         self._gains = ([POSITION_GAIN] * 6, [1.0] * 6)
         self._command_of: tuple[object, object] | None = None
         self._command: tuple[list[float], list[float], list[float]] = ([], [], [])
@@ -593,7 +596,7 @@ class SimArm:
         self._p.setJointMotorControlArray(
             self._body,
             self._joints,
-            self._p.POSITION_CONTROL,
+            self._position_control,
             targetPositions=q,
             targetVelocities=qd,
             forces=self._effort,
@@ -643,5 +646,5 @@ class SimArm:
         tau = np.clip(tau, -np.asarray(self._effort), self._effort)
         self._q_to = q
         self._p.setJointMotorControlArray(
-            self._body, self._joints, self._p.TORQUE_CONTROL, forces=tau.tolist()
+            self._body, self._joints, self._torque_control, forces=tau.tolist()
         )
