@@ -28,7 +28,8 @@ from cell.journal import Journal, JournalError, Resume  # noqa: E402
 
 CONFIG = """\
 cell: {{layout: {{bin_inner_size: [0.50, 0.44]}}}}
-sim: {{seed: {seed}, parts_in_bin: {parts}}}
+sim: {{seed: {seed}}}
+bin: {{parts: {parts}}}
 workflow: {{machining_time_s: 1, cycles: {parts}}}
 log: {{tick_log: {out}/ticks.jsonl, state_file: {out}/state.json, journal: {out}/journal.sqlite}}
 """

@@ -210,7 +210,8 @@ def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) ->
         sim = config.sim
         options = TwinOptions(
             seed=sim.seed if seed is None else seed,
-            parts_in_bin=sim.parts_in_bin,
+            parts_in_bin=config.bin.parts,
+            fill=config.bin.fill,
             yaw_spread=math.radians(sim.yaw_spread_deg),
             mu_ground=sim.mu_ground,
             machining_time=config.workflow.machining_time_s,
@@ -218,7 +219,7 @@ def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) ->
         try:
             backend = SimCellBackend(prep.layout, prep.part, options, resume=resume)
         except ValueError as exc:
-            raise prep.doc.error(("sim", "parts_in_bin"), str(exc).split(": ", 1)[-1]) from None
+            raise prep.doc.error(("bin", "parts"), str(exc).split(": ", 1)[-1]) from None
         if config.faults.enabled:  # the twin meets the configured faults behind its devices
             from sim.faults import twin_injector
 

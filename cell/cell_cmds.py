@@ -36,14 +36,22 @@ PROGRESS_KINDS = frozenset(
 )
 
 
-def load_prepared(path: Path | None) -> Any:
+def load_prepared(path: Path | None, **bin_overrides: Any) -> Any:
     """The configuration at ``path`` (None: the shipped example) validated and prepared
     (:func:`cell.assemble.prepare`): what `cell sim`, `cell run`, `cell tree`, `cell
-    check-hardware` and `cell soak` start from. Raises :class:`ConfigError`."""
+    check-hardware` and `cell soak` start from. ``bin_overrides``: keys of the ``bin`` section
+    given on the command line (None: the file's). Raises :class:`ConfigError`."""
     from cell.assemble import prepare
-    from cell.config import load_config
+    from cell.config import BinSection, load_config
 
     config, doc = load_config(path)
+    given = {k: v for k, v in bin_overrides.items() if v is not None}
+    if given:
+        try:
+            fixed = BinSection.model_validate({**config.bin.model_dump(), **given})
+        except ValueError as exc:
+            raise UserError(f"--{next(iter(given))}: {exc}") from None
+        config = config.model_copy(update={"bin": fixed})
     return prepare(config, doc)
 
 
@@ -59,6 +67,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
     p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
     p.add_argument("--seed", type=int, default=None, help="seed of the bin scene (sim.seed)")
+    p.add_argument(
+        "--fill",
+        choices=("rows", "random"),
+        default=None,
+        help="how the bin is filled (bin.fill): staged rows, or tipped in at random",
+    )
+    p.add_argument("--parts", type=int, default=None, help="parts in the bin (bin.parts)")
     p.add_argument("--record", type=Path, default=None, help="write an animated GIF of the run")
     p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
     p.add_argument(
@@ -141,8 +156,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
         raise UserError(f"--seed: must be >= 0, got {args.seed}")
     if args.record is not None and args.record.suffix.lower() != ".gif":
         raise UserError(f"--record: {args.record}: the animation is written as a .gif")
+    if args.parts is not None and args.parts < 0:
+        raise UserError(f"--parts: must be >= 0, got {args.parts}")
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, fill=args.fill, parts=args.parts)
     except ConfigError as exc:
         return report_config_error(exc, "sim")
     if prep.config.cell.backend != "sim":
@@ -236,6 +253,9 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     summary = _summary(prep, result, cycles)
     if parts is not None:
         summary["parts"] = parts  # where every part is at the end, judged by the twin
+        summary["left_in_bin"] = parts["in_bin"]
+    summary["left_reasons"] = left_reasons(prep.state.events, summary.get("left_in_bin"))
+    summary["repositioned"] = prep.state.counts.get(EventKind.REPOSITIONED, 0)
     _print_summary(summary)
     if recorder is not None and recorder.frames:
         recorder.save_gif(args.record, fps=12)
@@ -393,6 +413,19 @@ class _Progress:
         if self.bar_shown:
             sys.stderr.write("\n")
         sys.stderr.flush()
+
+
+def left_reasons(events: list[dict[str, Any]], left_in_bin: int | None) -> list[dict[str, str]]:
+    """Each part the cell left in the bin, named, with why: from the last time the cell found
+    nothing to pick (the parts it saw and passed over), and, where the twin counts more parts
+    in the bin than the cell saw, the rest as not found by perception."""
+    ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
+    seen: list[dict[str, str]] = list(ends[-1].get("left", [])) if ends else []
+    if left_in_bin is not None and left_in_bin > len(seen):
+        seen += [{"part": "a part", "reason": "not found by perception"}] * (
+            left_in_bin - len(seen)
+        )
+    return seen
 
 
 def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:

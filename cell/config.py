@@ -50,12 +50,22 @@ class SimSection(_Section):
     """The twin: what lies in the bin and how the physics runs."""
 
     seed: int = Field(0, ge=0, description="seed of the bin scene and the perturbations")
-    parts_in_bin: int = Field(10, ge=0, le=12, description="parts spawned lying in the bin")
     yaw_spread_deg: float = Field(
         3.0, ge=0.0, le=45.0, description="spawned parts' yaw spread about the radial direction"
     )
     mu_ground: float = Field(0.4, gt=0.0, le=2.0, description="part-floor friction")
     realtime: bool = Field(False, description="pace the twin to wall time (for watching)")
+
+
+class BinSection(_Section):
+    """What lies in the bin at the start, and how a person fills it (the twin's bin)."""
+
+    fill: Literal["rows", "random"] = Field(
+        "rows",
+        description="rows: lying along the radial direction where the pivot reaches (staged); "
+        "random: tipped in from random poses and left where physics settles them",
+    )
+    parts: int = Field(10, ge=0, le=30, description="parts in the bin (rows: at most 12)")
 
 
 class ArmDevice(_Section):
@@ -264,6 +274,7 @@ class CellConfig(_Section):
 
     cell: CellSection = Field(default_factory=CellSection)
     sim: SimSection = Field(default_factory=SimSection)
+    bin: BinSection = Field(default_factory=BinSection)
     devices: DevicesSection = Field(default_factory=DevicesSection)
     workflow: WorkflowSection = Field(default_factory=WorkflowSection)
     safety: SafetySection = Field(default_factory=SafetySection)

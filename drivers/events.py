@@ -19,6 +19,7 @@ class EventKind(StrEnum):
     PICKED_FROM_SLOT = "picked_from_slot"  #: the part taken back out of the slot
     PACKED = "packed"  #: the part let go in its place in the box
     BIN_EMPTY = "bin_empty"  #: nothing left to pick (the cycles end)
+    REPOSITIONED = "repositioned"  #: a part moved (pushed, dragged, rolled) to be picked
     CYCLE_DONE = "cycle_done"
     CYCLE_FAILED = "cycle_failed"
 

@@ -27,6 +27,7 @@ from sim.cell_layout import build_cell
 from sim.judge import judge
 from sim.part_body import PartBody, lying_pose, spawn_part
 from sim.robot import SimRobot
+from sim.scenes import dropped_bin_fill
 from sim.world import PhysicsSettings, SimWorld
 
 
@@ -40,6 +41,9 @@ class TwinOptions:
     frictions: Frictions = field(default_factory=Frictions)
     machining_time: float = 5.0  #: s of simulated time
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
+    #: "rows": lying along the radial direction where the pivot reaches (:func:`spawn_spots`);
+    #: "random": tipped in as a person would (:func:`sim.scenes.dropped_bin_fill`).
+    fill: str = "rows"
 
 
 def spawn_spots(
@@ -74,7 +78,7 @@ def spawn_spots(
                 spots.append((cx, cy, yaw))
     if count > len(spots):
         raise ValueError(
-            f"sim.parts_in_bin: {count} {part.name}s do not fit where the pivot reaches in this "
+            f"bin.parts: {count} {part.name}s do not fit where the pivot reaches in this "
             f"bin ({len(spots)} places; a wider bin_inner_size holds more)"
         )
     chosen = rng.choice(len(spots), size=count, replace=False)
@@ -110,20 +114,7 @@ class SimCellBackend:
             self.robot = robot = SimRobot(world)
             robot.gripper.set_finger_friction(options.frictions.mu_s, options.frictions.mu_h)
             self.bodies: list[PartBody] = []
-            spots = spawn_spots(
-                layout,
-                part,
-                options.parts_in_bin,
-                rng,
-                options.position_jitter,
-                options.yaw_spread,
-            )
-            if resume is not None:
-                spots = self._rebuild(resume, spots)
-            for x, y, yaw in spots:
-                self.bodies.append(self._spawn(lying_pose(part, x, y, yaw)))
-            for _ in range(int(0.3 / world.settings.control_dt)):  # let the parts settle
-                world.step()
+            self._fill(options.parts_in_bin, rng, resume)
             robot.ft.bias()
             camera = SimCamera(
                 world,
@@ -136,6 +127,28 @@ class SimCellBackend:
             world.close()
             raise
         self.packed_bodies: list[int] = [b.body_id for b in self._packed_at_start]
+
+    def _fill(self, count: int, rng: np.random.Generator, resume: Any = None) -> list[PartBody]:
+        """Put ``count`` parts into the bin as ``options.fill`` says (after a crash, those the
+        journal says were not taken), let them settle, return them."""
+        o, world = self.options, self.world
+        if o.fill == "random":
+            if resume is not None:
+                taken = len(resume.picked_from) - (1 if resume.in_hand else 0)
+                self._rebuild(resume, [])
+                count = max(0, count - max(0, taken))
+            new = dropped_bin_fill(world, self.layout, self.part, rng, count, self._spawn)
+        else:
+            spots = spawn_spots(
+                self.layout, self.part, count, rng, o.position_jitter, o.yaw_spread
+            )
+            if resume is not None:
+                spots = self._rebuild(resume, spots)
+            new = [self._spawn(lying_pose(self.part, x, y, yaw)) for x, y, yaw in spots]
+            for _ in range(int(0.3 / world.settings.control_dt)):  # let the parts settle
+                world.step()
+        self.bodies.extend(new)
+        return new
 
     def _rebuild(
         self, resume: Any, spots: list[tuple[float, float, float]]
@@ -221,16 +234,9 @@ class SimCellBackend:
         self.packed_bodies = [i for i in self.packed_bodies if i != body.body_id]
 
     def refill_bin(self, count: int, seed: int) -> list[PartBody]:
-        """A person tips ``count`` new parts into the empty bin: spawned lying where the pivot
-        reaches (:func:`spawn_spots`, seeded), then left to settle for 0.3 s."""
-        rng = np.random.default_rng(seed)
-        o = self.options
-        spots = spawn_spots(self.layout, self.part, count, rng, o.position_jitter, o.yaw_spread)
-        new = [self._spawn(lying_pose(self.part, x, y, yaw)) for x, y, yaw in spots]
-        self.bodies.extend(new)
-        for _ in range(int(0.3 / self.world.settings.control_dt)):
-            self.world.step()
-        return new
+        """A person tips ``count`` new parts into the empty bin, as ``options.fill`` says
+        (seeded), and they settle."""
+        return self._fill(count, np.random.default_rng(seed))
 
     @property
     def clock(self):  # type: ignore[no-untyped-def]

@@ -313,7 +313,10 @@ def judge(
     """Judge the hole grasp. ``finger_tips``: world positions of each fingertip centre."""
     p = world.p
     axis = part_body.axis()
-    tilt = math.degrees(math.acos(float(np.clip(axis[2], -1.0, 1.0))))
+    # A tube (two open ends) held upright by a finger in its hole is upright either end up; a
+    # cup or a bottle only with its open end up.
+    up = abs(float(axis[2])) if part_body.part.open_ends == 2 else float(axis[2])
+    tilt = math.degrees(math.acos(float(np.clip(up, -1.0, 1.0))))
     height = part_body.lowest_z() - floor_z
     on_floor = len(p.getContactPoints(bodyA=part_body.body_id, bodyB=floor_id)) > 0
     held_by = [

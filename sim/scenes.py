@@ -5,10 +5,12 @@ camera's view of them. Ground truth is returned for *scoring only*; nothing here
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from drivers.layout import CellLayout
 from drivers.parts import Part
@@ -126,3 +128,47 @@ def look_down_pose(
     ``target_xy`` on the floor."""
     offset = DOWN @ tool_T_camera.position
     return Pose(np.array([target_xy[0], target_xy[1], height]) - offset, DOWN)
+
+
+def dropped_bin_fill(
+    world: SimWorld,
+    layout: CellLayout,
+    part: Part,
+    rng: np.random.Generator,
+    n_parts: int,
+    spawn: Callable[[Pose], PartBody],
+    drop_height: float = 0.04,
+    wall_margin: float = 0.005,
+    settle_s: float = 1.5,
+) -> list[PartBody]:
+    """A bin filled as a person tips parts into it: each part released at a random orientation
+    (any yaw, either end first, any roll) a little above the floor or the parts already there,
+    one after the other, then left to settle. Where they end -- against walls, touching or
+    leaning on a neighbour -- is physics' answer, not a staged pose.
+
+    ``spawn`` creates one part at a pose (the caller's body options: friction, sleeping).
+    """
+    x0, x1, y0, y1 = layout.bin_interior()
+    half_diag = 0.5 * math.hypot(part.length, part.outer)
+    bodies: list[PartBody] = []
+    for _ in range(n_parts):
+        yaw = rng.uniform(-math.pi, math.pi)
+        # Anywhere its footprint at that yaw fits: up against a wall too.
+        hx = 0.5 * (part.length * abs(math.cos(yaw)) + part.outer * abs(math.sin(yaw)))
+        hy = 0.5 * (part.length * abs(math.sin(yaw)) + part.outer * abs(math.cos(yaw)))
+        x = rng.uniform(x0 + hx + wall_margin, x1 - hx - wall_margin)
+        y = rng.uniform(y0 + hy + wall_margin, y1 - hy - wall_margin)
+        tilt = rng.uniform(-0.35, 0.35)  # rad off horizontal: one end leads the fall
+        roll = rng.uniform(-math.pi, math.pi)
+        rotation = (
+            Rotation.from_euler("z", yaw) * Rotation.from_euler("y", tilt)
+            * Rotation.from_euler("x", roll)
+        ).as_matrix()
+        top = max([layout.bin_floor_z] + [b.pose().position[2] + 0.5 * part.outer for b in bodies])
+        z = top + drop_height + half_diag
+        bodies.append(spawn(Pose(np.array([x, y, z]), rotation)))
+        for _ in range(int(0.25 / world.settings.control_dt)):  # it lands before the next
+            world.step()
+    for _ in range(int(settle_s / world.settings.control_dt)):
+        world.step()
+    return bodies

@@ -227,20 +227,29 @@ class PlanPick(Behaviour):
         )
         x0, x1, y0, y1 = ctx.geometry.bin_roi
         usable, skipped = [], 0
+        left: list[dict[str, str]] = []  #: the parts seen and passed over, with why
         for d in dets:
-            if d.part != ctx.part.name or not d.open_end_seen:
+            where = f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m"
+            if d.part != ctx.part.name:
+                left.append({"part": where, "reason": f"not a {ctx.part.name}"})
+                continue
+            if not d.open_end_seen:
+                left.append({"part": where, "reason": "its open end was not made out"})
                 continue
             if not (x0 <= d.center[0] <= x1 and y0 <= d.center[1] <= y1):
+                left.append({"part": where, "reason": "outside the bin's inside"})
                 continue
-            if ctx.failures.get(location_key(d.center), 0) >= ctx.limits.max_failures_per_part:
+            tries = ctx.failures.get(location_key(d.center), 0)
+            if tries >= ctx.limits.max_failures_per_part:
                 skipped += 1
+                left.append({"part": where, "reason": f"{tries} picks failed"})
                 continue
             usable.append(d)
         if not usable:
             self.bb.set("/cell/bin_empty", True)
             extra = f" ({skipped} skipped after failed picks)" if skipped else ""
             self.feedback_message = f"plan pick: no {ctx.part.name} left to pick{extra}"
-            ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped)
+            ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
         if seen is not None and any(d is seen for d in usable):

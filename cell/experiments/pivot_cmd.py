@@ -71,6 +71,13 @@ def add_parser(sub: Any) -> None:
         help="give the skills the part's nominal pose instead of looking with the wrist camera",
     )
     p.add_argument(
+        "--pose",
+        choices=("nominal", "random"),
+        default="nominal",
+        help="nominal: the part near its nominal pose (+-3 mm, +-3 deg); random: anywhere on "
+        "the bin floor, any yaw, either end towards the robot, up against the walls",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="run a part the planner declines, at --la/--alpha (reported as forced)",
@@ -216,7 +223,9 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         setup = dataclasses.replace(setup, mu_ground=args.mu_ground)
     if args.nominal:
         setup = dataclasses.replace(setup, perceive=False)
-    reason = setup.reach_problem()
+    if getattr(args, "pose", "nominal") == "random":
+        setup = dataclasses.replace(setup, pose="random")
+    reason = setup.reach_problem() if setup.pose == "nominal" else None
     if reason is not None:
         source = str(args.cell) if args.cell is not None else "the default cell layout"
         raise PivotInputError(f"{source}: bin_center: {reason}")

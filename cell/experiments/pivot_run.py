@@ -72,6 +72,9 @@ class TrialSetup:
     layout: CellLayout = field(default_factory=CellLayout)
     mu_ground: float | None = None  # part-floor friction, exact (None: frictions.mu_g +- 20 %)
     perceive: bool = True  # the pick starts from the wrist camera's view, not the nominal pose
+    #: "nominal": near the nominal pose, perturbed; "random": anywhere on the bin floor where the
+    #: part fits, up against the walls, any yaw, either end towards the robot.
+    pose: str = "nominal"
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
 
     def frame(self) -> PivotFrame:
@@ -188,6 +191,18 @@ class TrialWorld:
     wall0: float
 
 
+def random_floor_pose(
+    layout: CellLayout, part: Part, rng: np.random.Generator, wall_gap: float = 0.001
+) -> tuple[float, float, float]:
+    """A lying part's centre and yaw drawn uniformly over the bin floor: any yaw, either end
+    towards the robot, anywhere its footprint fits (up against a wall included)."""
+    x0, x1, y0, y1 = layout.bin_interior()
+    yaw = rng.uniform(-math.pi, math.pi)
+    hx = 0.5 * (part.length * abs(math.cos(yaw)) + part.outer * abs(math.sin(yaw))) + wall_gap
+    hy = 0.5 * (part.length * abs(math.sin(yaw)) + part.outer * abs(math.cos(yaw))) + wall_gap
+    return rng.uniform(x0 + hx, x1 - hx), rng.uniform(y0 + hy, y1 - hy), yaw
+
+
 def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     """Draw the trial's perturbation from ``seed`` (always in the same order, so every method
     meets the same part) and build the world; the caller closes ``world``."""
@@ -204,10 +219,13 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     if setup.mu_ground is not None:
         mu_g = setup.mu_ground
     true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
-    nominal = setup.nominal_center()
-    x = nominal[0] + rng.uniform(-pert.position, pert.position)
-    y = nominal[1] + rng.uniform(-pert.position, pert.position)
-    yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
+    if setup.pose == "random":
+        x, y, yaw = random_floor_pose(setup.layout, true_part, rng)
+    else:
+        nominal = setup.nominal_center()
+        x = nominal[0] + rng.uniform(-pert.position, pert.position)
+        y = nominal[1] + rng.uniform(-pert.position, pert.position)
+        yaw = setup.nominal_yaw + rng.uniform(-pert.yaw, pert.yaw)
 
     world = SimWorld(seed=seed, settings=setup.physics)
     try:
@@ -323,6 +341,11 @@ def run_trial(
         t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
         seen: dict[str, float] = {}
         frame = setup.frame()
+        if setup.pose == "random":  # no nominal pose: without a look, the skills get the drawn one
+            t = tw.true_pose
+            frame = dataclasses.replace(
+                frame, center=np.array([t["x"], t["y"], 0.5 * setup.part.outer]), yaw=t["yaw"]
+            )
         if setup.perceive:
             look = Look(
                 dev,

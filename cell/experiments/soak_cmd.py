@@ -9,7 +9,7 @@ cycles, and whether any part is ever lost track of. It runs the tree of ``cell s
 :func:`cell.assemble.prepare` / :func:`cell.assemble.open_backend` / :class:`cell.runner.TickLoop`)
 in runs of at most the free box places, and between runs plays the person at the cell:
 
-* the bin is empty: tip in ``sim.parts_in_bin`` new parts;
+* the bin is empty: tip in ``bin.parts`` new parts, as ``bin.fill`` says;
 * the box is full, holds a part the tree did not record, or blocked a packing: ship it (its
   parts are counted as ``shipped``) and put in an empty one;
 * after every run: take out the parts in the hand, in the slot and on the floor (recorded in
@@ -352,7 +352,7 @@ class Soak:
             in_bin = []
             acted = True
         if not in_bin:
-            count = self.config.sim.parts_in_bin
+            count = self.config.bin.parts
             seed = self.scene_seed + 1 + 7 * self.refills + 1000 * self.twins
             self.spawned += len(backend.refill_bin(count, seed))
             self.refills += 1

@@ -15,7 +15,8 @@ import pytest
 CONFIG = """\
 sim:
   seed: 3
-  parts_in_bin: 2
+bin:
+  parts: 2
 workflow:
   cycles: 1
   machining_time_s: 1.0
@@ -120,7 +121,7 @@ def test_replay_of_a_broken_log_is_a_clear_error(tmp_path) -> None:
 
 
 def test_sigterm_stops_the_arm_flushes_the_log_saves_the_state(tmp_path) -> None:
-    long_run = CONFIG.replace("parts_in_bin: 2", "parts_in_bin: 6").replace(
+    long_run = CONFIG.replace("parts: 2", "parts: 6").replace(
         "cycles: 1", "cycles: 6"
     )
     cfg, log, state = _write_config(tmp_path, long_run)

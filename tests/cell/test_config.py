@@ -65,7 +65,7 @@ def test_the_shipped_example_validates_and_builds_its_tree() -> None:
             "expected a number, got the text '5 s'",
         ),
         ("cell:\n  backend: robot\n", 2, "cell.backend", "'sim' or 'hw'"),
-        ("sim:\n  parts_in_bin: true\n", 2, "sim.parts_in_bin", "integer"),
+        ("bin:\n  parts: true\n", 2, "bin.parts", "integer"),
         ("\n\nworkflow:\n  part: teapot\n", 4, "workflow.part", "unknown part 'teapot'"),
         ("workflow:\n  part: mounting_rail\n", 2, "workflow.part", "not pivotable"),
         ("cell:\n  layout:\n    bin_center: [0.0, 0.0]\n", 3, "cell.layout.bin_center", "robot"),
@@ -180,6 +180,7 @@ def test_schema_covers_every_section_and_the_registry_is_documented() -> None:
         "tree",
         "faults",
         "skills",
+        "bin",
     }
     readme = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
     for name in REGISTRY:

@@ -64,7 +64,8 @@ def test_a_corrupt_journal_is_an_error_naming_it_never_discarded(tmp_path) -> No
 
 
 CONFIG = """\
-sim: {{seed: 0, parts_in_bin: 2}}
+sim: {{seed: 0}}
+bin: {{parts: 2}}
 workflow: {{machining_time_s: 1, cycles: 2}}
 log: {{tick_log: {d}/ticks.jsonl, state_file: {d}/state.json, journal: {d}/journal.sqlite}}
 """

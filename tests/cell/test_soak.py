@@ -18,7 +18,8 @@ from trees.yaml_lines import ConfigError
 CONFIG = """\
 sim:
   seed: 0
-  parts_in_bin: {parts}
+bin:
+  parts: {parts}
 workflow:
   machining_time_s: 0.5
 log:

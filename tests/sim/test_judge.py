@@ -42,3 +42,15 @@ def test_pad_on_the_outer_wall_or_past_the_end_is_not(duct) -> None:
     assert not hook_in_hole(body, _at(body, [x, 0.5 * part.hole + 2 * TOUCH, 0.0]))[0]
     inside, depth = hook_in_hole(body, _at(body, [0.5 * part.length + 0.003, 0.0, 0.0]))
     assert not inside and depth < 0
+
+
+@pytest.mark.parametrize(("name", "tilt"), [("bushing", 0.0), ("medicine_bottle", 180.0)])
+def test_a_tube_is_upright_either_end_up_a_bottle_only_open_end_up(name: str, tilt: float) -> None:
+    """A tube has two open ends: standing on either, a finger can be in its hole from above."""
+    from sim.judge import judge
+
+    part = load_catalogue(None).get(name)
+    with SimWorld(seed=1) as world:
+        body = spawn_part(world, part, upright_pose(part, 0.5, 0.0, 0.0, open_up=False))
+        verdict = judge(world, body, -1, -1, {}, {})
+    assert verdict.tilt_deg == pytest.approx(tilt, abs=0.5)
