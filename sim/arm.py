@@ -18,6 +18,12 @@ How it moves, and why:
   :meth:`SimArm._track`), iterated to 1e-9 m for checks and jumps.
   PyBullet's ``calculateInverseKinematics`` (100 iterations, threshold 1e-5) leaves about
   1e-5 m here and starts from the body's live state; ours is cheaper per step as well.
+  The per-step path (:meth:`SimArm._track_frame`, :meth:`SimArm._actuate`) works on
+  ``(position, rotation)`` pairs and float lists rather than :class:`Pose` objects and tiny
+  numpy arrays, whose per-call costs outweighed the arithmetic; it keeps every numpy matrix
+  product and the LAPACK solve (BLAS rounds those its own way), so the joint commands are the
+  ones the numpy formulas give, bit for bit (``tests/drivers/ur5/test_kinematics_exact.py``):
+  contacts are chaotic, and a last-bit change would change trial outcomes.
 * **Joint control** is PyBullet POSITION_CONTROL with the joint torque limits, fed a position
   target interpolated per physics substep and the matching velocity as feed-forward. A line at
   constant speed stays on the line to micrometres; along it the TCP trails the command by one
