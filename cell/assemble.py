@@ -174,6 +174,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,
             cycles=config.workflow.cycles,
+            pick_order=config.workflow.pick_order,
             ft_link_grace=s.ft_link_grace_s,
             ft_settle=s.ft_settle_s,
         ),

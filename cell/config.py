@@ -149,6 +149,11 @@ class WorkflowSection(_Section):
     max_failures_per_part: int = Field(
         2, ge=1, le=10, description="a part that failed this many picks is skipped"
     )
+    pick_order: Literal["nearest", "freest"] = Field(
+        "nearest",
+        description="nearest: the part nearest the robot first; freest: the part with the most "
+        "room to its neighbours and the walls first (for a bin tipped full)",
+    )
     max_failed_cycles: int = Field(
         3, ge=1, le=100, description="consecutive cycles without a pick before the cell stops"
     )

@@ -30,6 +30,7 @@ from skills.home import go_home, put_back
 from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
+from skills.perception.pick_order import freest_first
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
@@ -252,7 +253,9 @@ class PlanPick(Behaviour):
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
-        if seen is not None and any(d is seen for d in usable):
+        if ctx.limits.pick_order == "freest":
+            target = freest_first(usable, dets, ctx.geometry.bin_roi)[0]
+        elif seen is not None and any(d is seen for d in usable):
             target = seen  # the one the Look looked at twice
         else:
             target = min(usable, key=lambda d: math.hypot(d.center[0], d.center[1]))

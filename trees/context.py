@@ -92,6 +92,9 @@ class WorkflowLimits:
     #: few samples) before its guard fails it without a start.
     ft_settle: float = 0.5
     cycles_done: int = 0  #: cycles a resumed cell had already done
+    #: "nearest": the part nearest the robot (the one the look examined twice); "freest": the
+    #: part with the most room around it (a bin tipped full).
+    pick_order: str = "nearest"
 
 
 @dataclass

@@ -1,0 +1,54 @@
+"""Which part to pick first from a bin tipped full: the freest. A part with room around it
+leaves the fingers, the wrist and the Tilt's arc clear of its neighbours and the walls, and
+taking it first frees the others. Judged from the detections -- the cell's own depth data,
+never the simulator's truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from skills.perception.bin_parts import Detection
+
+_SAMPLES = 9  # points along each part's axis
+
+
+def _axis_points(d: Detection) -> NDArray[np.float64]:
+    u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+    s = np.linspace(-0.5, 0.5, _SAMPLES)[:, None] * d.length
+    return np.asarray(d.center[:2], float) + s * u
+
+
+def clearance(
+    d: Detection, others: list[Detection], roi: tuple[float, float, float, float]
+) -> float:
+    """The smallest gap (m) between the part's outline and a neighbour's or a bin wall,
+    each part taken as its axis thickened by half its outer size."""
+    pts = _axis_points(d)
+    x0, x1, y0, y1 = roi
+    walls = np.minimum.reduce(
+        [pts[:, 0] - x0, x1 - pts[:, 0], pts[:, 1] - y0, y1 - pts[:, 1]]
+    )
+    gap = float(walls.min()) - 0.5 * d.outer
+    for o in others:
+        if o is d:
+            continue
+        q = _axis_points(o)
+        dist = np.linalg.norm(pts[:, None, :] - q[None, :, :], axis=2).min()
+        gap = min(gap, float(dist) - 0.5 * (d.outer + o.outer))
+    return gap
+
+
+def freest_first(
+    usable: list[Detection], all_seen: list[Detection], roi: tuple[float, float, float, float]
+) -> list[Detection]:
+    """``usable`` ordered by clearance, the freest first (ties: nearer the robot first)."""
+    return sorted(
+        usable,
+        key=lambda d: (-round(clearance(d, all_seen, roi), 3), math.hypot(*d.center[:2])),
+    )
+
+
+__all__ = ["clearance", "freest_first"]
