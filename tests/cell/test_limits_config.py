@@ -64,14 +64,23 @@ def test_the_safety_section_is_the_default_of_every_guard(tmp_path) -> None:
     assert pack.push_guard.max_force == 30.0 and pack.push_guard.max_torque == 5.0
 
 
-@pytest.mark.parametrize(("limit", "aborts"), [(45.0, True), (55.0, False)])
-def test_the_skill_stops_at_the_limit_the_node_gives(limit: float, aborts: bool) -> None:
-    """A 50 N wrench with the node's limit on either side of it: the skill's own guard (not
-    only the decorator) stops the arm, with the force-torque code."""
+@pytest.mark.parametrize(("limit", "aborts"), [(45, True), (55, False)])
+def test_the_skill_stops_at_the_limit_the_yaml_gives(limit: int, aborts: bool) -> None:
+    """A 50 N wrench, the tree YAML's limit on either side of it: built from the YAML and
+    ticked, the skill's own guard (the FT guard decorator is taken off) stops the arm at the
+    new value, with the force-torque code."""
+    from trees.decorators import FTGuard, Timeout
+    from trees.registry import TreeBuilder
+    from trees.yaml_lines import parse_yaml
+
     ctx = make_ctx()
     ctx.devices.arm.ticks_per_move = 20
     ctx.devices.ft.value = np.array([0.0, 0.0, 50.0, 0.0, 0.0, 0.0])
-    leaf = lv.GoHome("home", ctx, max_force_n=limit)
+    doc = parse_yaml(f"type: go_home\nmax_force_n: {limit}\n", "tree.yaml")
+    defaults = {"timeout_s": 30.0, "max_force_n": 80.0, "max_torque_nm": 8.0}
+    guard = TreeBuilder(ctx, doc, defaults).build(doc.data, ())
+    assert isinstance(guard, FTGuard) and isinstance(guard.decorated, Timeout)
+    leaf = guard.decorated.decorated  # the skill alone: no decorator checks the wrench
     statuses = tick_tree(leaf, ctx, ticks=40)
     if aborts:
         assert statuses[-1] == Status.FAILURE
