@@ -238,10 +238,14 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
     box_png = None
     parts = None
+    stills: list[Path] = []
     try:
+        if recorder is not None:
+            stills.append(_bin_picture(backend, prep, args.record, "start"))
         result = loop.run(max_time)
         if recorder is not None:
             box_png = _box_picture(backend, prep, args.record)
+            stills.append(_bin_picture(backend, prep, args.record, "end"))
         if hasattr(backend, "account"):
             parts = backend.account()
     finally:
@@ -262,6 +266,8 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         print(f"wrote {args.record} ({len(recorder.frames)} frames)")
     if box_png is not None:
         print(f"wrote {box_png} (the box at the end)")
+    for still in stills:
+        print(f"wrote {still} (the bin)")
     if args.json is not None:
         write_json(args.json, summary)
         print(f"wrote {args.json}")
@@ -275,17 +281,35 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
 
 def _box_picture(backend: Any, prep: Any, record: Path) -> Path:
     """A close-up of the box at the end of the run, beside the GIF."""
+    x0, x1, y0, y1 = prep.geometry.tray_roi
+    target = (0.5 * (x0 + x1), 0.5 * (y0 + y1), prep.geometry.tray_floor_z)
+    return _still(backend, target, (0.35, 0.35, 0.0), 0.25, 0.35, record, "_box.png")
+
+
+def _bin_picture(backend: Any, prep: Any, record: Path, when: str) -> Path:
+    """The bin seen from above its far side (``FILE_bin_start.png``, ``FILE_bin_end.png``):
+    how the parts lay when the run began, and what it left."""
+    x0, x1, y0, y1 = prep.geometry.bin_roi
+    target = (0.5 * (x0 + x1), 0.5 * (y0 + y1), prep.geometry.bin_floor_z)
+    return _still(backend, target, (0.7, 0.0, 0.7), 0.6, 0.0, record, f"_bin_{when}.png")
+
+
+def _still(  # noqa: PLR0913 -- the camera's placement, spelled out
+    backend: Any,
+    target: tuple[float, float, float],
+    normal: tuple[float, float, float],
+    distance: float,
+    height: float,
+    record: Path,
+    suffix: str,
+) -> Path:
     from PIL import Image
 
     from sim.recorder import Recorder
 
-    x0, x1, y0, y1 = prep.geometry.tray_roi
-    target = (0.5 * (x0 + x1), 0.5 * (y0 + y1), prep.geometry.tray_floor_z)
-    rec = Recorder(
-        backend.world, target, (0.35, 0.35, 0.0), distance=0.25, height=0.35, size=(480, 360)
-    )
+    rec = Recorder(backend.world, target, normal, distance=distance, height=height, size=(480, 360))
     rec.capture()
-    path = record.with_name(record.stem + "_box.png")
+    path = record.with_name(record.stem + suffix)
     Image.fromarray(rec.frames[0]).save(path)
     return path
 
