@@ -146,15 +146,16 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             f"unknown part {name!r}; known parts: {', '.join(catalogue.parts)}",
         )
     part = catalogue.parts[name]
-    plan = plan_pivot(part, Gripper(), Frictions())
+    gripper = Gripper()  # the planner's model: the skills' clearance and finger too
+    plan = plan_pivot(part, gripper, Frictions())
     if not plan.pivotable:
         raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")
     assert plan.l_a is not None and plan.alpha is not None
     # The hole grasp holds the part the slot's grip_depth below its rim, so that, standing in
     # the slot's pocket, the part is let go on the floor with the outer finger above the machine.
-    settings = skill_settings(config)
+    settings = skill_settings(config, layout.slot_depth, gripper)
     params = apply_config(
-        PivotParams(l_a=plan.l_a, alpha=plan.alpha, wall_depth=settings["slot"].grip_depth),
+        PivotParams(l_a=plan.l_a, alpha=plan.alpha, **settings.pop("pivot_fixed")),
         settings.pop("pivot"),
     )
     geometry = geometry_from(layout, config.devices.arm.home_joints_deg, part.outer)
@@ -170,7 +171,6 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         params=params,
         events=state,
         limits=WorkflowLimits(
-            machining_time=config.workflow.machining_time_s,
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,
             cycles=config.workflow.cycles,

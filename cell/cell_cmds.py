@@ -47,10 +47,15 @@ def load_prepared(path: Path | None, **bin_overrides: Any) -> Any:
     config, doc = load_config(path)
     given = {k: v for k, v in bin_overrides.items() if v is not None}
     if given:
+        from pydantic import ValidationError
+
         try:
             fixed = BinSection.model_validate({**config.bin.model_dump(), **given})
-        except ValueError as exc:
-            raise UserError(f"--{next(iter(given))}: {exc}") from None
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            raise UserError(
+                f"--{err['loc'][0]}: {err['msg']}, got {err.get('input')!r}"
+            ) from None
         config = config.model_copy(update={"bin": fixed})
     return prepare(config, doc)
 

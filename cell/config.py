@@ -11,6 +11,7 @@ configuration that fails never reaches a driver.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any, Literal
@@ -65,7 +66,13 @@ class BinSection(_Section):
         description="rows: lying along the radial direction where the pivot reaches (staged); "
         "random: tipped in from random poses and left where physics settles them",
     )
-    parts: int = Field(10, ge=0, le=30, description="parts in the bin (rows: at most 12)")
+    parts: int = Field(
+        8,
+        ge=0,
+        le=30,
+        description="parts in the bin at the start and at each refill (rows: at most what the "
+        "rows hold: 8 in the default layout, 10 in the example's wider bin)",
+    )
 
 
 class ArmDevice(_Section):
@@ -367,23 +374,37 @@ def validate_document(doc: LinedDocument) -> CellConfig:
     return config
 
 
-def skill_settings(config: CellConfig) -> dict[str, Any]:
+def skill_settings(
+    config: CellConfig, slot_depth: float | None = None, gripper: Any = None
+) -> dict[str, Any]:
     """Each skill section's parameters (SI) as configured; the pivot's are the configured values
     alone (``apply_config`` them to a :class:`PivotParams` once ``l_a`` and ``alpha`` are planned).
 
-    The hole grasp is one grasp for the whole cell: Align's ``wall_depth`` and the packing's
-    ``grip_depth`` are the slot's ``grip_depth``, so the part is held where every station
-    expects it."""
+    Some values are one fact of the cell, not a skill's: the hole grasp is one grasp (Align's
+    ``wall_depth`` and the packing's ``grip_depth`` are the slot's ``grip_depth``), the pocket's
+    depth is the layout's ``slot_depth`` (``slot_depth``; None: the skill's default), and the
+    approach clearance and finger thickness are the planner's gripper model's (``gripper``, a
+    :class:`drivers.parts.Gripper`; None: the skills' defaults)."""
 
     def values(name: str) -> dict[str, float]:
         return getattr(config.skills, name).model_dump(exclude_unset=True)
 
     slot = apply_config(SKILL_SECTIONS["slot"](), values("slot"))
-    settings: dict[str, Any] = {"slot": slot, "pivot": values("pivot")}
+    if slot_depth is not None:
+        slot = dataclasses.replace(slot, slot_depth=slot_depth)
+    pivot = dict(values("pivot"))
+    settings: dict[str, Any] = {"slot": slot, "pivot": pivot}
     for name, cls in SKILL_SECTIONS.items():
         if name not in settings:
             base = cls(grip_depth=slot.grip_depth) if name == "pack_in_box" else cls()
             settings[name] = apply_config(base, values(name))
+    fixed: dict[str, float] = {"wall_depth": slot.grip_depth}
+    if gripper is not None:
+        fixed |= {
+            "approach_clearance": gripper.clearance,
+            "finger_thickness": gripper.finger_thickness,
+        }
+    settings["pivot_fixed"] = fixed
     return settings
 
 

@@ -74,12 +74,18 @@ class CellState:
             self.journal.append(self.tick, self.time, kind, data)
 
     # -- trees.context.Events ------------------------------------------------------------
-    def abort(self, reason: str, code: Failure | None = None) -> None:
+    def abort(self, reason: str, code: Failure | None = None, node: str | None = None) -> None:
         why = None if code is None else code.value
         self.aborts.append(
-            {"reason": reason, "code": why, "tick": self.tick, "t": round(self.time, 3)}
+            {
+                "reason": reason,
+                "code": why,
+                "node": node,
+                "tick": self.tick,
+                "t": round(self.time, 3),
+            }
         )
-        self._journal(JournalKind.ABORT, {"reason": reason, "code": why})
+        self._journal(JournalKind.ABORT, {"reason": reason, "code": why, "node": node})
 
     def event(self, kind: EventKind, **data: object) -> None:
         kind = EventKind(kind)

@@ -38,7 +38,6 @@ class StopKind(StrEnum):
     PERSON_NEEDED = "person_needed"  #: a failure a stop_on_failure node says needs a person
     FAILED_CYCLES = "failed_cycles"  #: too many cycles in a row without a pick
     FT_LINK_LOST = "ft_link_lost"  #: the force-torque stream stayed lost past its grace
-    INTERRUPTED = "interrupted"  #: told to stop (a signal, Ctrl-C)
 
 
 __all__ = ["EventKind", "SlotState", "StopKind"]

@@ -55,7 +55,7 @@ class PackParams:
     #: m the fingertips reach below the rim in the hole grasp (in the cell: the slot's
     #: ``grip_depth``, the grasp every station shares, so not a key of its own)
     grip_depth: float = 0.020
-    tip_offset: float = si(0.005, "m", 0.0, 0.05, "from the TCP to the fingertips along tool z")
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     #: Direction (x, y) of the outer finger from the part: the trailing side of both pushes.
     trail_dir: tuple[float, float] = (-1.0, -1.0)
     offset: float = si(

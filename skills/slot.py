@@ -63,10 +63,10 @@ class SlotParams:
     grip_depth: float = si(
         0.020, "m", 0.005, 0.2, "the fingertips reach below the rim in the hole grasp"
     )
-    slot_depth: float = si(
-        0.040, "m", 0.005, 0.3, "the pocket's depth: the machine's top above its floor"
-    )
-    tip_offset: float = si(0.005, "m", 0.0, 0.05, "from the TCP to the fingertips along tool z")
+    #: m, the pocket's depth: the machine's top is this above its floor (in the cell: the
+    #: layout's ``slot_depth``, the pocket the twin builds, so not a key of its own)
+    slot_depth: float = 0.040
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     #: Direction (x, y) of tool x -- the outer finger's side of the part -- over the slot;
     #: None keeps the held grasp's (FeedSlot) or points it at the robot base (PickFromSlot).
     finger_dir: tuple[float, float] | None = None

@@ -28,7 +28,6 @@ class Failure(StrEnum):
     MISSED = "missed"  #: a grasp closed on nothing
     CHECK_FAILED = "check_failed"  #: a skill's own check of the outcome failed
     CANNOT_START = "cannot_start"  #: nothing to act on (no part chosen, the box full)
-    LOST_PART = "lost_part"  #: the part is no longer where it must be (dropped, not in the slot)
     BLOCKED = "blocked"  #: something stands where the part must go (a box place not free)
     NO_CONTACT = "no_contact"  #: a push met nothing where a wall or a packed part should be
 

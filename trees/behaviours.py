@@ -133,7 +133,7 @@ class SkillBehaviour(Behaviour):
             self.on_success()
             return Status.SUCCESS
         self.failure = result.code
-        self.ctx.events.abort(self.feedback_message, result.code)
+        self.ctx.events.abort(self.feedback_message, result.code, self.name)
         return Status.FAILURE
 
     def terminate(self, new_status: Status) -> None:

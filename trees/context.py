@@ -65,8 +65,9 @@ class CellGeometry:
 class Events(Protocol):
     """Where behaviours report what the cell's state and log must remember."""
 
-    def abort(self, reason: str, code: Failure | None = None) -> None:
-        """A guard, a timeout or a skill's check stopped a motion; ``code`` says which."""
+    def abort(self, reason: str, code: Failure | None = None, node: str | None = None) -> None:
+        """A guard, a timeout or a skill's check stopped a motion; ``code`` says which, ``node``
+        the tree leaf it stopped."""
 
     def event(self, kind: EventKind, **data: object) -> None:
         """A step of the workflow finished."""
@@ -82,7 +83,6 @@ class Events(Protocol):
 
 @dataclass
 class WorkflowLimits:
-    machining_time: float = 5.0  #: s
     max_failures_per_part: int = 2
     max_failed_cycles: int = 3
     cycles: int = 10

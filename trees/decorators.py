@@ -228,7 +228,7 @@ class FTGuard(_CheckFirst):
 
     def on_trip(self, reason: str) -> None:
         self.ctx.devices.arm.stop()  # also when the child was not running a motion
-        self.ctx.events.abort(reason, self.trip_code)
+        self.ctx.events.abort(reason, self.trip_code, leaf_name(self))
 
 
 class Timeout(_CheckFirst):
@@ -255,7 +255,7 @@ class Timeout(_CheckFirst):
 
     def on_trip(self, reason: str) -> None:
         self.ctx.devices.arm.stop()
-        self.ctx.events.abort(reason, Failure.TIMEOUT)
+        self.ctx.events.abort(reason, Failure.TIMEOUT, leaf_name(self))
 
 
 class Retry(_LeanDecorator):
@@ -456,6 +456,13 @@ class FTSampler(Behaviour):
             self.feedback_message = f"sampling the wrench into {WRENCH_KEY} (link back)"
         self._wrench.set(wrench)
         return Status.RUNNING
+
+
+def leaf_name(node: Behaviour) -> str:
+    """The name of the leaf under a chain of decorators (the node an abort belongs to)."""
+    while isinstance(node, Decorator):
+        node = node.decorated
+    return node.name
 
 
 def _deepest_feedback(node: Behaviour) -> str:

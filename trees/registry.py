@@ -10,7 +10,6 @@ an error naming the file, the line, the key and the valid choices.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -339,8 +338,6 @@ def _range(p: Param) -> str:
         return f"{'':17s}"
     return f"[{p.low:g}, {p.high:g}]".ljust(17)
 
-
-TreeFactory = Callable[[CellContext], Behaviour]
 
 __all__ = [
     "REGISTRY",

@@ -131,8 +131,11 @@ def pivot_overrides(config_path: Path | None) -> dict[str, Any]:
         raise UserError(str(exc)) from None
     base = PivotParams(l_a=0.5, alpha=0.3)
     safety = config.safety
+    settings = skill_settings(config)
+    # With a cell's configuration, Align takes the hole grasp that cell's stations expect.
+    fixed = settings["pivot_fixed"] if config_path is not None else {}
     tuned = with_limits(
-        apply_config(base, skill_settings(config)["pivot"]),
+        apply_config(dataclasses.replace(base, **fixed), settings["pivot"]),
         safety.ft_abort_force_n,
         safety.ft_abort_torque_nm,
     )

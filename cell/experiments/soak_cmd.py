@@ -126,12 +126,11 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------- the soak
-def abort_key(reason: str, code: str | None) -> str:
-    """What counts an abort as one kind: the leaf that stopped and the failure's code, e.g.
-    ``grasp: force_torque`` (never the message's numbers or wording)."""
-    leaf = reason.split(":", 1)[0].strip() if ":" in reason else ""
+def abort_key(node: str | None, code: str | None) -> str:
+    """What counts an abort as one kind: the tree leaf that stopped and the failure's code,
+    e.g. ``grasp: force_torque`` (never the message's numbers or wording)."""
     what = code or "uncoded"
-    return f"{leaf}: {what}" if leaf else what
+    return f"{node}: {what}" if node else what
 
 
 def stop_key(state: Any) -> str:
@@ -295,7 +294,7 @@ class Soak:
         self.done += done
         self.attempted += done + failed
         for a in state.aborts:
-            self.aborts[abort_key(a["reason"], a.get("code"))] += 1
+            self.aborts[abort_key(a.get("node"), a.get("code"))] += 1
         if state.stop_reason:
             self.stops[stop_key(state)] += 1
         info.update(

@@ -26,13 +26,13 @@ class PivotParams:
     )
     close_lead: float = si(0.001, "m", 0.0, 0.01, "the palm leads the outer finger closing")
     close_speed: float = si(0.02, "m/s", 0.001, 0.15, "of each finger while closing onto H")
-    approach_clearance: float = si(
-        0.010, "m", 0.0, 0.04, "extra jaw opening during the approach"
-    )
+    #: m of extra jaw opening during the approach (in the cell: the planner's gripper model,
+    #: :class:`drivers.parts.Gripper`, so the plan and the skill agree; not a key of its own)
+    approach_clearance: float = 0.010
     approach_distance: float = si(
         0.06, "m", 0.0, 0.2, "back along the fingers before the final approach"
     )
-    tip_offset: float = si(0.005, "m", 0.0, 0.05, "from the TCP to the fingertips along tool z")
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP on approaches")
     tilt_speed: float = si(
         0.01, "m/s", 0.001, 0.1, "of the TCP along the arc (quasi-static, Sec. II-B)"
@@ -56,7 +56,7 @@ class PivotParams:
     tilt_floor_clearance: float = si(
         0.003, "m", 0.0, 0.02, "kept between the fingertips and the floor on the arc"
     )
-    finger_thickness: float = si(0.008, "m", 0.001, 0.03, "from a pad's face to its back")
+    finger_thickness: float = 0.008  #: m from a pad's face to its back (the gripper model's)
     locate_pivot: bool = True  #: place P_c from where the closed grasp found the rim
     tilt_squeeze: float | None = None  #: m the jaws may still close along the arc (None: free)
     tilt_axes: tuple[bool, bool, bool] = (False, False, True)  #: tool axes that give way

@@ -67,7 +67,7 @@ def test_a_missed_grasp_is_put_back_and_retried() -> None:
 def test_a_lost_camera_frame_fails_the_look_and_the_retry_goes_on() -> None:
     r = _soak(1, _force("camera_lost"))
     assert r["faults"]["injected"]["camera_lost"] == 1
-    assert r["aborts_by_reason"].get("look: device_lost") == 1, r["aborts_by_reason"]
+    assert r["aborts_by_reason"].get("perceive: device_lost") == 1, r["aborts_by_reason"]
     assert r["cycles_done"] == 1 and r["unhandled_exceptions"] == 0
     _accounted(r)
 

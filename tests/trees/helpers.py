@@ -30,7 +30,7 @@ class Recorder:
         self._stopped: str | None = None
         self.stop_code: StopKind | None = None
 
-    def abort(self, reason: str, code: Failure | None = None) -> None:
+    def abort(self, reason: str, code: Failure | None = None, node: str | None = None) -> None:
         self.aborts.append(reason)
         self.codes.append(code)
 

@@ -366,10 +366,26 @@ def test_put_back_without_a_chosen_part_remembers_nothing(ctx) -> None:
 
 def test_put_back_opens_under_the_load_of_a_pinched_part_within_its_node_limit(ctx) -> None:
     holding(ctx)
-    ctx.devices.ft.value = np.array([0.0, 0.0, 150.0, 0, 0, 0])  # fingers still pressing
+    ft = ctx.devices.ft
+    ft.value = np.array([0.0, 0.0, 150.0, 0, 0, 0])  # fingers still pressing
+
+    def released(_: int) -> None:  # the load goes with the opened jaws
+        if not ctx.devices.gripper.object_detected() and not ctx.devices.gripper.moving():
+            ft.value = np.zeros(6)
+
+    node = lv.PutBack("put back", ctx, max_force_n=250.0)
+    assert run(node, ctx, on_tick=released)[-1] == Status.FAILURE
+    assert not ctx.events.aborts and len(ctx.devices.arm.commands) == 2  # it went home
+
+
+def test_put_back_rises_and_goes_home_under_the_stricter_move_limit(ctx) -> None:
+    """Only the opening needs the node's high limit; a 150 N push on the way up stops it."""
+    holding(ctx)
+    ctx.devices.ft.value = np.array([0.0, 0.0, 150.0, 0, 0, 0])  # it never goes away
     node = lv.PutBack("put back", ctx, max_force_n=250.0)
     assert run(node, ctx)[-1] == Status.FAILURE
-    assert not ctx.events.aborts and len(ctx.devices.arm.commands) == 2  # it went home
+    assert ctx.events.codes == [Failure.FORCE_TORQUE] and ctx.devices.arm.stops >= 1
+    assert len(ctx.devices.arm.commands) == 1  # the rise began, home never did
 
 
 def test_put_back_force_spike_stops_the_arm_before_home_and_reports_an_abort(ctx) -> None:
