@@ -445,11 +445,18 @@ class _Progress:
 
 
 def left_reasons(events: list[dict[str, Any]], left_in_bin: int | None) -> list[dict[str, str]]:
-    """Each part the cell left in the bin, named, with why: from the last time the cell found
-    nothing to pick (the parts it saw and passed over), and, where the twin counts more parts
-    in the bin than the cell saw, the rest as not found by perception."""
+    """Each part the cell left in the bin, named, with why. A run that ended on an empty bin:
+    the parts the cell saw and passed over, and any more the twin counts as not found by
+    perception. A run that ended otherwise (its cycles done, a stop): the parts not tried."""
     ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
-    seen: list[dict[str, str]] = list(ends[-1].get("left", [])) if ends else []
+    last = events[-1] if events else None
+    ended_empty = bool(ends) and last is not None and last["kind"] in (
+        EventKind.BIN_EMPTY,
+        EventKind.CYCLE_FAILED,
+    ) and any(e is ends[-1] for e in events[-2:])
+    if not ended_empty:
+        return [{"part": "a part", "reason": "not tried: the run ended first"}] * (left_in_bin or 0)
+    seen: list[dict[str, str]] = list(ends[-1].get("left", []))
     if left_in_bin is not None and left_in_bin > len(seen):
         seen += [{"part": "a part", "reason": "not found by perception"}] * (
             left_in_bin - len(seen)

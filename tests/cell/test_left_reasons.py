@@ -1,0 +1,26 @@
+"""What `cell sim` says of the parts it left in the bin."""
+
+from __future__ import annotations
+
+from cell.cell_cmds import left_reasons
+
+
+def _e(kind: str, **data: object) -> dict[str, object]:
+    return {"kind": kind, **data}
+
+
+def test_a_run_that_found_nothing_to_pick_names_what_it_passed_over_and_what_it_never_saw() -> None:
+    passed = {"part": "bushing at (0.400, 0.100) m", "reason": "2 picks failed"}
+    events = [_e("packed"), _e("cycle_done"), _e("bin_empty", left=[passed]), _e("cycle_failed")]
+    assert left_reasons(events, 3) == [
+        passed,
+        {"part": "a part", "reason": "not found by perception"},
+        {"part": "a part", "reason": "not found by perception"},
+    ]
+
+
+def test_a_run_that_ended_on_its_cycles_left_the_rest_untried() -> None:
+    events = [_e("bin_empty", left=[]), _e("cycle_failed"), _e("packed"), _e("cycle_done")]
+    untried = {"part": "a part", "reason": "not tried: the run ended first"}
+    assert left_reasons(events, 2) == [untried, untried]
+    assert left_reasons(events, 0) == []
