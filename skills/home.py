@@ -4,6 +4,7 @@ tree node's guard, never from a behaviour."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -14,14 +15,18 @@ from drivers.pose import Pose
 from skills.motion import Guard, Sequence
 from skills.params import guard_field, si
 
+DEG = math.pi / 180.0
+
 
 @dataclass(frozen=True)
 class HomeParams:
     """A joint move to the home joints: it also unwinds the wrist that Cartesian moves wind up
     (a straight TCP line that keeps the tool's yaw turns the last joint towards its limit)."""
 
-    joint_speed: float = si(1.0, "rad/s", 0.05, 3.0, "of the joints on the way home")
-    joint_acceleration: float = si(2.0, "rad/s^2", 0.1, 10.0, "of the joints on the way home")
+    joint_speed: float = si(1.0, "rad/s", 3.0 * DEG, 180.0 * DEG, "of the joints on the way home")
+    joint_acceleration: float = si(
+        2.0, "rad/s^2", 6.0 * DEG, 600.0 * DEG, "of the joints on the way home"
+    )
     guard: Guard = field(default_factory=Guard)
 
 

@@ -99,11 +99,11 @@ def config_keys(cls: type) -> list[ConfigKey]:
             stem = f.name.removesuffix("_guard")
             keys.append(
                 ConfigKey(f"{stem}_max_force_n", f.name, "max_force", "N", 1.0, 1.0, 300.0,
-                          g.max_force, f"{meta['doc']}: abort force (N; the node's limit caps it)")
+                          g.max_force, f"{meta['doc']}: abort force, capped by the node's limit")
             )
             keys.append(
                 ConfigKey(f"{stem}_timeout_s", f.name, "timeout", "s", 1.0, 0.1, 600.0,
-                          g.timeout, f"{meta['doc']}: timeout of each such motion (s)")
+                          g.timeout, f"{meta['doc']}: timeout of each such motion")
             )
         elif "unit" in meta:
             suffix, scale = UNITS[meta["unit"]]

@@ -72,7 +72,7 @@ class PivotParams:
     tilt_timeout: float = si(20.0, "s", 1.0, 600.0, "the longest the arc may take")
     settle: float = si(0.3, "s", 0.0, 5.0, "to let the standing part come to rest")
     align_speed: float = si(
-        0.5, "rad/s", 0.05, 2.0, "of Align's turn about the rim contact (in hand)"
+        0.5, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
     )
     align_press: float = si(
         0.0005, "m", 0.0, 0.005, "the turn's centre lies inside the rim (keeps the contact)"
