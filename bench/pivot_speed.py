@@ -2,7 +2,7 @@
 settle times, beside the regrasp baseline, on the same parts and seeds as `cell compare`.
 
 Why: `cell compare` runs the pivot as the paper describes it, quasi-static (Tilt at 0.01 m/s,
-1 s settle), and finds it slower than the regrasp. Both methods are to be tuned with
+0.3 s settle), and finds it slower than the regrasp. Both methods are to be tuned with
 equal care; this measures how much of the gap the Tilt's speed explains. Run by hand:
 
     python bench/pivot_speed.py --part bushing medicine_bottle cookie_can --trials 10 \
