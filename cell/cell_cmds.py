@@ -534,7 +534,7 @@ def cmd_tree(args: argparse.Namespace) -> int:
     import py_trees
 
     from trees.registry import describe_types
-    from trees.render import write_pictures
+    from trees.render import limits_table, write_pictures
 
     if args.types:
         print(describe_types())
@@ -544,6 +544,9 @@ def cmd_tree(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return report_config_error(exc, "tree")
     print(py_trees.display.unicode_tree(prep.root))
+    print("abort limits of each motion leaf (force, torque, time):")
+    for line in limits_table(prep.root):
+        print(f"  {line}")
     dot, png = write_pictures(prep.root, args.out)
     print(f"wrote {dot} and {png}")
     return 0

@@ -31,6 +31,34 @@ def _kind(node: Behaviour) -> str:
     return "Leaf"
 
 
+def _label(node: Behaviour) -> str:
+    """A node's name, and for a guard or a timeout the limits it holds (safety is in the
+    picture, not only in the YAML)."""
+    from trees.decorators import FTGuard, Timeout
+
+    name = node.name.replace(" ", "\n", 1) if len(node.name) > 14 else node.name
+    if isinstance(node, FTGuard):
+        return f"{name}\n{node.max_force:g} N, {node.max_torque:g} N*m"
+    if isinstance(node, Timeout):
+        return f"{name}\n{node.seconds:g} s"
+    return name
+
+
+def limits_table(root: Behaviour) -> list[str]:
+    """One line per guarded motion leaf: its abort force and torque and its timeout."""
+    from trees.decorators import FTGuard, Timeout, leaf_name
+
+    lines = []
+    for node in root.iterate():
+        if isinstance(node, FTGuard):
+            inner = node.decorated
+            seconds = f", {inner.seconds:g} s" if isinstance(inner, Timeout) else ""
+            lines.append(
+                f"{leaf_name(node)}: {node.max_force:g} N, {node.max_torque:g} N*m{seconds}"
+            )
+    return lines
+
+
 def write_pictures(root: Behaviour, out: Path) -> tuple[Path, Path]:
     out.mkdir(parents=True, exist_ok=True)
     dot_path = out / "tree.dot"
@@ -77,7 +105,7 @@ def _draw_png(root: Behaviour, path: Path) -> None:
         ax.text(
             x,
             -d,
-            node.name.replace(" ", "\n", 1) if len(node.name) > 14 else node.name,
+            _label(node),
             ha="center",
             va="center",
             fontsize=7,
