@@ -382,3 +382,13 @@ def test_the_type_list_names_every_type_and_its_parameters() -> None:
         assert nt.kind in line
         for param in nt.params:
             assert param in text
+
+
+def test_the_shipped_trees_limits_are_listed_for_cell_tree(ctx) -> None:
+    from trees.render import limits_table
+
+    doc = load_yaml(SHIPPED / "bushing_machining.yaml")
+    root = TreeBuilder(ctx, doc, DEFAULTS).build(doc.data, ())
+    lines = limits_table(root)
+    assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 50 N*m, 20 s" in lines
+    assert len(lines) == 11  # every guarded motion leaf, once
