@@ -263,7 +263,9 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     if parts is not None:
         summary["parts"] = parts  # where every part is at the end, judged by the twin
         summary["left_in_bin"] = parts["in_bin"]
-    summary["left_reasons"] = left_reasons(prep.state.events, summary.get("left_in_bin"))
+    summary["left_reasons"] = left_reasons(
+        prep.state.events, summary.get("left_in_bin"), prep.state.stop_reason
+    )
     summary["repositioned"] = prep.state.counts.get(EventKind.REPOSITIONED, 0)
     _print_summary(summary)
     if recorder is not None and recorder.frames:
@@ -444,10 +446,16 @@ class _Progress:
         sys.stderr.flush()
 
 
-def left_reasons(events: list[dict[str, Any]], left_in_bin: int | None) -> list[dict[str, str]]:
+def left_reasons(
+    events: list[dict[str, Any]], left_in_bin: int | None, stop_reason: str | None = None
+) -> list[dict[str, str]]:
     """Each part the cell left in the bin, named, with why. A run that ended on an empty bin:
     the parts the cell saw and passed over, and any more the twin counts as not found by
-    perception. A run that ended otherwise (its cycles done, a stop): the parts not tried."""
+    perception. A cell that stopped for a person: the stop's reason. A run that ended on its
+    cycles: the parts not tried."""
+    if stop_reason:
+        why = f"left when the cell stopped: {stop_reason}"
+        return [{"part": "a part", "reason": why}] * (left_in_bin or 0)
     ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
     last = events[-1] if events else None
     ended_empty = bool(ends) and last is not None and last["kind"] in (

@@ -24,3 +24,9 @@ def test_a_run_that_ended_on_its_cycles_left_the_rest_untried() -> None:
     untried = {"part": "a part", "reason": "not tried: the run ended first"}
     assert left_reasons(events, 2) == [untried, untried]
     assert left_reasons(events, 0) == []
+
+
+def test_a_cell_that_stopped_says_so_for_each_part_left() -> None:
+    out = left_reasons([_e("cycle_failed")], 1, "3 cycles in a row failed")
+    why = "left when the cell stopped: 3 cycles in a row failed"
+    assert out == [{"part": "a part", "reason": why}]
