@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
+import py_trees
 from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
@@ -10,10 +13,10 @@ from cell.catalogue import load_catalogue
 from drivers.devices import Devices
 from drivers.events import StopKind
 from drivers.machine import TimedMachine
-from drivers.parts import Gripper
+from drivers.parts import Gripper, Part
 from drivers.pose import Pose
 from skills.mechanics.contact import Frictions
-from skills.mechanics.planner import plan_pivot
+from skills.mechanics.planner import PivotPlan, plan_pivot
 from skills.pivot import PivotParams
 from skills.status import Failure
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
@@ -49,9 +52,16 @@ class Recorder:
         return [k for k, _ in self.events]
 
 
-def make_ctx() -> CellContext:
+@functools.cache
+def _bushing() -> tuple[Part, PivotPlan]:
+    """The catalogue's bushing and its plan: the same every time, and planning takes 0.1 s."""
     part = load_catalogue(None).get("bushing")
-    plan = plan_pivot(part, Gripper(), Frictions())
+    return part, plan_pivot(part, Gripper(), Frictions())
+
+
+def make_ctx() -> CellContext:
+    """A fresh context (fresh fakes, an empty events sink) around the bushing's plan."""
+    part, plan = _bushing()
     clock = FakeClock()
     dev = Devices(FakeArm(Pose(np.array([0.4, 0.0, 0.3]))), FakeGripper(), FakeFT(), clock)
     geometry = CellGeometry(
@@ -91,3 +101,9 @@ def tick_tree(node: Behaviour, ctx: CellContext, ticks: int) -> list[Status]:
         dev.gripper.tick()
         dev.clock.t += dev.clock.dt
     return out
+
+
+def fresh_ctx() -> CellContext:
+    """A context for one test: the blackboard cleared (py_trees keeps it process-wide)."""
+    py_trees.blackboard.Blackboard.clear()
+    return make_ctx()

@@ -15,32 +15,14 @@ from py_trees.behaviour import Behaviour
 from py_trees.common import Access, ParallelPolicy, Status
 
 from drivers.health import DeviceError
-from tests.trees.helpers import make_ctx
+from tests.trees.helpers import fresh_ctx
 from trees import behaviours as lv
 from trees.decorators import WRENCH_KEY, Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _plan_once():
-    """make_ctx plans the bushing's pivot each time (0.1 s); the plan is the same every time."""
-    import tests.trees.helpers as helpers
-
-    real, plans = helpers.plan_pivot, {}
-
-    def cached(part, *args, **kwargs):  # type: ignore[no-untyped-def]
-        if part.name not in plans:
-            plans[part.name] = real(part, *args, **kwargs)
-        return plans[part.name]
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(helpers, "plan_pivot", cached, raising=False)
-        yield
-
-
 @pytest.fixture
 def ctx():
-    py_trees.blackboard.Blackboard.clear()
-    c = make_ctx()
+    c = fresh_ctx()
     c.devices.arm.ticks_per_move = 1000  # a long move: a GoHome stays RUNNING
     return c
 

@@ -17,7 +17,7 @@ import pytest
 from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
-from tests.trees.helpers import make_ctx
+from tests.trees.helpers import fresh_ctx
 from trees import behaviours as lv
 from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 from trees.registry import (
@@ -34,27 +34,9 @@ DEFAULTS = {"timeout_s": 30.0, "max_force_n": 80.0, "max_torque_nm": 8.0}
 SHIPPED = Path(lv.__file__).resolve().parents[1] / "cell" / "data" / "trees"
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _plan_once():
-    """make_ctx plans the bushing's pivot each time (0.1 s); the plan is the same every time."""
-    import tests.trees.helpers as helpers
-
-    real, plans = helpers.plan_pivot, {}
-
-    def cached(part, *args, **kwargs):  # type: ignore[no-untyped-def]
-        if part.name not in plans:
-            plans[part.name] = real(part, *args, **kwargs)
-        return plans[part.name]
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(helpers, "plan_pivot", cached, raising=False)
-        yield
-
-
 @pytest.fixture
 def ctx():
-    py_trees.blackboard.Blackboard.clear()
-    return make_ctx()
+    return fresh_ctx()
 
 
 def build(text: str, ctx, defaults: dict[str, float] | None = None) -> Behaviour:  # type: ignore[no-untyped-def]
