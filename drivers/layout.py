@@ -306,19 +306,4 @@ def _rect(center: tuple[float, ...], inner: tuple[float, ...], wall: float) -> _
     return (center[0] - hx, center[0] + hx, center[1] - hy, center[1] + hy)
 
 
-def _unit(key: str) -> str:
-    return "rad" if key == "camera_rpy" else "m"
-
-
-def _number(source: str, key: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ValueError(f"{source}: {key}: expected a finite number ({_unit(key)}), got {value!r}")
-    return float(value)
-
-
-def _rect(center: tuple[float, ...], inner: tuple[float, ...], wall: float) -> _Rect:
-    hx, hy = 0.5 * inner[0] + wall, 0.5 * inner[1] + wall
-    return (center[0] - hx, center[0] + hx, center[1] - hy, center[1] + hy)
-
-
 __all__ = ["MIN_MACHINE_WALL", "CellLayout", "tray_places"]
