@@ -130,6 +130,18 @@ def look_down_pose(
     return Pose(np.array([target_xy[0], target_xy[1], height]) - offset, DOWN)
 
 
+def random_floor_pose(
+    layout: CellLayout, part: Part, rng: np.random.Generator, wall_gap: float = 0.001
+) -> tuple[float, float, float]:
+    """A lying part's centre and yaw drawn uniformly over the bin floor: any yaw, either end
+    towards the robot, anywhere its footprint at that yaw fits (up against a wall included)."""
+    x0, x1, y0, y1 = layout.bin_interior()
+    yaw = rng.uniform(-math.pi, math.pi)
+    hx = 0.5 * (part.length * abs(math.cos(yaw)) + part.outer * abs(math.sin(yaw))) + wall_gap
+    hy = 0.5 * (part.length * abs(math.sin(yaw)) + part.outer * abs(math.cos(yaw))) + wall_gap
+    return rng.uniform(x0 + hx, x1 - hx), rng.uniform(y0 + hy, y1 - hy), yaw
+
+
 def dropped_bin_fill(
     world: SimWorld,
     layout: CellLayout,
@@ -148,16 +160,10 @@ def dropped_bin_fill(
 
     ``spawn`` creates one part at a pose (the caller's body options: friction, sleeping).
     """
-    x0, x1, y0, y1 = layout.bin_interior()
     half_diag = 0.5 * math.hypot(part.length, part.outer)
     bodies: list[PartBody] = []
     for _ in range(n_parts):
-        yaw = rng.uniform(-math.pi, math.pi)
-        # Anywhere its footprint at that yaw fits: up against a wall too.
-        hx = 0.5 * (part.length * abs(math.cos(yaw)) + part.outer * abs(math.sin(yaw)))
-        hy = 0.5 * (part.length * abs(math.sin(yaw)) + part.outer * abs(math.cos(yaw)))
-        x = rng.uniform(x0 + hx + wall_margin, x1 - hx - wall_margin)
-        y = rng.uniform(y0 + hy + wall_margin, y1 - hy - wall_margin)
+        x, y, yaw = random_floor_pose(layout, part, rng, wall_margin)
         tilt = rng.uniform(-0.35, 0.35)  # rad off horizontal: one end leads the fall
         roll = rng.uniform(-math.pi, math.pi)
         rotation = (

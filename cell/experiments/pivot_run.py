@@ -34,6 +34,7 @@ from sim.judge import PivotWatch, WatchSample, judge
 from sim.part_body import lying_pose, spawn_part
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_WIDTH
+from sim.scenes import random_floor_pose
 from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
@@ -189,18 +190,6 @@ class TrialWorld:
     frictions: dict[str, float]
     mass: float
     wall0: float
-
-
-def random_floor_pose(
-    layout: CellLayout, part: Part, rng: np.random.Generator, wall_gap: float = 0.001
-) -> tuple[float, float, float]:
-    """A lying part's centre and yaw drawn uniformly over the bin floor: any yaw, either end
-    towards the robot, anywhere its footprint fits (up against a wall included)."""
-    x0, x1, y0, y1 = layout.bin_interior()
-    yaw = rng.uniform(-math.pi, math.pi)
-    hx = 0.5 * (part.length * abs(math.cos(yaw)) + part.outer * abs(math.sin(yaw))) + wall_gap
-    hy = 0.5 * (part.length * abs(math.sin(yaw)) + part.outer * abs(math.cos(yaw))) + wall_gap
-    return rng.uniform(x0 + hx, x1 - hx), rng.uniform(y0 + hy, y1 - hy), yaw
 
 
 def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
