@@ -17,6 +17,7 @@ itself is not configured here: its force and torque are the tree node's limits (
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -83,8 +84,10 @@ class ConfigKey:
 MOTION_TIMEOUT = "motion_timeout_s"
 
 
-def config_keys(cls: type) -> list[ConfigKey]:
-    """The configuration keys of a parameter dataclass, in declaration order."""
+@functools.cache
+def config_keys(cls: type) -> tuple[ConfigKey, ...]:
+    """The configuration keys of a parameter dataclass, in declaration order (read once per
+    class: a leaf asks for them each time its skill starts)."""
     keys: list[ConfigKey] = []
     for f in dataclasses.fields(cls):
         meta = f.metadata
@@ -111,7 +114,7 @@ def config_keys(cls: type) -> list[ConfigKey]:
                 ConfigKey(f.name + suffix, f.name, None, meta["unit"], scale, meta["low"],
                           meta["high"], float(f.default), meta["doc"])
             )
-    return keys
+    return tuple(keys)
 
 
 P = TypeVar("P")
