@@ -43,7 +43,7 @@ class CellSection(_Section):
     layout: dict[str, Any] = Field(
         default_factory=dict,
         description="cell geometry overrides (m, rad), the keys of `cell pivot --cell`; "
-        "see README 'Cell layout'",
+        "see docs/commands.md, 'Cell layout (YAML)'",
     )
 
 
