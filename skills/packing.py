@@ -4,10 +4,11 @@ The application of Sec. IV-C of the paper (Fig. 15): a hybrid force-position pus
 set down a few millimetres short of its place towards ``-x, -y``, then pushed ``-z`` until the
 box floor pushes back, ``+x`` until a wall or a packed neighbour does, ``+y`` likewise, let go and
 the gripper withdrawn up (a last short ``+x`` push closes the millimetre the part was eased back
-before the ``+y`` push, see ``back_off``). Each push is a guarded straight move that stops the
-moment the force against it rises ``contact_force`` above what it was when the push began (the
-held part's weight and friction on the floor are in that reference, so they are not taken for
-contact), which is how a position-controlled arm with a wrist sensor does force-guided placing.
+before the ``+y`` push, see ``back_off``). Each push runs in the arm's force mode
+(:class:`~skills.slot.ForcePush`, ``forceMode`` on a UR): ``contact_force`` along the push, position
+held on the other axes, until the TCP stands still pressing -- the measured contact, wherever it
+is. The force is added to the wrench read as the push begins (the held part's weight and the
+sensor's offset), so only the reaction of the floor, a wall or a neighbour ends a push.
 
 Why the hole grasp helps: the finger in the hole and the one on the wall hold the part from one
 side only, so no finger sits between the part and the things it is pushed against; the gripper
@@ -36,6 +37,7 @@ from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
     ContactMove,
+    ForcePush,
     SequenceSkill,
     WrenchReference,
     check,
@@ -73,7 +75,16 @@ class PackParams:
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
     settle: float = si(0.2, "s", 0.0, 5.0, "held still before a reference wrench is read")
     floor_gap: float = si(0.005, "m", 0.0, 0.05, "above the floor where the fast descent ends")
-    contact_force: float = si(4.0, "N", 0.5, 50.0, "against a push that means contact")
+    contact_force: float = si(
+        6.0, "N", 0.5, 50.0,
+        "each push presses with in force mode; the guarded descent stops at it",
+    )
+    contact_settle: float = si(
+        0.15, "s", 0.0, 2.0, "a push stands still, pressing, before that counts as contact"
+    )
+    still_speed: float = si(
+        0.002, "m/s", 0.0001, 0.05, "slower than this along a push is standing still"
+    )
     overshoot: float = si(
         0.004, "m", 0.0, 0.02, "the -z push aims below the floor (contact stops it)"
     )
@@ -140,26 +151,26 @@ class PackInBox(SequenceSkill):
         )
 
     def _make_contact_moves(self) -> None:
-        """The guarded moves that end at contact: down, onto the floor, and the three pushes."""
+        """The fast guarded descent into the box, then the force-mode pushes: -z onto the floor,
+        +x, +y and +x again, each pressing ``contact_force`` until it stands on a contact."""
         p, dev = self.params, self.dev
+        self.descend = ContactMove(
+            "down into the box", dev, p.push_guard,
+            lambda: self._pose(self.floor_z + p.floor_gap), p.approach_speed, p.acceleration,
+            p.contact_force,
+        )
 
-        def contact_move(name: str, target: Callable[[], Pose], speed: float) -> ContactMove:
-            return ContactMove(
-                name, dev, p.push_guard, target, speed, p.acceleration, p.contact_force
+        def push(name: str, direction: tuple[float, float, float], reach: float) -> ForcePush:
+            return ForcePush(
+                name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
+                settle=p.contact_settle, still_speed=p.still_speed,
             )
 
-        self.descend = contact_move(
-            "down into the box", lambda: self._pose(self.floor_z + p.floor_gap), p.approach_speed
-        )
-        self.floor = contact_move(
-            "push -z onto the floor", lambda: self._pose(self.floor_z - p.overshoot), p.push_speed
-        )
-        self.push_x = contact_move("push +x", lambda: self._shifted(self._reach, 0.0), p.push_speed)
-        self.push_y = contact_move("push +y", lambda: self._shifted(0.0, self._reach), p.push_speed)
+        self.floor = push("push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot)
+        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach)
+        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach)
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
-        self.push_x_again = contact_move(
-            "push +x again", lambda: self._shifted(p.back_off + 0.002, 0.0), p.push_speed
-        )
+        self.push_x_again = push("push +x again", (1.0, 0.0, 0.0), p.back_off + 0.002)
 
     # --- the phases --------------------------------------------------------------------------
     def _over_place_steps(self) -> list[GuardedMotion]:
@@ -258,7 +269,7 @@ class PackInBox(SequenceSkill):
         self.contacts["floor"] = self.dev.arm.tool_pose()
         return None
 
-    def _felt(self, move: ContactMove, what: str) -> str | None:
+    def _felt(self, move: ForcePush, what: str) -> str | None:
         if not move.contact:
             return f"no {what} felt within {1e3 * self._reach:.0f} mm"
         self.contacts[move.motion.name.split()[-1]] = self.dev.arm.tool_pose()

@@ -31,6 +31,11 @@ class FakeArm:
         self.state = MotionState.IDLE
         self.commands: list[tuple[str, object]] = []
         self.stops = 0
+        #: force mode: (selection, wrench, speed limits) while it runs, else None
+        self.force: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: in force mode the TCP moves at its speed limit unless something holds it (the test)
+        self.blocked = False
+        self.dt = 0.008
 
     def tool_pose(self) -> Pose:
         return self.pose
@@ -55,11 +60,15 @@ class FakeArm:
 
     def force_mode(self, selection, wrench, speed_limits) -> None:
         self.commands.append(("force", tuple(wrench)))
+        self.force = (np.asarray(selection, bool), np.asarray(wrench, float),
+                      np.asarray(speed_limits, float))
+        self.queue = []
         self.state = MotionState.MOVING
 
     def stop(self) -> None:
         self.stops += 1
         self.queue = []
+        self.force = None
         self.state = MotionState.STOPPED
 
     def status(self) -> ArmStatus:
@@ -69,6 +78,12 @@ class FakeArm:
         return np.zeros(6)
 
     def tick(self) -> None:
+        if self.state is MotionState.MOVING and self.force is not None:
+            if not self.blocked:
+                sel, wrench, limits = self.force
+                step = np.where(sel[:3], np.sign(wrench[:3]) * limits[:3], 0.0) * self.dt
+                self.pose = Pose(self.pose.position + step, self.pose.rotation)
+            return
         if self.state is MotionState.MOVING and self.queue:
             self.remaining -= 1
             if self.remaining <= 0:

@@ -167,7 +167,8 @@ def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
 
     def on_tick(_: int) -> None:
         arm = d["arm"]
-        if pack.step in forces and arm.state is MotionState.MOVING and arm.queue:
+        arm.blocked = pack.step in forces
+        if pack.step in forces and arm.state is MotionState.MOVING and arm.force is not None:
             push_back(d, forces[pack.step])
         elif pack.step not in forces:
             d["ft"].value = np.zeros(6)
@@ -175,6 +176,11 @@ def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
     result, _ = run(pack, d, on_tick=on_tick)
     assert result.status is Status.SUCCESS, result.message
     assert set(pack.contacts) == {"floor", "+x", "+y"}
+    # every push ran in force mode, pressing contact_force along its axis only
+    pushes = [c for c in d["arm"].commands if c[0] == "force"]
+    assert len(pushes) == 4
+    assert pushes[0][1][2] == pytest.approx(-6.0) and pushes[1][1][0] == pytest.approx(6.0)
+    assert pushes[2][1][1] == pytest.approx(6.0)
     # the outer finger (tool x) trails on the -x, -y diagonal
     x = pack.contacts["+x"].rotation[:, 0]
     assert np.allclose(x, [-np.sqrt(0.5), -np.sqrt(0.5), 0.0])
@@ -187,6 +193,7 @@ def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
     pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
 
     def on_tick(_: int) -> None:
+        d["arm"].blocked = pack.step == "push -z onto the floor"
         if pack.step == "push -z onto the floor" and d["arm"].state is MotionState.MOVING:
             push_back(d, (0, 0, 10.0))
         elif pack.step != "push -z onto the floor":
