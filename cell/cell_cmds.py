@@ -267,6 +267,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         prep.state.events, summary.get("left_in_bin"), prep.state.stop_reason
     )
     summary["repositioned"] = prep.state.counts.get(EventKind.REPOSITIONED, 0)
+    summary["phases"] = log.phases.table(summary["packed_claimed"] or None)
     _print_summary(summary)
     if recorder is not None and recorder.frames:
         recorder.save_gif(args.record, fps=12)
@@ -535,6 +536,19 @@ def _print_summary(s: dict[str, Any]) -> None:
     width = max(len(r[0]) for r in rows)
     for k, v in rows:
         print(f"{k:<{width}}  {v}")
+    phases = s.get("phases") or []
+    if phases:
+        per_part = "per_part_s" in phases[0]
+        print("where the time goes (each leaf of the tree, simulated or wall-clock s):")
+        name_w = max(len(str(r["phase"])) for r in phases)
+        head = f"  {'leaf':<{name_w}}  {'runs':>4}  {'failed':>6}  {'mean':>7}  {'total':>8}"
+        print(head + ("  per part" if per_part else ""))
+        for r in phases:
+            line = (
+                f"  {r['phase']:<{name_w}}  {r['runs']:>4}  {r['failed']:>6}  "
+                f"{r['mean_s']:>7.1f}  {r['total_s']:>8.1f}"
+            )
+            print(line + (f"  {r['per_part_s']:>8.1f}" if per_part else ""))
 
 
 # ------------------------------------------------------------------------------ tree/replay

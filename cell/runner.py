@@ -23,6 +23,7 @@ from py_trees import common
 from py_trees.behaviour import Behaviour
 
 from cell.journal import JournalKind
+from cell.phases import PhaseTimes
 from drivers.clock import Clock
 from drivers.events import EventKind, StopKind
 from skills.status import Failure
@@ -165,6 +166,7 @@ class TickLog:
         self._status: dict[str, str] = {}
         self._bb: dict[str, int] = {}
         self.lines = 0
+        self.phases = PhaseTimes()  #: how long each leaf ran (kept with or without a file)
 
     def record(
         self, tick: int, t: float, root: Behaviour, wrench: Any, extra: dict | None = None
@@ -175,6 +177,8 @@ class TickLog:
             if self._status.get(node.name) != s:
                 self._status[node.name] = s
                 changed[node.name] = s
+                if not node.children and node.parent is not root:  # not the FT sampler
+                    self.phases.change(node.name, s, t)
                 if s in ("FAILURE", "SUCCESS") and node.feedback_message:
                     why[node.name] = node.feedback_message
         bb_changed = {}
@@ -186,7 +190,7 @@ class TickLog:
             if self._bb.get(key) != ident:
                 self._bb[key] = ident
                 bb_changed[key] = _summary(value)
-        if not changed and not bb_changed and not extra:
+        if self._fh is None or (not changed and not bb_changed and not extra):
             return
         tip = root.tip()
         line: dict[str, Any] = {

@@ -83,6 +83,13 @@ def test_one_cycle_feeds_machines_and_packs_a_part_judged_by_the_twin(one_cycle)
     assert packed["verdict"]["ok"], packed["verdict"]
     assert s["tact_time_s_mean"] > 20.0  # simulated seconds of a whole cycle
     assert "packed (judged)" in r.stdout
+    # Where the tact goes: each leaf's time, summing to about the whole cycle.
+    phases = {row["phase"]: row for row in s["phases"]}
+    for leaf in ("grasp", "tilt", "feed slot", "wait machining", "pack in box"):
+        assert phases[leaf]["runs"] >= 1 and phases[leaf]["per_part_s"] > 0, phases
+    assert "ft sampler" not in phases
+    total = sum(row["total_s"] for row in s["phases"])
+    assert 0.8 * s["sim_time_s"] < total <= s["sim_time_s"] + 1e-6
 
 
 def test_state_is_saved_and_the_log_replays_as_a_timeline(one_cycle) -> None:
