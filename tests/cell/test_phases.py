@@ -27,5 +27,6 @@ def test_a_halted_leaf_counts_up_to_its_halt_and_a_running_one_not_yet() -> None
     p.change("feed slot", "INVALID", 3.0)
     p.change("pack in box", "RUNNING", 3.0)
     rows = {r["phase"]: r for r in p.table()}
-    assert rows["feed slot"]["total_s"] == pytest.approx(3.0) and "per_part_s" not in rows["feed slot"]
+    assert rows["feed slot"]["total_s"] == pytest.approx(3.0)
+    assert "per_part_s" not in rows["feed slot"]
     assert "pack in box" not in rows
