@@ -118,8 +118,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "writes DOT and PNG pictures.",
     )
     p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
-    p.add_argument("--out", type=Path, default=Path("out"), help="directory for tree.dot/.png")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="directory for tree.dot/.png, tree.xml (--format btcpp) or tree.yaml (--from-btcpp)"
+        " (default: out; --from-btcpp without it prints the YAML)",
+    )
     p.add_argument("--types", action="store_true", help="list the behaviour types and exit")
+    p.add_argument(
+        "--format",
+        choices=("picture", "btcpp"),
+        default="picture",
+        help="picture: DOT and PNG (default); btcpp: BehaviorTree.CPP v4 XML (DIR/tree.xml) "
+        "that Groot2 opens",
+    )
+    p.add_argument(
+        "--from-btcpp",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="read a BehaviorTree.CPP v4 XML tree (e.g. edited in Groot2) into the YAML form",
+    )
     p.set_defaults(func=cmd_tree)
 
     p = sub.add_parser(
@@ -561,10 +581,19 @@ def cmd_tree(args: argparse.Namespace) -> int:
     if args.types:
         print(describe_types())
         return 0
+    if args.from_btcpp is not None:
+        from cell.tree_xml import from_btcpp
+
+        return from_btcpp(args.from_btcpp, args.out)
     try:
         prep = load_prepared(args.config)
     except ConfigError as exc:
         return report_config_error(exc, "tree")
+    if args.format == "btcpp":
+        from cell.tree_xml import write_btcpp
+
+        return write_btcpp(prep, args.out or Path("out"))
+    args.out = args.out or Path("out")
     print(py_trees.display.unicode_tree(prep.root))
     print("abort limits of each motion leaf (force, torque, time):")
     for line in limits_table(prep.root):
