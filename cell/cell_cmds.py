@@ -93,6 +93,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="continue from the journal (log.journal) after a crash or a stop",
     )
+    p.add_argument(
+        "--monitor",
+        default=None,
+        metavar="HOST:PORT",
+        help="serve a read-only web page of the run (tree, wrench, camera, events) on "
+        "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
+    )
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -108,6 +115,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--resume",
         action="store_true",
         help="continue from the journal (log.journal) after a crash or a stop",
+    )
+    p.add_argument(
+        "--monitor",
+        default=None,
+        metavar="HOST:PORT",
+        help="serve a read-only web page of the run (tree, wrench, camera, events) on "
+        "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
     )
     p.set_defaults(func=cmd_run)
 
@@ -150,6 +164,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("log", type=Path, help="the JSONL tick log (log.tick_log in the config)")
     p.add_argument("--all", action="store_true", help="every status change, not only leaves")
+    p.add_argument(
+        "--serve",
+        default=None,
+        metavar="HOST:PORT",
+        help="serve the monitor's page over the recorded run, with a time slider, instead of "
+        "printing the timeline",
+    )
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser(
@@ -217,8 +238,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) -> int:
     from cell.assemble import open_backend
-    from cell.runner import TickLog, TickLoop
+    from cell.runner import TickLoop
 
+    if getattr(args, "monitor", None) is not None:
+        from cell.monitor.server import parse_address
+
+        parse_address(args.monitor)  # a bad address is refused before anything opens
     try:
         resume = _open_journal(prep, command, bool(getattr(args, "resume", False)))
     except _NothingToDo as done:
@@ -232,7 +257,16 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         return report_config_error(exc, command)
     config = prep.config
     cycles = prep.ctx.limits.cycles
-    log = TickLog(config.log.tick_log)
+    from cell.monitor import open_session
+
+    try:
+        session = open_session(prep, getattr(args, "monitor", None), command)
+    except UserError:
+        backend.close()
+        if prep.state.journal is not None:
+            prep.state.journal.close()
+        raise
+    log = session.log
     recorder = None
     if args.record is not None:
         from sim.recorder import Recorder
@@ -259,6 +293,8 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         on_tick=on_tick,
         realtime=(command == "run") or config.sim.realtime,
         state_file=config.log.state_file,
+        taps=session.taps,
+        monitor=session.live,
     )
     max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
     box_png = None
@@ -274,6 +310,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         if hasattr(backend, "account"):
             parts = backend.account()
     finally:
+        session.close()
         log.close()
         backend.close()
         if prep.state.journal is not None:
@@ -604,6 +641,10 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    if args.serve is not None:
+        from cell.monitor import serve_replay
+
+        return serve_replay(args.log, args.serve)
     try:
         text = args.log.read_text(encoding="utf-8")
     except OSError as exc:

@@ -211,6 +211,20 @@ class LogSection(_Section):
         description="crash-safe journal (SQLite, WAL) of every workflow event; `--resume` "
         "continues from it",
     )
+    frames: bool = Field(
+        True,
+        description="keep each camera frame (JPEG, 320 px wide) beside the tick log, for "
+        "`cell replay --serve`",
+    )
+    wrench_deadband_n: float = Field(
+        1.0,
+        ge=0.0,
+        le=50.0,
+        description="the tick log writes the wrench when a force component moved more than this",
+    )
+    wrench_deadband_nm: float = Field(
+        0.1, ge=0.0, le=5.0, description="likewise for a torque component"
+    )
 
 
 def _rate(what: str) -> Any:

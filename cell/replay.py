@@ -11,6 +11,7 @@ _PLUMBING = ("cell", "ft sampler")
 
 def timeline(lines: list[dict[str, Any]], every: bool = False) -> Iterator[str]:
     """One line per behaviour start/end (leaves only unless ``every``), event and abort."""
+    lines = [line for line in lines if "header" not in line]  # the tree's shape, no event
     started: dict[str, float] = {}
     last_t = 0.0
     for line in lines:

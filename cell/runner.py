@@ -12,7 +12,7 @@ import json
 import os
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -153,11 +153,25 @@ def _jsonable(v: Any) -> Any:
 
 class TickLog:
     """A JSONL line per tick where something changed: time, statuses that changed, the tip of
-    the tree and its feedback, blackboard keys that changed, the wrench."""
+    the tree and its feedback, blackboard keys that changed, the wrench, and what the taps add
+    (the events, the aborts, a camera frame's file).
+
+    The first line is a header, ``{"header": {"format": 2, "tree": [...], ...}}``: the tree's
+    shape (:func:`trees.nodes.node_table`) that `cell replay --serve` draws. The wrench is
+    logged as a change too: on every line written, and on a tick where it moved more than the
+    deadband (``log.wrench_deadband_n`` / ``_nm``) from the last one logged -- contact is
+    logged at the full tick rate, free motion costs nothing.
+    """
 
     SKIP_KEYS = ("/ft/wrench",)
+    FORMAT = 2
 
-    def __init__(self, path: str | Path | None) -> None:
+    def __init__(
+        self,
+        path: str | Path | None,
+        deadband: tuple[float, float] = (1.0, 0.1),
+        meta: dict[str, Any] | None = None,
+    ) -> None:
         self.path = Path(path) if path is not None else None
         self._fh = None
         if self.path is not None:
@@ -165,12 +179,31 @@ class TickLog:
             self._fh = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 -- kept for the run
         self._status: dict[str, str] = {}
         self._bb: dict[str, int] = {}
+        self._wrench: np.ndarray | None = None
+        self.deadband = deadband
+        self.meta = dict(meta or {})
+        self.header: dict[str, Any] | None = None
+        #: build the lines without a file too (the live monitor folds them)
+        self.keep_lines = False
         self.lines = 0
         self.phases = PhaseTimes()  #: how long each leaf ran (kept with or without a file)
 
+    def _write(self, line: dict[str, Any]) -> None:
+        if self._fh is not None:
+            self._fh.write(json.dumps(line) + "\n")
+            self.lines += 1
+            if self.lines % 50 == 0:
+                self._fh.flush()  # a crash loses at most the last few lines
+
     def record(
         self, tick: int, t: float, root: Behaviour, wrench: Any, extra: dict | None = None
-    ) -> None:
+    ) -> dict[str, Any] | None:
+        """Log this tick if anything changed; the line written (None: nothing changed)."""
+        if self.header is None:
+            from trees.nodes import node_table
+
+            self.header = {"format": self.FORMAT, "tree": node_table(root), **self.meta}
+            self._write({"header": self.header})
         changed, why = {}, {}
         for node in root.iterate():
             s = node.status.value
@@ -190,8 +223,16 @@ class TickLog:
             if self._bb.get(key) != ident:
                 self._bb[key] = ident
                 bb_changed[key] = _summary(value)
-        if self._fh is None or (not changed and not bb_changed and not extra):
-            return
+        w = None if wrench is None else np.asarray(wrench, dtype=float).ravel()
+        moved = w is not None and (
+            self._wrench is None
+            or float(np.max(np.abs(w[:3] - self._wrench[:3]))) > self.deadband[0]
+            or float(np.max(np.abs(w[3:] - self._wrench[3:]))) > self.deadband[1]
+        )
+        if (self._fh is None and not self.keep_lines) or (
+            not changed and not bb_changed and not extra and not moved
+        ):
+            return None
         tip = root.tip()
         line: dict[str, Any] = {
             "tick": tick,
@@ -204,15 +245,13 @@ class TickLog:
             line["feedback_of"] = why
         if bb_changed:
             line["blackboard"] = bb_changed
-        if wrench is not None:
-            line["wrench"] = [round(float(x), 3) for x in np.asarray(wrench).ravel()]
+        if w is not None:
+            self._wrench = w
+            line["wrench"] = [round(float(x), 3) for x in w]
         if extra:
             line.update(_jsonable(extra))
-        if self._fh is not None:
-            self._fh.write(json.dumps(line) + "\n")
-            self.lines += 1
-            if self.lines % 50 == 0:
-                self._fh.flush()  # a crash loses at most the last few lines
+        self._write(line)
+        return line
 
     def flush(self) -> None:
         if self._fh is not None:
@@ -226,6 +265,8 @@ class TickLog:
 
 def _summary(value: Any) -> Any:
     if isinstance(value, list):
+        if value and all(hasattr(v, "center") and hasattr(v, "yaw") for v in value):
+            return [_detection(v) for v in value]  # what the camera found: drawn on its frame
         return f"{len(value)} item(s)"
     if isinstance(value, dict) and "detection" in value:
         d = value["detection"]
@@ -235,6 +276,20 @@ def _summary(value: Any) -> Any:
             "yaw": round(float(d.yaw), 4),
         }
     return _jsonable(value) if isinstance(value, bool | int | float | str) else repr(value)[:120]
+
+
+def _detection(d: Any) -> dict[str, Any]:
+    """A part the camera found, in the robot base frame (m, rad), small enough for every look."""
+    return {
+        "x": round(float(d.center[0]), 4),
+        "y": round(float(d.center[1]), 4),
+        "z": round(float(d.center[2]), 4),
+        "yaw": round(float(d.yaw), 4),
+        "length": round(float(d.length), 4),
+        "outer": round(float(d.outer), 4),
+        "part": d.part,
+        "confidence": round(float(d.confidence), 3),
+    }
 
 
 class Interrupted(Exception):
@@ -266,11 +321,17 @@ class TickLoop:
         on_tick: Callable[[int], None] | None = None,
         realtime: bool = False,
         state_file: str | Path | None = None,
+        taps: Sequence[Callable[[], dict[str, Any]]] = (),
+        monitor: Any = None,
     ) -> None:
         self.root, self.backend, self.state, self.log = root, backend, state, log
         self.period = 1.0 / control_hz
         self.wrench, self.on_tick, self.realtime = wrench, on_tick, realtime
         self.state_file = state_file
+        #: what else a tick logs (a camera frame's file): each gives a dict for the line
+        self.taps = taps
+        #: the live monitor (cell/monitor): handed each tick's wrench and line, never waits
+        self.monitor = monitor
         self._signal: int | None = None
 
     def _handler(self, signum: int, _frame: Any) -> None:
@@ -301,7 +362,12 @@ class TickLoop:
                     extra["events"] = self.state.events[n_events:]
                 if len(self.state.aborts) > n_aborts:
                     extra["aborts"] = self.state.aborts[n_aborts:]
-                self.log.record(tick, self.state.time, self.root, self.wrench(), extra)
+                for tap in self.taps:
+                    extra.update(tap())
+                wrench = self.wrench()
+                line = self.log.record(tick, self.state.time, self.root, wrench, extra)
+                if self.monitor is not None:
+                    self.monitor.publish(tick, self.state.time, wrench, line, self.log.header)
                 if (
                     "events" in extra
                     and self.state_file is not None

@@ -1,0 +1,72 @@
+"""The built tree as a table: what the tick log's header and the monitor page draw.
+
+Why a table of ids: the page and the replay need the tree's shape once (ids, names, types,
+children, the limits of each guard and timeout), and then only status changes by name, which the
+builder keeps unique. Ids are pre-order positions, so the root is 0 and a parent comes before
+its children.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import py_trees
+from py_trees.behaviour import Behaviour
+
+from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
+from trees.registry import REGISTRY
+
+_CLASSES: dict[type, str] = {
+    py_trees.composites.Sequence: "sequence",
+    py_trees.composites.Selector: "selector",
+    py_trees.composites.Parallel: "parallel",
+    Retry: "retry",
+    Timeout: "timeout",
+    FTGuard: "ft_guard",
+    Cycles: "cycles",
+    StopOnFailure: "stop_on_failure",
+    FTSampler: "ft_sampler",
+}
+for _kind, _nt in REGISTRY.items():
+    if _nt.leaf is not None:
+        _CLASSES[_nt.leaf] = _kind
+
+
+def node_type(node: Behaviour) -> str:
+    """The registry's type of a built node (its exact class: a subclass is another type)."""
+    return _CLASSES.get(type(node), type(node).__name__)
+
+
+def preorder(root: Behaviour) -> list[Behaviour]:
+    out: list[Behaviour] = []
+
+    def walk(node: Behaviour) -> None:
+        out.append(node)
+        for child in node.children:
+            walk(child)
+
+    walk(root)
+    return out
+
+
+def node_table(root: Behaviour) -> list[dict[str, Any]]:
+    """``[{"id", "name", "type", "children": [ids], "limits"?}]`` in pre-order."""
+    nodes = preorder(root)
+    ids = {id(n): i for i, n in enumerate(nodes)}
+    table = []
+    for i, n in enumerate(nodes):
+        row: dict[str, Any] = {
+            "id": i,
+            "name": n.name,
+            "type": node_type(n),
+            "children": [ids[id(c)] for c in n.children],
+        }
+        if isinstance(n, FTGuard):
+            row["limits"] = {"force_n": float(n.max_force), "torque_nm": float(n.max_torque)}
+        elif isinstance(n, Timeout):
+            row["limits"] = {"seconds": float(n.seconds)}
+        table.append(row)
+    return table
+
+
+__all__ = ["node_table", "node_type", "preorder"]
