@@ -65,6 +65,7 @@ def open_session(prep: Any, address: str | None, command: str) -> Session:
             "timeout_s": s.default_timeout_s,
         },
         "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "wrench_deadband": [config.log.wrench_deadband_n, config.log.wrench_deadband_nm],
     }
     tick_log = config.log.tick_log
     folder = frames_folder(tick_log) if tick_log is not None and config.log.frames else None

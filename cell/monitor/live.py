@@ -59,6 +59,8 @@ class LiveMonitor:
         self.published: Published | None = None
         self.frames: FrameTap | None = None
         self.keep = int(3 * WRENCH_WINDOW_S * float(meta.get("control_hz", 125.0)))
+        self.deadband: tuple[float, float] = tuple(meta.get("wrench_deadband", (1.0, 0.1)))
+        self._last: np.ndarray | None = None
 
     def publish(
         self,
@@ -76,9 +78,21 @@ class LiveMonitor:
             self.fold.tick, self.fold.t = tick, t
         w = self.wrench
         if wrench is not None:
-            w.add(t, np.asarray(wrench, dtype=float).ravel())
-            if len(w.t) > 2 * self.keep:  # new lists: a reader keeps the old ones
-                w.t, w.w = w.t[-self.keep :], w.w[-self.keep :]
+            # As the log does: a sample when it moved past the deadband, and at least every
+            # 0.1 s -- the page draws each value held until the next, so nothing is lost that
+            # the deadband would not lose, and the page's JSON stays small.
+            v = np.asarray(wrench, dtype=float).ravel()
+            last = self._last
+            if (
+                last is None
+                or t - w.t[-1] >= 0.1
+                or float(np.max(np.abs(v[:3] - last[:3]))) > self.deadband[0]
+                or float(np.max(np.abs(v[3:] - last[3:]))) > self.deadband[1]
+            ):
+                w.add(t, v)
+                self._last = v
+                if len(w.t) > 2 * self.keep:  # new lists: a reader keeps the old ones
+                    w.t, w.w = w.t[-self.keep :], w.w[-self.keep :]
         self.published = Published(self.fold.view(), w.t, w.w, len(w.t))
 
     def finish(self) -> None:
