@@ -67,9 +67,12 @@ def _run(sim_seconds: float, monitor: bool, folder: Path, cycles: int = 1) -> di
 
         def poll() -> None:
             while not stop.wait(0.25):
-                for route in ("api/tree", "api/state", "api/events"):
-                    with urllib.request.urlopen(url + route, timeout=5) as r:
-                        r.read()
+                try:
+                    for route in ("api/tree", "api/state", "api/events"):
+                        with urllib.request.urlopen(url + route, timeout=5) as r:
+                            r.read()
+                except OSError:
+                    return  # the run ended and the server with it
                 polls[0] += 1
 
         threading.Thread(target=poll, daemon=True).start()
@@ -166,7 +169,8 @@ def main() -> None:
         "publish_pct_of_tick": 100.0 * pub / off,
     }
     print(
-        f"tick wall: {off:.0f} us off, {on:.0f} us on: {report['overhead']['overhead_pct']:+.1f} %; "
+        f"tick wall: {off:.0f} us off, {on:.0f} us on: "
+        f"{report['overhead']['overhead_pct']:+.1f} %; "
         f"CPU: {cpu_off:.0f} us off, {cpu_on:.0f} us on: "
         f"{report['overhead']['cpu_overhead_pct']:+.1f} %; "
         f"publish() in the tick {pub:.1f} us = {report['overhead']['publish_pct_of_tick']:.2f} %"
