@@ -97,7 +97,8 @@ def test_state_is_saved_and_the_log_replays_as_a_timeline(one_cycle) -> None:
     assert state["counts"]["packed"] == 1 and state["stop_reason"] is None
     assert state["filled"] == [0]  # the first box place
     lines = one_cycle["log"].read_text().splitlines()
-    first = json.loads(lines[0])
+    assert "header" in json.loads(lines[0])  # the tree's shape, for `cell replay --serve`
+    first = json.loads(lines[1])
     assert {"tick", "t", "changed", "tip", "feedback"} <= set(first)
     assert any("wrench" in json.loads(x) for x in lines)
     r = subprocess.run(

@@ -223,7 +223,7 @@ def test_each_tick_is_logged_with_its_new_events_and_aborts(ctx, tmp_path) -> No
     tl.run(max_time=10.0)
     log.close()
     lines = [json.loads(x) for x in (tmp_path / "ticks.jsonl").read_text().splitlines()]
-    by_tick = {line["tick"]: line for line in lines}
+    by_tick = {line["tick"]: line for line in lines[1:]}  # [0]: the header
     assert by_tick[2]["events"][0]["kind"] == "fed"
     assert by_tick[2]["aborts"][0]["reason"] == "guard tripped"
     assert 3 not in by_tick  # nothing changed on tick 3
@@ -351,8 +351,9 @@ def test_the_log_writes_a_line_only_when_something_changed(ctx, tmp_path) -> Non
     log.record(5, 0.040, root, None, extra={"events": [{"kind": "fed"}]})
     log.close()
     log.close()  # idempotent
-    lines = [json.loads(x) for x in path.read_text().splitlines()]
-    assert [line["tick"] for line in lines] == [1, 4, 5] and log.lines == 3
+    header, *lines = [json.loads(x) for x in path.read_text().splitlines()]
+    assert header["header"]["format"] == 2 and header["header"]["tree"][0]["name"] == "root"
+    assert [line["tick"] for line in lines] == [1, 4, 5] and log.lines == 4
     first, fourth, fifth = lines
     assert first["changed"] == {"root": "RUNNING", "a": "RUNNING", "b": "INVALID"}
     assert first["wrench"] == [0.0, 0.0, 1.235, 0.0, 0.0, 0.0]
