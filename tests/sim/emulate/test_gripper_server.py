@@ -228,3 +228,26 @@ def test_an_injected_fault_code_reaches_the_driver(rtu: ModbusRtuServer, device:
         assert wait_for(lambda: (gripper.fault() or "").startswith("fault 0x0E"), 2.0)
     finally:
         gripper.disconnect()
+
+
+def test_a_pulled_cable_fails_a_guarded_gripper_motion_with_its_code(
+    rtu: ModbusRtuServer, twin  # noqa: ANN001
+) -> None:
+    from drivers.clock import WallClock
+    from skills.motion import Guard, gripper_motion
+    from skills.status import Failure, Status
+
+    world, robot = twin
+    gripper = Robotiq2F85(ModbusRtuTransport(rtu.port, timeout=0.05, backoff_first=0.02),
+                          poll_hz=50.0, stale_after=0.2)
+    try:
+        gripper.activate(timeout=5.0)
+        motion = gripper_motion("close", gripper, robot.arm, robot.ft, WallClock(), Guard(),
+                                lambda: gripper.close(force=40.0, speed=0.02))
+        assert motion.tick().status is Status.RUNNING
+        rtu.pull_cable()
+        assert wait_for(lambda: motion.tick().status is Status.FAILURE, 2.0)
+        result = motion.tick()
+        assert result.code is Failure.GRIPPER_FAULT and "status stale" in result.message
+    finally:
+        gripper.disconnect()
