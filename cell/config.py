@@ -131,6 +131,21 @@ class CameraDevice(_Section):
     height: int = Field(480, ge=48, le=1080)
     fps: int = Field(30, ge=1, le=90)
     timeout_ms: int = Field(1000, ge=10, le=30000, description="a frame must arrive within")
+    stream: str | None = Field(
+        None,
+        description="host:port of a D435 frame stream (the emulator's, `cell emulate`) instead "
+        "of the USB camera; width, height and fps then come from the stream",
+    )
+
+    @field_validator("stream")
+    @classmethod
+    def _host_port(cls, value: str | None) -> str | None:
+        if value is None:
+            return value
+        host, _, port = value.rpartition(":")
+        if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise ValueError(f"{value!r} is not host:port (port 1..65535)")
+        return value
 
 
 class DevicesSection(_Section):

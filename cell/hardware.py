@@ -31,7 +31,8 @@ _ADDRESS = {
         else f"{d.arm.host}:{d.gripper.urcap_port}"
     ),
     "ft": lambda d: f"{d.ft.port} unit {d.ft.slave_id}",
-    "camera": lambda d: f"D435 {d.camera.serial or '(the only one)'}",
+    "camera": lambda d: (f"D435 stream {d.camera.stream}" if d.camera.stream
+                         else f"D435 {d.camera.serial or '(the only one)'}"),
 }
 _NAMES = {"arm": "UR5", "gripper": "2F-85", "ft": "FT300", "camera": "D435"}
 
@@ -77,6 +78,10 @@ def _open_camera(cfg: Any, layout: Any, clock: Any) -> Any:
     from drivers.realsense import RealSenseD435
 
     c = cfg.camera
+    if c.stream:  # a streamed camera (the emulator's): frames over a socket, same frame path
+        host, _, port = c.stream.rpartition(":")
+        return RealSenseD435.from_stream(host, int(port), timeout_ms=c.timeout_ms,
+                                         tool_T_camera=layout.tool_T_camera(), clock=clock)
     cam = RealSenseD435(
         c.serial,
         width=c.width,

@@ -17,11 +17,19 @@ Two ways in, one frame path:
   built ``rs.device`` directly into an ``rs.syncer``. The tests feed it a
   ``rs.software_device`` (librealsense 2.59 does not list a software device in a context, so a
   pipeline cannot be started on one); everything after "a frameset arrived" is shared.
+* ``RealSenseD435.from_stream(host, port, ...)``: a camera whose frames arrive over a socket
+  (:mod:`drivers.realsense.stream`; the emulator's D435 sends them). It builds a software device
+  shaped by the stream's header and a thread pushes each received pair into it, so from the
+  frameset on (syncer, align, depth scale, intrinsics) it is the hardware path. A stream that
+  stops or closes is a camera that delivers no frames: ``capture()`` raises ``TimeoutError``.
 """
 
 from __future__ import annotations
 
+import socket
+import threading
 import time
+from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
@@ -31,6 +39,7 @@ from drivers.clock import Clock, WallClock
 from drivers.health import CheckResult, DeviceError, backoff_delays
 from drivers.pose import Pose
 from drivers.realsense.frames import colour_to_rgb, depth_to_metres, intrinsics_from_rs
+from drivers.realsense.stream import StreamInfo, read_frame, read_info
 
 DEVICE = "RealSense D435"
 
@@ -75,6 +84,105 @@ class _SyncerSource:
             s.close()
 
 
+def software_d435(rs: Any, info: StreamInfo) -> tuple[Any, Any, Any, Any, Any]:
+    """A ``rs.software_device`` shaped by ``info``: a depth sensor (Z16, ``depth_units``) and a
+    colour sensor (RGB8) with the same intrinsics and an identity extrinsic between them (the
+    stream's depth is aligned to colour already). Returns the device, both sensors and both
+    video stream profiles."""
+    def stream(kind: Any, fmt: Any, bpp: int, uid: int) -> Any:
+        intr = rs.intrinsics()
+        intr.width, intr.height = info.width, info.height
+        intr.fx, intr.fy, intr.ppx, intr.ppy = info.fx, info.fy, info.cx, info.cy
+        intr.model, intr.coeffs = rs.distortion.none, [0.0] * 5
+        st = rs.video_stream()
+        st.type, st.index, st.uid = kind, 0, uid
+        st.width, st.height, st.fps, st.bpp, st.fmt = info.width, info.height, info.fps, bpp, fmt
+        st.intrinsics = intr
+        return st
+
+    dev = rs.software_device()
+    dev.register_info(rs.camera_info.serial_number, info.serial)
+    dev.register_info(rs.camera_info.firmware_version, info.firmware)
+    dev.register_info(rs.camera_info.name, info.name)
+    ds, cs = dev.add_sensor("Stereo Module"), dev.add_sensor("RGB Camera")
+    dp = ds.add_video_stream(stream(rs.stream.depth, rs.format.z16, 2, 0))
+    ds.add_read_only_option(rs.option.depth_units, info.depth_units)
+    cp = cs.add_video_stream(stream(rs.stream.color, rs.format.rgb8, 3, 1))
+    ex = rs.extrinsics()
+    ex.rotation = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    ex.translation = [0.0, 0.0, 0.0]
+    dp.register_extrinsics_to(cp, ex)
+    dev.create_matcher(rs.matchers.default)
+    return dev, ds, cs, dp.as_video_stream_profile(), cp.as_video_stream_profile()
+
+
+def _same_geometry(depth: Any, colour: Any) -> bool:
+    """Depth and colour profiles with equal intrinsics and an identity extrinsic between them."""
+    a, b = depth.get_intrinsics(), colour.get_intrinsics()
+    same = ((a.width, a.height, a.fx, a.fy, a.ppx, a.ppy, a.model, list(a.coeffs))
+            == (b.width, b.height, b.fx, b.fy, b.ppx, b.ppy, b.model, list(b.coeffs)))
+    try:
+        ex = depth.get_extrinsics_to(colour)
+    except RuntimeError:  # no extrinsic registered: not known to be one geometry
+        return False
+    identity = np.allclose(ex.rotation, np.eye(3).ravel()) and np.allclose(ex.translation, 0.0)
+    return bool(same and identity)
+
+
+class _StreamFeed:
+    """Receives frame pairs from the socket and pushes them into the software device's sensors
+    (a thread). librealsense reads a pushed frame's pixels without copying, so the last few
+    buffers are kept alive here."""
+
+    KEEP = 64  #: frame buffers kept alive (more than the syncer and align can hold)
+
+    def __init__(self, rs: Any, sock: socket.socket, info: StreamInfo, sensors: tuple[Any, Any],
+                 profiles: tuple[Any, Any]) -> None:
+        self._rs, self._sock, self.info = rs, sock, info
+        self._sensors, self._profiles = sensors, profiles
+        self._keep: deque[Any] = deque(maxlen=self.KEEP)
+        self._stop = threading.Event()
+        self.frames = 0  #: pairs pushed
+        self.error: str | None = None  #: why the feed ended, if the stream failed
+        self._thread = threading.Thread(target=self._run, name="d435-stream", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+        self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        rs, info = self._rs, self.info
+        w = info.width
+        try:
+            while not self._stop.is_set():
+                number, ts, depth, rgb = read_frame(self._sock, info)
+                for sensor, profile, pixels, bpp, units in (
+                    (self._sensors[0], self._profiles[0], depth, 2, info.depth_units),
+                    (self._sensors[1], self._profiles[1], rgb, 3, None),
+                ):
+                    self._keep.append(pixels)
+                    f = rs.software_video_frame()
+                    f.pixels, f.stride, f.bpp = pixels, w * bpp, bpp
+                    f.timestamp, f.frame_number = ts, number
+                    f.domain = rs.timestamp_domain.hardware_clock
+                    f.profile = profile
+                    if units is not None:
+                        f.depth_units = units
+                    sensor.on_video_frame(f)
+                self.frames += 1
+        except (OSError, ConnectionError, ValueError) as exc:
+            if not self._stop.is_set():
+                self.error = str(exc)
+
+
 class RealSenseD435:
     """An eye-in-hand D435 (implements ``drivers.camera.Camera``).
 
@@ -112,6 +220,8 @@ class RealSenseD435:
         self._intrinsics: Intrinsics | None = None
         self._coeffs: list[float] = []
         self._colour_fmt = "rgb8"
+        self._feed: _StreamFeed | None = None
+        self._device: Any = None
         self.info: dict[str, str] = {}
 
     @property
@@ -167,7 +277,39 @@ class RealSenseD435:
             colour[0].open(colour[1])
         for s in sensors:
             s.start(syncer)
-        cam._attach(rs, device, _SyncerSource(sensors, syncer), scale, colour[1])
+        cam._attach(rs, device, _SyncerSource(sensors, syncer), scale, colour[1], depth[1])
+        return cam
+
+    @classmethod
+    def from_stream(
+        cls,
+        host: str,
+        port: int,
+        timeout_ms: int = 1000,
+        tool_T_camera: Pose | None = None,
+        *,
+        clock: Clock | None = None,
+    ) -> RealSenseD435:
+        """A started camera whose frames arrive over TCP from ``host``:``port`` (see the module
+        doc). Its width, height, fps, intrinsics and identity come from the stream's header.
+        Raises :class:`DeviceError` naming the address when nothing answers there or it does
+        not speak the stream protocol."""
+        rs = _rs()
+        address = f"{host}:{port}"
+        try:
+            sock = socket.create_connection((host, port), timeout=timeout_ms / 1000.0)
+            info = read_info(sock)
+        except (OSError, ConnectionError, ValueError) as exc:
+            raise DeviceError(DEVICE, address, f"no D435 frame stream: {exc}") from exc
+        sock.settimeout(None)
+        dev, ds, cs, dp, cp = software_d435(rs, info)
+        cam = cls.from_device(dev, info.width, info.height, info.fps, timeout_ms, tool_T_camera,
+                              clock=clock)
+        cam.serial = info.serial
+        cam._device = dev  # the software device must outlive its sensors' use
+        cam._feed = _StreamFeed(rs, sock, info, (ds, cs), (dp, cp))
+        cam.info["stream_from"] = address
+        cam._feed.start()
         return cam
 
     def start(self) -> None:
@@ -210,13 +352,23 @@ class RealSenseD435:
         device = profile.get_device()
         scale = device.first_depth_sensor().get_depth_scale()
         colour = profile.get_stream(rs.stream.color).as_video_stream_profile()
-        self._attach(rs, device, _PipelineSource(pipe), scale, colour)
+        depth = profile.get_stream(rs.stream.depth).as_video_stream_profile()
+        self._attach(rs, device, _PipelineSource(pipe), scale, colour, depth)
 
-    def _attach(self, rs: Any, device: Any, source: _Source, scale: float, colour: Any) -> None:
-        """Shared end of both ways in: remember the source, scale, intrinsics and identity."""
+    def _attach(self, rs: Any, device: Any, source: _Source, scale: float, colour: Any,
+                depth: Any) -> None:
+        """Shared end of every way in: remember the source, scale, intrinsics and identity.
+
+        Depth is aligned to colour with ``rs.align``, except when the two streams already share
+        one geometry (same intrinsics, identity extrinsic: a streamed camera whose depth was
+        rendered aligned). Aligning a stream onto itself is the identity, but ``rs.align``
+        computes it in floating point and leaves whole rows and columns empty (measured on a
+        64 x 48 software device: columns 2 and 5 and row 10 zeroed), so it is skipped there.
+        A D435's depth and colour imagers never share a geometry, so on hardware it always runs.
+        """
         intr = colour.get_intrinsics()
         self._source = source
-        self._align = rs.align(rs.stream.color)
+        self._align = None if _same_geometry(depth, colour) else rs.align(rs.stream.color)
         self._depth_scale = float(scale)
         self._intrinsics = intrinsics_from_rs(intr)
         self._coeffs = [float(c) for c in intr.coeffs]
@@ -231,6 +383,9 @@ class RealSenseD435:
 
     def stop(self) -> None:
         """Stop streaming and release the device (safe to call twice)."""
+        feed, self._feed = self._feed, None
+        if feed is not None:
+            feed.stop()
         source, self._source = self._source, None
         if source is not None:
             try:
@@ -284,13 +439,15 @@ class RealSenseD435:
             stamp = self._clock.now()
             if not (frames.get_depth_frame() and frames.get_color_frame()):
                 continue  # a lone stream (the other one dropped): wait for a full pair
-            aligned = self._align.process(frames)
+            aligned = frames if self._align is None else self._align.process(frames)
             depth, colour = aligned.get_depth_frame(), aligned.get_color_frame()
             if not (depth and colour):
                 continue
             metres = depth_to_metres(np.asanyarray(depth.get_data()), self._depth_scale)
             rgb = colour_to_rgb(np.asanyarray(colour.get_data()), self._colour_fmt)
             return Frame(rgb=rgb, depth=metres, stamp=stamp)
+        if self._feed is not None and self._feed.error is not None:
+            raise DeviceError(DEVICE, self.address, f"frame stream lost: {self._feed.error}")
         raise TimeoutError(f"{DEVICE} at {self.address}: no depth+colour frame within "
                            f"{self.timeout_ms} ms")
 

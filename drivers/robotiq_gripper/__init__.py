@@ -51,7 +51,7 @@ def make_gripper(
     ``unit_id``, ``baudrate``) or "urcap-socket" (``host``, ``urcap_port``).
 
     Defaults per transport: timeout 0.1 s and 50 Hz polling on the serial line; 0.5 s and 25 Hz
-    on the socket (each status there is eight request/reply round trips).
+    on the socket (each status there is seven request/reply round trips).
     """
     calibration = Calibration(open_count, closed_count)
     link: GripperTransport

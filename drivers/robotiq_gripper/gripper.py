@@ -292,7 +292,7 @@ class Robotiq2F85:
             "position": f"{st.po}/255 = {self.calibration.width(st.po) * 1000:.1f} mm open",
             "request echo": str(st.pr),
             "object": str(st.obj),
-            "current": f"{st.cu * 10} mA",
+            "current": f"{st.cu * 10} mA" if st.cu is not None else "not readable here",
             "speed/force settings": f"{count_speed(255) * 1000:.0f} mm/s, "
                                     f"{count_force(255):.0f} N at 255",
             "calibration": f"open {self.calibration.open_count}, "

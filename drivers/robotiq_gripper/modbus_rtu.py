@@ -8,14 +8,22 @@ Unit id 9, 115200 baud, 8N1.
 
 pymodbus's own retries are switched off (``retries=0``) so that :func:`with_retries` alone decides
 how often a request is repeated and how long to back off in between.
+
+pymodbus 3.10 or newer is required, and checked when the transport is built: the unit is passed as
+``device_id=``, which older 3.x releases do not know. pymodbus 3.6 swallows the unknown keyword and
+addresses unit 0, the broadcast (every write executed by every device on the line, never
+answered); 3.9 raises TypeError in the status thread. Either way the only symptom would be a
+stale status, so an older pymodbus is refused by name instead.
 """
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 from collections.abc import Callable
 
+import pymodbus
 from pymodbus.client import ModbusSerialClient
 from pymodbus.exceptions import ConnectionException, ModbusException
 
@@ -32,6 +40,15 @@ from drivers.robotiq_gripper.registers import (
     encode_request,
 )
 from drivers.robotiq_gripper.transport import DEVICE, TransientError, with_retries
+
+PYMODBUS_MIN = (3, 10)  #: the first pymodbus whose client calls take ``device_id=``
+
+
+def _version(text: str) -> tuple[int, int]:
+    """Major and minor of a version string ("3.9.2" -> (3, 9), "3.10.0rc1" -> (3, 10));
+    (0, 0) when it has none."""
+    m = re.match(r"(\d+)\.(\d+)", text)
+    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
 
 
 class ModbusRtuTransport:
@@ -65,6 +82,13 @@ class ModbusRtuTransport:
         self.timeout, self.retries, self.backoff_first = timeout, retries, backoff_first
         self.status_function = status_function
         self.address = f"{port} unit {unit_id} ({baudrate} baud)"
+        found = getattr(pymodbus, "__version__", "0")
+        if _version(found) < PYMODBUS_MIN:
+            need = ".".join(map(str, PYMODBUS_MIN))
+            raise DeviceError(DEVICE, self.address,
+                              f"pymodbus {found} is too old: this driver needs pymodbus >= {need} "
+                              f"(older releases do not address the unit; pip install "
+                              f"'pymodbus>={need},<4')")
         self._sleep = sleep
         self._lock = threading.Lock()
         self._client = ModbusSerialClient(

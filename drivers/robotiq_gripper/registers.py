@@ -94,7 +94,7 @@ class GripperStatus:
     kflt: int  #: kFLT (controller fault nibble, shown in checks only)
     pr: int  #: gPR, the position request echo
     po: int  #: gPO, the position
-    cu: int  #: gCU, the finger current (x 10 mA)
+    cu: int | None  #: gCU, the finger current (x 10 mA); None where not readable (URCap socket)
 
     @property
     def activated(self) -> bool:
@@ -136,7 +136,7 @@ def encode_status(st: GripperStatus) -> list[int]:
     """The three status registers (from 0x07D0) for ``st`` (used by the test peers)."""
     status = st.act & 1 | (st.gto & 1) << 3 | (st.sta & 3) << 4 | (st.obj & 3) << 6
     return [status << 8, ((st.kflt & 0xF) << 4 | st.flt & 0xF) << 8 | st.pr & 0xFF,
-            (st.po & 0xFF) << 8 | st.cu & 0xFF]
+            (st.po & 0xFF) << 8 | (st.cu or 0) & 0xFF]
 
 
 def decode_status(registers: list[int]) -> GripperStatus:

@@ -76,6 +76,12 @@ def test_the_shipped_example_validates_and_builds_its_tree() -> None:
             "devices.arm.home_joints_deg",
             "outside the UR5",
         ),
+        (
+            "devices:\n  camera:\n    stream: localhost\n",
+            3,
+            "devices.camera.stream",
+            "not host:port",
+        ),
     ],
 )
 def test_bad_values_name_file_line_and_key(tmp_path, text, line, key, words) -> None:

@@ -1,7 +1,8 @@
 """The Robotiq gripper URCap's socket (TCP 63352 on a UR controller), on localhost.
 
-A threaded TCP server speaking the URCap's line protocol: ``SET VAR value [VAR value ...]``
-answered ``ack`` (variables applied in the order given), ``GET VAR`` answered ``VAR value``.
+A threaded TCP server speaking the URCap's protocol: ``SET VAR value [VAR value ...]`` answered
+with the three bytes ``ack`` and no newline (variables applied in the order given), ``GET VAR``
+answered ``VAR value`` and a newline, anything else ``?`` (no newline), as the URCap does.
 Behind it sits the same :class:`GripperModel` as the Modbus peer, so both transports are tested
 against one gripper behaviour. ``silent`` makes it read commands and never answer (a hung
 controller); ``lines`` records every command line received.
@@ -44,7 +45,9 @@ class UrcapPeer:
                     if peer.silent:
                         continue
                     try:
-                        self.wfile.write((peer.answer(line) + "\n").encode("ascii"))
+                        reply = peer.answer(line)
+                        bare = reply in ("ack", "?")  # the URCap ends only values with \n
+                        self.wfile.write((reply if bare else reply + "\n").encode("ascii"))
                     except OSError:
                         return
 
@@ -74,7 +77,7 @@ class UrcapPeer:
         if len(words) == 2 and words[0] == "GET":
             st = self.model.status()
             values = {"ACT": st.act, "GTO": st.gto, "STA": st.sta, "OBJ": st.obj,
-                      "FLT": st.flt, "PRE": st.pr, "POS": st.po, "COU": st.cu}
+                      "FLT": st.flt, "PRE": st.pr, "POS": st.po}
             if words[1] in values:
                 return f"{words[1]} {values[words[1]]}"
         return "?"

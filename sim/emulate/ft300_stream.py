@@ -1,0 +1,283 @@
+"""A Robotiq FT300 on a pseudo-terminal, its readings the twin's wrist load.
+
+Written from Robotiq's FT 300 instruction manual ("Serial communication": Modbus RTU at
+19200 bit/s 8N1, slave id 9; the data stream), not from this project's driver:
+
+* after power-up the sensor is a Modbus RTU slave: function 3 or 4 on registers 180..185 reads
+  Fx, Fy, Fz (x100, N) and Mx, My, Mz (x1000, N*m) as signed 16-bit values; other addresses get
+  exception 02, other functions exception 01, other unit ids nothing;
+* writing ``0x0200`` into register 410 (function 16) is answered as Modbus does and starts the
+  **stream**: 16-byte frames ``0x20 0x4E``, the six values little-endian, then the Modbus
+  CRC-16 of those 14 bytes low byte first, at 100 Hz. While streaming the sensor answers no
+  request; a run of ``0xFF`` bytes (the manual: send them for about 0.5 s, 50 times, to be sure)
+  ends the stream and the sensor is a Modbus slave again.
+
+Readings: the backend's noiseless load, plus a power-up offset (constant until the next power-up,
+which is why a driver biases it away) and Gaussian noise per axis, rounded to the frame's
+resolution and saturated at the int16 range. The noise defaults are the signal noise Robotiq's
+FT 300 specifications quote, 0.1 N per force axis and 0.005 N*m per moment axis; the offset
+magnitude is not specified and is a parameter (a few newtons, as the twin's sensor has).
+
+Backend interface (:class:`WrenchBackend`)::
+
+    wrench() -> array of 6 floats   # the load on the sensor now: Fx, Fy, Fz (N), Mx, My, Mz
+                                    #   (N*m) in the sensor frame, noiseless, offset-free
+
+:class:`TwinWrist` implements it on the twin's :class:`sim.ft_sensor.SimForceTorqueSensor` (its
+noiseless sample of the last control step; the twin's own noise and offset are not used, so they
+are not counted twice). It is read from the stream's thread; it touches no PyBullet state.
+
+Wire faults: :meth:`FT300Emulator.pull_cable` takes the sensor off the line (its cable carries
+power: nothing is sent, what arrives is lost); :meth:`FT300Emulator.restore` plugs it back, and
+it comes up as after power-up: a Modbus slave with a new offset, silent until a start request.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import struct
+import threading
+import time
+import tty
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+HEADER = b"\x20\x4e"
+DEFAULT_UNIT_ID = 9
+BAUDRATE = 19200  #: the FT300's fixed line rate (8N1)
+RATE_HZ = 100.0  #: the manual's stream rate
+FORCE_REGISTER = 180  #: Fx; 181 Fy, 182 Fz, 183 Mx, 184 My, 185 Mz
+STREAM_REGISTER = 410
+STREAM_START = 0x0200
+STOP_RUN = 20  #: 0xFF bytes in a row that end the stream here (the manual sends about 50)
+FORCE_NOISE = 0.1  #: N, signal noise per force axis (FT 300 specifications)
+MOMENT_NOISE = 0.005  #: N*m, signal noise per moment axis (FT 300 specifications)
+SCALE = np.array([100.0] * 3 + [1000.0] * 3)  #: counts per N and per N*m
+
+
+@runtime_checkable
+class WrenchBackend(Protocol):
+    """The load the emulated sensor measures (see the module doc)."""
+
+    def wrench(self) -> NDArray[np.float64]: ...
+
+
+class TwinWrist:
+    """:class:`WrenchBackend` on the twin's wrist sensor (its noiseless sample, sensor frame)."""
+
+    def __init__(self, ft) -> None:  # type: ignore[no-untyped-def]
+        """``ft``: the twin's ``SimForceTorqueSensor``."""
+        self._ft = ft
+
+    def wrench(self) -> NDArray[np.float64]:
+        return np.array(self._ft.sampled_true_load(), dtype=float)
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16 of Modbus RTU (reflected polynomial 0xA001, initial 0xFFFF)."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
+
+
+def _with_crc(body: bytes) -> bytes:
+    return body + crc16(body).to_bytes(2, "little")
+
+
+def counts(reading: NDArray[np.float64]) -> list[int]:
+    """The six int16 values of a reading (N, N*m), rounded and saturated."""
+    c = np.clip(np.rint(np.asarray(reading, float) * SCALE), -32768, 32767)
+    return [int(v) for v in c]
+
+
+def stream_frame(reading: NDArray[np.float64]) -> bytes:
+    """One 16-byte stream frame for ``reading`` (N, N*m)."""
+    return _with_crc(HEADER + struct.pack("<6h", *counts(reading)))
+
+
+class FT300Emulator:
+    """The FT300 side of a pseudo-terminal (start it; point a driver at :attr:`port`).
+
+    ``backend``: the load; ``unit_id``: its Modbus id; ``rate_hz``: stream frames a second;
+    ``force_noise`` / ``moment_noise``: standard deviations (N, N*m) per axis;
+    ``force_offset`` / ``moment_offset``: the power-up offset is uniform within +-these per axis;
+    ``seed``: the noise and offsets' generator.
+    """
+
+    def __init__(
+        self,
+        backend: WrenchBackend,
+        unit_id: int = DEFAULT_UNIT_ID,
+        rate_hz: float = RATE_HZ,
+        force_noise: float = FORCE_NOISE,
+        moment_noise: float = MOMENT_NOISE,
+        force_offset: float = 3.0,
+        moment_offset: float = 0.1,
+        seed: int = 0,
+    ) -> None:
+        if rate_hz <= 0:
+            raise ValueError("rate_hz must be > 0")
+        self.backend, self.unit_id, self.rate_hz = backend, unit_id, rate_hz
+        self._sigma = np.array([force_noise] * 3 + [moment_noise] * 3)
+        self._offset_range = np.array([force_offset] * 3 + [moment_offset] * 3)
+        self._rng = np.random.default_rng(seed)
+        self.offset = self._power_up_offset()
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.port = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._cut = threading.Event()
+        self.streaming = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="emu-ft300", daemon=True)
+        self.frames_sent = 0
+        self.requests = 0  #: valid Modbus requests for this unit, answered
+        self.power_ups = 1
+
+    def _power_up_offset(self) -> NDArray[np.float64]:
+        return self._rng.uniform(-self._offset_range, self._offset_range)
+
+    # --- control ----------------------------------------------------------------------------
+
+    def start(self) -> FT300Emulator:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop (joined) and close both ends of the pseudo-terminal."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def __enter__(self) -> FT300Emulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def pull_cable(self) -> None:
+        """Unplug the sensor: no power, nothing sent, everything arriving lost."""
+        self._cut.set()
+        self.streaming.clear()
+
+    def restore(self) -> None:
+        """Plug it back: it powers up as a Modbus slave (not streaming) with a new offset."""
+        if self._cut.is_set():
+            self.offset = self._power_up_offset()
+            self.power_ups += 1
+        self._cut.clear()
+
+    @property
+    def cable_pulled(self) -> bool:
+        return self._cut.is_set()
+
+    def reading(self) -> NDArray[np.float64]:
+        """What the sensor measures now: the load, its offset and a draw of noise (N, N*m)."""
+        load = np.asarray(self.backend.wrench(), float)
+        return load + self.offset + self._sigma * self._rng.standard_normal(6)
+
+    # --- the line ---------------------------------------------------------------------------
+
+    def _write(self, data: bytes) -> bool:
+        view = memoryview(data)
+        deadline = time.monotonic() + 0.2
+        while view:
+            try:
+                n = os.write(self._master, view)
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    return False  # nobody reads: the frame is lost, as on a real line
+                time.sleep(0.001)
+                continue
+            except OSError:
+                return False
+            view = view[n:]
+        return True
+
+    def _run(self) -> None:
+        rx = bytearray()
+        ff_run = 0
+        period = 1.0 / self.rate_hz
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            streaming = self.streaming.is_set()
+            wait = max(0.0, next_t - time.monotonic()) if streaming else 0.01
+            ready, _, _ = select.select([self._master], [], [], wait)
+            if ready:
+                try:
+                    data = os.read(self._master, 4096)
+                except (BlockingIOError, OSError):
+                    data = b""
+                if self._cut.is_set():
+                    data = b""
+                for byte in data:
+                    ff_run = ff_run + 1 if byte == 0xFF else 0
+                    if ff_run >= STOP_RUN and self.streaming.is_set():
+                        self.streaming.clear()
+                        rx.clear()
+                if not self.streaming.is_set():
+                    rx += data.lstrip(b"\xff") if not rx else data
+                    self._requests(rx)
+            if not self.streaming.is_set():
+                next_t = time.monotonic()
+                continue
+            now = time.monotonic()
+            if now < next_t:
+                continue
+            next_t = max(next_t + period, now - period)  # late: no burst to catch up
+            if self._write(stream_frame(self.reading())):
+                self.frames_sent += 1
+
+    def _requests(self, rx: bytearray) -> None:
+        """Serve complete Modbus requests at the start of ``rx`` (slave mode)."""
+        while len(rx) >= 8:
+            fc = rx[1]
+            n = 8 if fc in (3, 4) else (9 + rx[6] if fc == 16 else 8)
+            if len(rx) < n:
+                return
+            frame = bytes(rx[:n])
+            if crc16(frame[:-2]) != int.from_bytes(frame[-2:], "little"):
+                del rx[:1]
+                continue
+            del rx[:n]
+            if frame[0] != self.unit_id:
+                continue
+            self.requests += 1
+            reply, start = self._reply(frame)
+            time.sleep(len(reply) * 10 / BAUDRATE)  # the reply's time on the line
+            self._write(reply)
+            if start:
+                self.streaming.set()
+
+    def _reply(self, frame: bytes) -> tuple[bytes, bool]:
+        unit, fc = frame[0], frame[1]
+
+        def error(code: int) -> bytes:
+            return _with_crc(bytes([unit, fc | 0x80, code]))
+
+        addr, count = struct.unpack(">HH", frame[2:6])
+        if fc in (3, 4):
+            if not (FORCE_REGISTER <= addr and addr + count <= FORCE_REGISTER + 6 and count):
+                return error(0x02), False
+            values = counts(self.reading())[addr - FORCE_REGISTER:addr - FORCE_REGISTER + count]
+            body = bytes([unit, fc, 2 * count]) + struct.pack(f">{count}h", *values)
+            return _with_crc(body), False
+        if fc == 16:
+            if addr != STREAM_REGISTER or count != 1:
+                return error(0x02), False
+            value = int.from_bytes(frame[7:9], "big")
+            if value != STREAM_START:
+                return error(0x03), False
+            return _with_crc(frame[:6]), True
+        return error(0x01), False
