@@ -794,6 +794,10 @@ class _Listener:
         """Stop listening (new connections are refused) and drop the live ones."""
         server, self._server = self._server, None
         if server is not None:
+            try:  # stops listening at once (close alone waits for a blocked accept to return)
+                server.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
             server.close()
         self.drop_clients()
 
