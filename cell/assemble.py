@@ -197,6 +197,27 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     return Prepared(config, doc, layout, part, [part], plan, params, geometry, ctx, root, state)
 
 
+def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> Any:
+    """The PyBullet twin of the configured cell (`cell sim`, and behind `cell emulate`'s
+    device emulators)."""
+    from sim.cell_twin import SimCellBackend, TwinOptions
+
+    config = prep.config
+    sim = config.sim
+    options = TwinOptions(
+        seed=sim.seed if seed is None else seed,
+        parts_in_bin=config.bin.parts,
+        fill=config.bin.fill,
+        yaw_spread=math.radians(sim.yaw_spread_deg),
+        mu_ground=sim.mu_ground,
+        machining_time=config.workflow.machining_time_s,
+    )
+    try:
+        return SimCellBackend(prep.layout, prep.part, options, resume=resume)
+    except ValueError as exc:
+        raise prep.doc.error(("bin", "parts"), str(exc).split(": ", 1)[-1]) from None
+
+
 def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) -> Backend:
     """Create the twin or connect the hardware named by ``cell.backend`` and hand its devices to
     the tree's context."""
@@ -206,21 +227,7 @@ def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) ->
 
         backend = open_hardware(prep)
     else:
-        from sim.cell_twin import SimCellBackend, TwinOptions
-
-        sim = config.sim
-        options = TwinOptions(
-            seed=sim.seed if seed is None else seed,
-            parts_in_bin=config.bin.parts,
-            fill=config.bin.fill,
-            yaw_spread=math.radians(sim.yaw_spread_deg),
-            mu_ground=sim.mu_ground,
-            machining_time=config.workflow.machining_time_s,
-        )
-        try:
-            backend = SimCellBackend(prep.layout, prep.part, options, resume=resume)
-        except ValueError as exc:
-            raise prep.doc.error(("bin", "parts"), str(exc).split(": ", 1)[-1]) from None
+        backend = build_twin(prep, seed, resume)
         if config.faults.enabled:  # the twin meets the configured faults behind its devices
             from sim.faults import twin_injector
 
@@ -232,4 +239,4 @@ def open_backend(prep: Prepared, seed: int | None = None, resume: Any = None) ->
     return backend
 
 
-__all__ = ["ConfigError", "Prepared", "open_backend", "prepare"]
+__all__ = ["ConfigError", "Prepared", "build_twin", "open_backend", "prepare"]

@@ -331,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.experiments.soak_cmd import add_parser as add_soak
 
     add_soak(sub)
+    from cell.emulate_cmd import add_parser as add_emulate
+
+    add_emulate(sub)
     return parser
 
 

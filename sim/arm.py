@@ -268,6 +268,10 @@ class SimArm:
         """Measured joint angles (rad), base to wrist 3."""
         return np.array([s[0] for s in self._p.getJointStates(self._body, self._joints)])
 
+    def joint_velocities(self) -> NDArray[np.float64]:
+        """Measured joint speeds (rad/s), base to wrist 3 (what a controller publishes)."""
+        return np.array([s[1] for s in self._p.getJointStates(self._body, self._joints)])
+
     def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:
         """Start a straight-line move of the TCP to ``pose`` (m/s, m/s^2)."""
         self.move_path([pose], speed, acceleration)

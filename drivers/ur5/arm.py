@@ -10,25 +10,39 @@ How each command maps onto the controller, and why:
 * :meth:`move_to` / :meth:`move_path`: ``moveL`` with ``asynchronous=True``; a path is one
   ``moveL`` over a list of poses with blend radii, so the TCP does not stop at intermediate
   waypoints (as in the twin). UR rejects overlapping blends, so each radius is at most
-  :data:`BLEND_FRACTION` of its shorter neighbouring segment.
+  :data:`BLEND_FRACTION` of its shorter neighbouring segment. ur_rtde sends a path by stopping
+  its control script and uploading it again with the path inside, then waits, without a
+  timeout, for the program to run: that call runs on a worker thread, bounded by
+  ``script_start_timeout``; the tick only polls it.
 * :meth:`move_joints`: ``moveJ`` asynchronous.
-* Completion comes from ``getAsyncOperationProgress``: >= 0 while the move runs, negative when
-  none does, toggling between -1 and -2 so a move too short to be seen running still shows as a
-  new negative value. A finished move is DONE only if the arm is within the goal tolerance.
+* Completion comes from the async status word (``getAsyncOperationProgressEx``): the script
+  numbers every async operation it starts and flags the running one. Our move is the first
+  operation numbered after the one current when it was sent (after a path's re-upload: any
+  operation of the fresh script); it ended when that operation is no longer running or another
+  replaced it. Nothing waits for a "-1": the script cancels a running operation and starts the
+  next within one controller cycle, so none is published between two moves. A finished move is
+  DONE only if the arm is within the goal tolerance.
+* A move right after an asynchronous stop is held back (the state says MOVING) until the stop's
+  operation has ended: the script's stop thread, when it ends, marks whatever operation is current
+  as finished, which would end the new move's tracking at once.
 * :meth:`servo`: one ``servoL`` per call (the caller calls it once per tick), ``time`` = one
   control period, with ``lookahead``/``gain`` from :class:`UR5Settings`.
 * :meth:`force_mode`: ``forceMode`` with the base frame as task frame (type 2: not transformed);
   selected axes get the caller's speed limits, the others the allowed deviation from
   :class:`UR5Settings` (what UR's ``limits`` mean for non-compliant axes).
-* :meth:`stop`: ``stopL``/``stopJ`` (asynchronous), ``servoStop`` or ``forceModeStop``, whichever
-  matches the running mode; a second call sends nothing.
+* :meth:`stop`: ``stopL`` (asynchronous) for moves and joint moves alike -- the script runs
+  every asynchronous stop as ``stopl``, so the deceleration is ``stop_deceleration`` in m/s^2 --
+  ``servoStop`` or ``forceModeStop``, whichever matches the running mode; a second call sends
+  nothing.
 * :meth:`status`: the live safety status bits and robot mode come first (protective stop ->
   FAULT with ``protective_stop=True``; emergency or safeguard stop, violation, fault, robot not
   RUNNING, control script not running, lost link -> FAULT with the reason), then the motion.
   A fault is latched until the next command, as in the twin.
 * Lost link: bounded reconnect attempts with :func:`drivers.health.backoff_delays` between them,
   scheduled on the clock and run off the tick (``ur_rtde``'s reconnect blocks on TCP connects),
-  so a dead controller costs a handful of attempts, never a storm.
+  so a dead controller costs a handful of attempts, never a storm. A reconnect uploads a fresh
+  control script, so the watchdog (which lives for one script run) is armed again after it, as
+  after :meth:`recover`.
 """
 
 from __future__ import annotations
@@ -37,7 +51,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,8 +114,11 @@ class UR5Settings:
     servo_lookahead: float = 0.1  #: s, UR range [0.03, 0.2]: smooths the servoL targets
     servo_gain: float = 300.0  #: UR range [100, 2000]: servoL position gain
     path_blend: float = 0.01  #: m: blend radius at intermediate path waypoints (upper bound)
-    stop_deceleration: float = 10.0  #: m/s^2: stopL, servoStop
-    stop_joint_deceleration: float = 4.0  #: rad/s^2: stopJ
+    #: m/s^2: every stop of a move, a joint move or servoing (the control script runs each
+    #: asynchronous stop as ``stopl``, so there is no joint deceleration to set)
+    stop_deceleration: float = 10.0
+    #: s: the longest wait for an uploaded control script to run (a path's upload, recover())
+    script_start_timeout: float = 5.0
     #: Force mode, non-compliant axes: allowed deviation from the programmed pose (m, m, m,
     #: rad, rad, rad).
     force_deviation: tuple[float, ...] = (0.01, 0.01, 0.01, 0.05, 0.05, 0.05)
@@ -126,6 +143,8 @@ class UR5Settings:
             raise ValueError("force_deviation needs 6 values")
         if self.reconnect_attempts < 1:
             raise ValueError("reconnect_attempts must be >= 1")
+        if self.script_start_timeout <= 0:
+            raise ValueError("script_start_timeout must be > 0 s")
 
 
 def pose_to_vector(pose: Pose) -> list[float]:
@@ -144,6 +163,17 @@ def describe_safety_bits(bits: int) -> str:
     """Names of the set bits, for check() and messages."""
     names = [name for bit, name in SAFETY_BITS.items() if bits & (1 << bit)]
     return ", ".join(names) if names else "none"
+
+
+@dataclass
+class _PathJob:
+    """A path's ``moveL`` on its worker thread (ur_rtde re-uploads its script for it)."""
+
+    started: float
+    finished: threading.Event = field(default_factory=threading.Event)
+    ok: bool = False
+    error: str | None = None
+    cancelled: bool = False
 
 
 def _spawn_thread(fn: Callable[[], None]) -> None:
@@ -176,10 +206,14 @@ class UR5Arm:
         self._state = MotionState.IDLE
         self._message = ""
         self._protective = False
-        # Async move completion (see _poll_progress).
-        self._await_previous = False
-        self._neg_before = 0
-        self._seen_running = False
+        # Async move completion (see _poll_progress): the operation id current before our
+        # command, ours once seen, a command held back behind a running async stop.
+        self._op_before = 0
+        self._op_ours: int | None = None
+        self._stop_sent = False
+        self._deferred: tuple[str, Callable[[], bool]] | None = None
+        # A path's upload on its worker thread (see move_path).
+        self._job: _PathJob | None = None
         self._goal: Pose | None = None
         self._goal_q: NDArray[np.float64] | None = None
         self.last_servo_target: Pose | None = None
@@ -282,6 +316,9 @@ class UR5Arm:
     def _attempt_reconnect(self) -> None:
         try:
             ok, cause = bool(self._rtde.reconnect()), "reconnect refused"
+            if ok and self.settings.watchdog_hz:  # a fresh script: arm its watchdog again
+                ok = bool(self._rtde.set_watchdog(self.settings.watchdog_hz))
+                cause = "the controller refused the watchdog after the reconnect"
         except Exception as e:  # whatever ur_rtde raises, the attempt failed
             ok, cause = False, f"{type(e).__name__}: {e}"
         with self._lock:
@@ -321,8 +358,11 @@ class UR5Arm:
                     return self._link_message(), False
             bits = self._rtde.safety_status_bits()
             mode = self._rtde.robot_mode()
-            running = self._rtde.is_program_running()
-            if self.settings.watchdog_hz:
+            # While a path's upload runs on its worker, the script is being replaced (not
+            # running, no watchdog) and the control interface is the worker's.
+            uploading = self._job is not None
+            running = uploading or self._rtde.is_program_running()
+            if self.settings.watchdog_hz and not uploading:
                 self._rtde.kick_watchdog()
         except Exception as e:  # ur_rtde raises RuntimeError on a dead socket
             self._lose_link(f"{type(e).__name__}: {e}")
@@ -348,29 +388,64 @@ class UR5Arm:
             message, protective = problem
             self._fault(message, protective)
             return ArmStatus(MotionState.FAULT, message, protective)
-        if self._state is MotionState.MOVING and self._mode in ("path", "joints"):
+        if self._job is not None:
+            self._poll_job()
+        elif self._state is MotionState.MOVING and self._mode in ("path", "joints"):
             self._poll_progress()
         return ArmStatus(self._state, self._message, self._protective)
 
     def _poll_progress(self) -> None:
         try:
-            p = self._rtde.async_progress()
+            running, op = self._rtde.async_status()
         except Exception as e:
             self._lose_link(f"{type(e).__name__}: {e}")
             self._fault(self._link_message())
             return
-        if self._await_previous:  # an earlier async move was still running at our command
-            if p < 0:
-                self._await_previous = False
-                self._neg_before = p
+        if self._stop_sent and not running:
+            self._stop_sent = False  # the async stop's operation has ended
+        if self._deferred is not None:
+            if running:
+                return  # the stop still runs: ours waits
+            what, call = self._deferred
+            self._deferred = None
+            self._start_async(what, call)
             return
-        if p >= 0:
-            self._seen_running = True
+        if self._op_ours is None:
+            if op == self._op_before:
+                return  # ours has not started yet
+            self._op_ours = op
+        if op == self._op_ours and running:
             return
-        if not (self._seen_running or p != self._neg_before):
-            return  # ours has not started yet
         self._mode = "hold"
         self._check_goal()
+
+    def _poll_job(self) -> None:
+        """The path's upload on its worker: wait (MOVING), bounded by script_start_timeout."""
+        job = self._job
+        assert job is not None
+        if not job.finished.is_set():
+            if self._clock.now() - job.started <= self.settings.script_start_timeout:
+                return
+            self._job = None
+            self._fault(f"moveL path: the control script did not start within "
+                        f"{self.settings.script_start_timeout:g} s")
+            self._lose_link("the control script did not start after a path's upload")
+            self._spawn(self._rtde.drop_control)
+            return
+        self._job = None
+        if job.error is not None:
+            self._lose_link(job.error)
+            self._fault(f"moveL path failed: {self._link_message()}")
+        elif not job.ok:
+            self._fault("moveL path rejected by the controller")
+        elif job.cancelled:
+            self._mode = "hold"
+            self._stop_sent = True
+            if self._state is MotionState.MOVING:
+                self._latch(MotionState.STOPPED)
+        else:
+            self._op_before, self._op_ours = 0, None  # a fresh script numbers from 0
+            self._poll_progress()
 
     def _check_goal(self) -> None:
         """The move ended: DONE at the goal, FAULT if the controller ended it elsewhere."""
@@ -415,11 +490,15 @@ class UR5Arm:
     def _begin(self, what: str) -> bool:
         """Before any command: refuse (FAULT) if the arm cannot move; else leave the mode
         that is running if the new command needs another one."""
+        if self._job is not None:
+            self._fault(f"{what} refused: a path's upload is still under way (stop first)")
+            return False
         problem = self._health()
         if problem is not None:
             message, protective = problem
             self._fault(f"{what} refused: {message}", protective)
             return False
+        self._deferred = None
         try:
             if self._mode == "servo" and what != "servo":
                 self._rtde.servo_stop(self.settings.stop_deceleration)
@@ -446,14 +525,18 @@ class UR5Arm:
 
     def _start_async(self, what: str, call: Callable[[], bool]) -> None:
         try:
-            before = self._rtde.async_progress()
+            running, op = self._rtde.async_status()
         except Exception as e:
             self._lose_link(f"{type(e).__name__}: {e}")
             self._fault(f"{what} failed: {self._link_message()}")
             return
-        self._await_previous = before >= 0
-        self._neg_before = before
-        self._seen_running = False
+        if self._stop_sent and running:
+            self._deferred = (what, call)  # sent when the stop's operation has ended
+            self._latch(MotionState.MOVING)
+            return
+        self._stop_sent = False
+        self._deferred = None
+        self._op_before, self._op_ours = op, None
         if self._send(what, call):
             self._latch(MotionState.MOVING)
 
@@ -489,7 +572,24 @@ class UR5Arm:
             for p, r in zip(waypoints, radii, strict=True)
         ]
         self._mode, self._goal, self._goal_q = "path", waypoints[-1], None
-        self._start_async("moveL path", lambda: self._rtde.move_l_path(rows))
+        self._deferred = None
+        job = _PathJob(self._clock.now())
+        self._job = job
+        self._latch(MotionState.MOVING)
+        watchdog = self.settings.watchdog_hz
+
+        def upload() -> None:
+            try:
+                job.ok = bool(self._rtde.move_l_path(rows))
+                if job.ok and watchdog:
+                    self._rtde.set_watchdog(watchdog)  # the fresh script has none
+                if job.cancelled:
+                    self._rtde.stop_l(self.settings.stop_deceleration)
+            except Exception as e:  # whatever ur_rtde raises: the upload failed
+                job.error = f"{type(e).__name__}: {e}"
+            job.finished.set()
+
+        self._spawn(upload)  # off the tick: ur_rtde blocks until the new script runs
 
     def move_joints(self, q: Sequence[float], speed: float, acceleration: float) -> None:
         """Start a joint-space move to ``q`` (``moveJ`` asynchronous; rad/s, rad/s^2)."""
@@ -536,10 +636,13 @@ class UR5Arm:
     def _stop_motion(self) -> None:
         """Send the stop that matches the running mode (no-op when holding)."""
         s = self.settings
-        if self._mode == "path":
+        if self._job is not None:
+            self._job.cancelled = True  # the worker stops the arm once its upload returns
+        elif self._deferred is not None:
+            self._deferred = None  # never sent: nothing to stop
+        elif self._mode in ("path", "joints"):
             self._rtde.stop_l(s.stop_deceleration)
-        elif self._mode == "joints":
-            self._rtde.stop_j(s.stop_joint_deceleration)
+            self._stop_sent = True
         elif self._mode == "servo":
             self._rtde.servo_stop(s.stop_deceleration)
         elif self._mode == "force":
@@ -553,6 +656,9 @@ class UR5Arm:
         Never raises: it is what guards call on their way out. Without a link nothing can be
         sent; the status stays FAULT with the reason."""
         mode = self._mode
+        if self._job is not None:
+            self._job.cancelled = True
+            self._job = None if self._job.finished.is_set() else self._job
         if mode == "hold" or self._link_lost:
             self._mode = "hold"
             if self._state is MotionState.MOVING and not self._link_lost:
@@ -579,7 +685,24 @@ class UR5Arm:
         self.dashboard.unlock_protective_stop()
         if not self._rtde.reupload_script():
             raise DeviceError(DEVICE, self.address, "the control script did not restart")
+        # reuploadScript() returns once the text is sent; the controller starts the program
+        # later, and ur_rtde refuses every command until it runs.
+        t_end = time.monotonic() + self.settings.script_start_timeout
+        while not self._rtde.is_program_running():
+            if time.monotonic() > t_end:
+                raise DeviceError(
+                    DEVICE, self.address,
+                    f"the control script did not run within {self.settings.script_start_timeout:g}"
+                    " s of its upload",
+                )
+            time.sleep(0.005)
+        self._arm_watchdog()  # it lived for the old script's run only
+        self._stop_sent, self._deferred = False, None
         self._latch(MotionState.IDLE)
+
+    def _arm_watchdog(self) -> None:
+        if self.settings.watchdog_hz and not self._rtde.set_watchdog(self.settings.watchdog_hz):
+            raise DeviceError(DEVICE, self.address, "the controller refused the watchdog")
 
     def check(self) -> CheckResult:
         """Start-up check: link, robot mode, safety status, control script; controller version

@@ -1,11 +1,11 @@
 """The only module that touches ``ur_rtde``: a thin adapter exposing exactly the calls
 :class:`drivers.ur5.arm.UR5Arm` makes.
 
-Why an adapter: ``ur_rtde``'s control interface uploads a URScript program to the controller and
-talks to it over RTDE input registers, so it needs a UR controller (or URSim) that cannot run on
-a build machine. Everything the driver decides (states, faults, reconnect, stop) is therefore
-written against :class:`RTDEAdapter` and tested with a recording double; this module stays so
-thin that reading it is the review. ``rtde_control``/``rtde_receive`` are imported inside
+Why an adapter: everything the driver decides (states, faults, reconnect, stop) is written
+against :class:`RTDEAdapter`, so its logic can be checked tick by tick with a recording double;
+the real calls are checked against the UR controller emulator (:mod:`sim.emulate.ur_controller`),
+which behaves as ur_rtde's control script does. This module stays so thin that reading it is the
+review. ``rtde_control``/``rtde_receive`` are imported inside
 :meth:`URRTDEAdapter.connect` so the simulated cell never needs the library.
 
 Poses cross this boundary in the controller's own convention, ``[x, y, z, rx, ry, rz]`` (m and an
@@ -38,7 +38,12 @@ class RTDEAdapter(Protocol):
         ...
 
     def reconnect(self) -> bool:
-        """Reopen lost links (blocking: TCP connects and the script upload)."""
+        """Reopen lost links at the configured frequency (blocking: TCP connects and the
+        script upload)."""
+        ...
+
+    def drop_control(self) -> None:
+        """Give up the control interface (a call inside it is stuck); see the class."""
         ...
 
     def reupload_script(self) -> bool:
@@ -59,9 +64,12 @@ class RTDEAdapter(Protocol):
         """``moveJ(q, speed, acceleration, asynchronous=True)``."""
         ...
 
-    def async_progress(self) -> int:
-        """``getAsyncOperationProgress()``: >= 0 while an async move runs; < 0 when none does,
-        toggling between -1 and -2 so that the end of a short move is still seen."""
+    def async_status(self) -> tuple[bool, int]:
+        """``getAsyncOperationProgressEx()``: ``(running, operation id)``. The control script
+        numbers each async operation it starts (7 bits, wrapping 127 -> 0; a fresh script
+        starts at 0); the running bit is the operation's, so the end of one operation and the
+        start of the next are told apart even when no "finished" value is ever published
+        between them (the script cancels and restarts within one controller cycle)."""
         ...
 
     def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
@@ -71,11 +79,10 @@ class RTDEAdapter(Protocol):
     def servo_stop(self, deceleration: float) -> bool: ...
 
     def stop_l(self, deceleration: float) -> None:
-        """``stopL(a, asynchronous=True)``: returns at once, the controller decelerates."""
-        ...
+        """``stopL(a, asynchronous=True)``: returns at once, the controller decelerates (m/s^2).
 
-    def stop_j(self, deceleration: float) -> None:
-        """``stopJ(a, asynchronous=True)``."""
+        There is no asynchronous stopJ here: ur_rtde's script runs every asynchronous stop as
+        ``stopl`` whatever was asked, so an ``a`` meant in rad/s^2 would be applied in m/s^2."""
         ...
 
     def force_mode(
@@ -143,6 +150,9 @@ class URRTDEAdapter:
         self.frequency = frequency
         self._control: Any = None
         self._receive: Any = None
+        # Interfaces given up on: kept referenced, never destroyed under a thread of theirs
+        # that may still be inside a blocking call.
+        self._retired: list[Any] = []
 
     def connect(self) -> None:
         self.connect_receive()
@@ -175,20 +185,41 @@ class URRTDEAdapter:
     def is_connected(self) -> bool:
         return self.receive_connected() and self.control_connected()
 
+    # ur_rtde's own reconnect() resets the receive side's frequency to its default (125 or
+    # 500 Hz): a reconnect builds fresh interfaces with the configured frequency instead.
+
     def reconnect_receive(self) -> bool:
-        if self._receive is None:
-            self.connect_receive()
-            return self.receive_connected()
-        return self.receive_connected() or bool(self._receive.reconnect())
+        if self.receive_connected():
+            return True
+        self._retire(self._receive)
+        self._receive = None
+        self.connect_receive()
+        return self.receive_connected()
 
     def reconnect_control(self) -> bool:
-        if self._control is None:
-            self.connect_control()
-            return self.control_connected()
-        return self.control_connected() or bool(self._control.reconnect())
+        if self.control_connected():
+            return True
+        self._retire(self._control)
+        self._control = None
+        self.connect_control()
+        return self.control_connected()
 
     def reconnect(self) -> bool:
         return self.reconnect_receive() and self.reconnect_control()
+
+    def drop_control(self) -> None:
+        """Disconnect the control interface so a late command it still sends goes nowhere;
+        the next reconnect builds a new one."""
+        self._retire(self._control)
+        self._control = None
+
+    def _retire(self, iface: Any) -> None:
+        if iface is not None:
+            self._retired.append(iface)
+            try:
+                iface.disconnect()
+            except Exception:  # already dead: nothing to close
+                pass
 
     def reupload_script(self) -> bool:
         return bool(self._control.reuploadScript())
@@ -202,8 +233,9 @@ class URRTDEAdapter:
     def move_j(self, q: Sequence[float], speed: float, acceleration: float) -> bool:
         return bool(self._control.moveJ(list(q), speed, acceleration, True))
 
-    def async_progress(self) -> int:
-        return int(self._control.getAsyncOperationProgress())
+    def async_status(self) -> tuple[bool, int]:
+        status = self._control.getAsyncOperationProgressEx()
+        return bool(status.isAsyncOperationRunning()), int(status.operationId())
 
     def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
         return bool(self._control.servoL(list(pose), 0.0, 0.0, time, lookahead, gain))
@@ -213,9 +245,6 @@ class URRTDEAdapter:
 
     def stop_l(self, deceleration: float) -> None:
         self._control.stopL(deceleration, True)
-
-    def stop_j(self, deceleration: float) -> None:
-        self._control.stopJ(deceleration, True)
 
     def force_mode(
         self,

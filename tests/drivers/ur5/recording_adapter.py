@@ -20,8 +20,9 @@ class RecordingAdapter:
         self.host = host
         self.calls: list[tuple[str, tuple[Any, ...]]] = []
         self.connected = True
-        self.progress = -1  #: what async_progress() returns now
-        self.progress_script: list[int] = []  #: if set, consumed one value per read
+        #: what async_status() returns now: (running, operation id)
+        self.op: tuple[bool, int] = (False, 0)
+        self.op_script: list[tuple[bool, int]] = []  #: if set, consumed one value per read
         self.safety_bits = 1  #: bit 0: normal mode
         self.mode = 7  #: RUNNING
         self.program_running = True
@@ -39,7 +40,7 @@ class RecordingAdapter:
     def names(self, include_reads: bool = False) -> list[str]:
         """Call names in order; by default only commands (not state reads)."""
         reads = {
-            "is_connected", "async_progress", "safety_status_bits", "robot_mode",
+            "is_connected", "async_status", "safety_status_bits", "robot_mode",
             "is_program_running", "tcp_pose", "joint_positions",
         }
         return [n for n, _ in self.calls if include_reads or n not in reads]
@@ -87,11 +88,11 @@ class RecordingAdapter:
         self._rec("move_j", list(q), speed, acceleration)
         return self.accept
 
-    def async_progress(self) -> int:
-        self._rec("async_progress")
-        if self.progress_script:
-            self.progress = self.progress_script.pop(0)
-        return self.progress
+    def async_status(self) -> tuple[bool, int]:
+        self._rec("async_status")
+        if self.op_script:
+            self.op = self.op_script.pop(0)
+        return self.op
 
     def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
         self._rec("servo_l", list(pose), time, lookahead, gain)
@@ -104,9 +105,6 @@ class RecordingAdapter:
     def stop_l(self, deceleration: float) -> None:
         self._rec("stop_l", deceleration)
 
-    def stop_j(self, deceleration: float) -> None:
-        self._rec("stop_j", deceleration)
-
     def force_mode(self, task_frame, selection, wrench, frame_type, limits) -> bool:  # type: ignore[no-untyped-def]
         self._rec("force_mode", list(task_frame), list(selection), list(wrench), frame_type,
                   list(limits))
@@ -115,6 +113,9 @@ class RecordingAdapter:
     def force_mode_stop(self) -> bool:
         self._rec("force_mode_stop")
         return True
+
+    def drop_control(self) -> None:
+        self._rec("drop_control")
 
     def is_program_running(self) -> bool:
         self._rec("is_program_running")

@@ -49,56 +49,84 @@ def test_implements_the_arm_protocol() -> None:
 def test_move_to_runs_moving_then_done() -> None:
     arm, rtde, _ = make()
     goal = goal_at(rtde)
-    rtde.progress = -1
+    rtde.op = (False, 4)
     arm.move_to(goal, 0.1, 0.5)
     (pose, speed, acc), = rtde.args("move_l")
     assert np.allclose(pose, pose_to_vector(goal)) and (speed, acc) == (0.1, 0.5)
     assert arm.status().state is MotionState.MOVING
-    for p in (0, 0, 0):  # running: the controller reports progress 0
-        rtde.progress = p
+    for _ in range(3):  # running: operation 5, ours
+        rtde.op = (True, 5)
         assert arm.status().state is MotionState.MOVING
-    rtde.progress = -2  # the toggled end value
+    rtde.op = (False, 5)  # ours finished
     assert arm.status().state is MotionState.DONE
-    assert arm.status().state is MotionState.DONE  # stays DONE, no more progress reads needed
+    assert arm.status().state is MotionState.DONE  # stays DONE, no more status reads needed
     assert rtde.names() == ["move_l"]
 
 
-def test_move_too_short_to_be_seen_running_is_done_by_the_toggle() -> None:
+def test_move_too_short_to_be_seen_running_is_done_by_its_operation_id() -> None:
     arm, rtde, _ = make()
-    rtde.progress = -2
+    rtde.op = (False, 7)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    rtde.progress = -1  # ended between two ticks: a new negative value
+    rtde.op = (False, 8)  # started and ended between two ticks: a new id, not running
     assert arm.status().state is MotionState.DONE
 
 
 def test_move_not_yet_started_stays_moving() -> None:
     arm, rtde, _ = make()
-    rtde.progress = -1
+    rtde.op = (False, 3)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    for _ in range(5):  # same negative value as before the command: not started
+    for _ in range(5):  # the operation current before the command: ours has not started
         assert arm.status().state is MotionState.MOVING
-    rtde.progress_script = [0, -2]
+    rtde.op_script = [(True, 4), (False, 4)]
     assert arm.status().state is MotionState.MOVING
     assert arm.status().state is MotionState.DONE
 
 
-def test_replacing_a_running_move_waits_for_the_previous_end() -> None:
+def test_replacing_a_running_move_needs_no_finished_value_in_between() -> None:
     arm, rtde, _ = make()
-    rtde.progress = 0  # an earlier async move still runs
+    rtde.op = (True, 9)  # an earlier async move still runs
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    rtde.progress_script = [0, -1, -1, 0, 0]  # previous ends (-1), ours starts
+    rtde.op = (True, 10)  # the script cancelled 9 and started ours in one cycle
     for _ in range(5):
         assert arm.status().state is MotionState.MOVING
-    rtde.progress = -2
+    rtde.op = (False, 10)
+    assert arm.status().state is MotionState.DONE
+
+
+def test_operation_ids_wrap_after_127() -> None:
+    arm, rtde, _ = make()
+    rtde.op = (False, 127)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.op_script = [(True, 0), (False, 0)]
+    assert arm.status().state is MotionState.MOVING
+    assert arm.status().state is MotionState.DONE
+
+
+def test_a_move_right_after_an_async_stop_waits_for_the_stop_to_end() -> None:
+    arm, rtde, _ = make()
+    rtde.op = (False, 1)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.op = (True, 2)
+    assert arm.status().state is MotionState.MOVING
+    arm.stop()
+    rtde.op = (True, 3)  # the stop's own operation
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.names() == ["move_l", "stop_l"]  # held back
+    assert arm.status().state is MotionState.MOVING
+    rtde.op = (False, 3)  # the stop ended: ours is sent now
+    assert arm.status().state is MotionState.MOVING
+    assert rtde.names() == ["move_l", "stop_l", "move_l"]
+    rtde.op_script = [(True, 4), (False, 4)]
+    assert arm.status().state is MotionState.MOVING
     assert arm.status().state is MotionState.DONE
 
 
 def test_move_that_ends_away_from_its_goal_is_a_fault() -> None:
     arm, rtde, _ = make()
     goal = Pose(goal_at(rtde).position + [0.01, 0.0, 0.0], goal_at(rtde).rotation)
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal, 0.1, 0.5)
-    rtde.progress_script = [0, -2]
+    rtde.op_script = [(True, 1), (False, 1)]
     arm.status()
     st = arm.status()
     assert st.state is MotionState.FAULT and "10.0 mm" in st.message
@@ -126,7 +154,7 @@ def test_move_path_is_one_blended_movel_ending_on_the_last_waypoint() -> None:
     w2 = Pose(start.position + [0.10, 0.0, 0.10], start.rotation)
     w3 = Pose(start.position + [0.10, 0.03, 0.10], start.rotation)  # short segment: 3 cm
     w4 = Pose(start.position + [0.10, 0.23, 0.10], start.rotation @ rot_x(0.3))
-    rtde.progress = -1
+    rtde.op = (False, 6)  # the old script's last operation
     arm.move_path([w1, w2, w3, w4], 0.2, 1.0)
     (rows,), = rtde.args("move_l_path")
     assert len(rows) == 4 and all(len(r) == 9 for r in rows)
@@ -139,7 +167,9 @@ def test_move_path_is_one_blended_movel_ending_on_the_last_waypoint() -> None:
     assert blends[2] == pytest.approx(BLEND_FRACTION * 0.03)
     assert blends[3] == 0.0  # ends on the last waypoint
     rtde.pose = pose_to_vector(w4)
-    rtde.progress_script = [0, -2]
+    # ur_rtde re-uploaded its script for the path: ids count from 0 again, and the injected
+    # signal_async_progress(0) makes the path operation 2.
+    rtde.op_script = [(True, 2), (False, 2)]
     assert arm.status().state is MotionState.MOVING
     assert arm.status().state is MotionState.DONE
 
@@ -147,13 +177,13 @@ def test_move_path_is_one_blended_movel_ending_on_the_last_waypoint() -> None:
 def test_move_joints_is_an_async_movej_done_at_the_goal() -> None:
     arm, rtde, _ = make()
     q = [0.1, -1.5, 1.5, -1.6, -1.57, 0.2]
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_joints(q, 1.0, 2.0)
     assert rtde.args("move_j") == [(q, 1.0, 2.0)]
-    rtde.progress = 0
+    rtde.op = (True, 1)
     assert arm.status().state is MotionState.MOVING
     rtde.q = q
-    rtde.progress = -2
+    rtde.op = (False, 1)
     assert arm.status().state is MotionState.DONE
 
 
@@ -163,7 +193,7 @@ def test_move_joints_is_an_async_movej_done_at_the_goal() -> None:
     ("start", "expected"),
     [
         ("move", ("stop_l", (10.0,))),
-        ("joints", ("stop_j", (4.0,))),
+        ("joints", ("stop_l", (10.0,))),  # every async stop is a stopl in the script
         ("servo", ("servo_stop", (10.0,))),
         ("force", ("force_mode_stop", ())),
     ],
@@ -191,9 +221,9 @@ def test_stop_when_idle_or_done_sends_nothing_and_keeps_the_state() -> None:
     arm, rtde, _ = make()
     arm.stop()
     assert rtde.names() == [] and arm.status().state is MotionState.IDLE
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    rtde.progress = -2
+    rtde.op = (False, 1)
     assert arm.status().state is MotionState.DONE
     arm.stop()
     assert rtde.names() == ["move_l"] and arm.status().state is MotionState.DONE
@@ -213,9 +243,9 @@ def test_stop_never_raises_on_a_dead_link() -> None:
 
 def test_protective_stop_is_a_fault_with_the_flag_latched_until_the_next_command() -> None:
     arm, rtde, _ = make()
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    rtde.progress = 0
+    rtde.op = (True, 1)
     assert arm.status().state is MotionState.MOVING
     rtde.safety_bits = NORMAL | PROTECTIVE
     rtde.program_running = False  # the control script ends with the stop
@@ -228,7 +258,7 @@ def test_protective_stop_is_a_fault_with_the_flag_latched_until_the_next_command
     st = arm.status()
     assert st.state is MotionState.FAULT and st.protective_stop
     # Unlocked (and the script back): the fault stays latched until the next command.
-    rtde.safety_bits, rtde.program_running, rtde.progress = NORMAL, True, -1
+    rtde.safety_bits, rtde.program_running, rtde.op = NORMAL, True, (False, 1)
     st = arm.status()
     assert st.state is MotionState.FAULT and st.protective_stop
     arm.move_to(goal_at(rtde), 0.1, 0.5)
@@ -263,7 +293,7 @@ def test_other_stops_are_faults_without_the_protective_flag(
 
 def test_lost_link_is_a_fault_with_bounded_reconnects_and_backoff() -> None:
     arm, rtde, clock = make(UR5Settings(reconnect_attempts=4, reconnect_first_delay=0.5))
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
     rtde.connected = False
     st = arm.status()
@@ -292,7 +322,7 @@ def test_lost_link_is_a_fault_with_bounded_reconnects_and_backoff() -> None:
     st = arm.status()
     assert st.state is MotionState.FAULT and "reconnected, the motion was dropped" in st.message
     assert rtde.names().count("reconnect") == 5
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
     assert arm.status().state is MotionState.MOVING
 
@@ -345,7 +375,7 @@ def test_servo_streams_one_servol_per_tick_at_the_control_rate() -> None:
         assert np.allclose(pose, pose_to_vector(t))
         assert (dt, lookahead, gain) == (pytest.approx(0.008), 0.05, 500)
     assert arm.last_servo_target is targets[-1]
-    assert "async_progress" not in rtde.names(include_reads=True)  # servo has no progress
+    assert "async_status" not in rtde.names(include_reads=True)  # servo has no progress
 
 
 def test_leaving_servo_for_a_move_stops_servoing_first() -> None:
@@ -376,7 +406,7 @@ def test_force_mode_maps_selection_wrench_and_limits_in_the_base_frame() -> None
 
 def test_force_mode_during_a_move_stops_the_move_first() -> None:
     arm, rtde, _ = make()
-    rtde.progress = -1
+    rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
     arm.force_mode([False, False, True, False, False, False], [0, 0, -5, 0, 0, 0], [0.01] * 6)
     assert rtde.names() == ["move_l", "stop_l", "force_mode"]
@@ -464,3 +494,20 @@ def test_importing_the_driver_does_not_import_ur_rtde() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_path_whose_script_never_starts_faults_after_the_timeout() -> None:
+    rtde, clock = RecordingAdapter(), FakeClock()
+    stuck: list = []  # the upload's worker never returns (ur_rtde waits without a timeout)
+    arm = UR5Arm(rtde, clock, UR5Settings(script_start_timeout=2.0), spawn=stuck.append)
+    start = goal_at(rtde)
+    arm.move_path([Pose(start.position + [0, 0, 0.05], start.rotation),
+                   Pose(start.position + [0.05, 0, 0.05], start.rotation)], 0.1, 0.5)
+    assert len(stuck) == 1
+    for _ in range(int(2.0 / 0.008) - 1):
+        clock.t += 0.008
+        assert arm.status().state is MotionState.MOVING
+    clock.t += 0.05
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "did not start within 2 s" in st.message
+    assert stuck[-1] == rtde.drop_control  # the stuck interface is given up, off the tick
