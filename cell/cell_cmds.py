@@ -564,6 +564,7 @@ def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
         "stop_reason": state.stop_reason,
         "sim_time_s": round(result.sim_time, 3),
         "ticks": result.ticks,
+        "tick_period_ms": result.tick_period_ms,
         "picked": state.counts.get(EventKind.PICKED, 0),
         "picked_recovered": sum(
             1 for e in state.events if e["kind"] == EventKind.PICKED and e.get("recovered")

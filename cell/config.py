@@ -269,6 +269,55 @@ class FaultsSection(_Section):
     rates: FaultRates = Field(default_factory=FaultRates)
 
 
+class EmulatedFault(_Section):
+    """One fault `cell emulate` puts on the wire, on a schedule."""
+
+    device: Literal["arm", "gripper", "ft", "camera"] = Field(
+        description="whose cable: arm (every UR socket), gripper (its serial line and the "
+        "URCap socket), ft (the sensor's cable, power included), camera (frames freeze)"
+    )
+    fault: Literal["cable", "protective_stop"] = Field(
+        "cable", description="cable: pull the cable; protective_stop: the arm's (arm only)"
+    )
+    at_s: float = Field(
+        ge=0.0, description="when: seconds of the emulated controller's time after the arm "
+        "first moved"
+    )
+    mid_motion: bool = Field(
+        True, description="wait from at_s until the arm is moving, then pull"
+    )
+    duration_s: float | None = Field(
+        None, gt=0.0, description="plug the cable back after this long (null: only SIGUSR1 or "
+        "a restart of the emulator brings it back)"
+    )
+
+
+class EmulateSection(_Section):
+    """`cell emulate`: the emulators' own settings (the devices' addresses are `devices`)."""
+
+    camera_width: int = Field(
+        424, ge=64, le=1920, description="the emulated D435's frame width (px)"
+    )
+    camera_height: int = Field(
+        240, ge=48, le=1080, description="the emulated D435's frame height (px)"
+    )
+    camera_fps: int = Field(
+        6, ge=1, le=90, description="frames a second the emulated D435 renders and sends"
+    )
+    faults: list[EmulatedFault] = Field(
+        default_factory=list, description="faults on the wire, each once, on a schedule"
+    )
+
+    @field_validator("faults")
+    @classmethod
+    def _arm_only_stop(cls, value: list[EmulatedFault]) -> list[EmulatedFault]:
+        for i, f in enumerate(value):
+            if f.fault == "protective_stop" and f.device != "arm":
+                raise ValueError(f"fault {i}: a protective stop is the arm's, not the "
+                                 f"{f.device}'s")
+        return value
+
+
 def _shown(value: float) -> float:
     return float(f"{value:.12g}")  # 4 deg, not 4.000000000000001
 
@@ -322,6 +371,7 @@ class CellConfig(_Section):
     skills: SkillsSection = Field(default_factory=SkillsSection)  # type: ignore[valid-type]
     log: LogSection = Field(default_factory=LogSection)
     faults: FaultsSection = Field(default_factory=FaultsSection)
+    emulate: EmulateSection = Field(default_factory=EmulateSection)
     tree: dict[str, Any] = Field(
         default_factory=lambda: {"file": "trees/bushing_machining.yaml"},
         description="the behaviour tree: a node spec, or {file: PATH} relative to this file "

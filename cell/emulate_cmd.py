@@ -7,20 +7,31 @@ each finished cycle and on the way out. The twin judges by physics alone (where 
 ``packed`` = parts standing in the box, ``fed`` = parts that reached the slot (packed ones
 included), ``cycles`` = packed parts.
 
+Where each device listens is the configuration's ``devices`` section, the one `cell run` reads:
+the UR controller on ``devices.arm.host`` (RTDE 30004, script 30003, dashboard 29999), the
+gripper's URCap socket there too (``devices.gripper.urcap_port``), the 2F-85's Modbus RTU line and
+the FT300's stream on pseudo-terminals whose names the kernel picks, so a symbolic link at
+``devices.gripper.port`` and ``devices.ft.port`` points at each (made on start, removed on exit;
+an existing file that is not a link is never replaced), the D435's frames on
+``devices.camera.stream``.
+
 One thread owns PyBullet (:class:`sim.emulate.realtime.RealTimeLoop`): each control period it
 runs the UR controller's cycle (which commands the twin's arm) and one twin step; the device
-servers exchange values with it under locks. Faults on the wire, by signal: SIGUSR1 pulls the
-arm's Ethernet cable (every UR socket dropped, new connections refused), a second SIGUSR1 plugs
-it back; SIGUSR2 raises a protective stop.
+servers exchange values with it under locks. The camera renders in a forked process
+(:mod:`sim.emulate.camera_process`). Faults on the wire: on the schedule of ``emulate.faults``,
+and by signal: SIGUSR1 pulls the arm's Ethernet cable (every UR socket dropped, new connections
+refused), a second SIGUSR1 plugs it back; SIGUSR2 raises a protective stop.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +55,8 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_emulate)
 
 
-def _report(backend: Any, controller: Any, loop: Any) -> dict[str, Any]:
+def _report(backend: Any, controller: Any, loop: Any, faults: list[dict[str, Any]],
+            wires: Any) -> dict[str, Any]:
     where = backend.parts_where()
     account = backend.account()
     packed = account["packed"]
@@ -59,8 +71,100 @@ def _report(backend: Any, controller: Any, loop: Any) -> dict[str, Any]:
             for b, w in where
         ],
         "ur": controller.status(),
+        "faults": faults,
+        "ft": {"frames_sent": wires.ft.frames_sent, "max_gap_ms": round(1e3 * wires.ft.max_gap, 1),
+               "late_frames": wires.ft.late_frames},
+        "gripper": {"modbus_requests": wires.rtu.requests, "crc_errors": wires.rtu.crc_errors},
         "realtime": loop.margin_stats(),
     }
+
+
+def _link(path: str, target: str, key: str) -> Path:
+    """A symbolic link ``path`` -> ``target`` (a pseudo-terminal), replacing an old link only."""
+    link = Path(path)
+    if link.exists() and not link.is_symlink():
+        raise UserError(f"{key}: {path} exists and is not a link: the emulator does not replace "
+                        "it (a real device?)")
+    try:
+        link.parent.mkdir(parents=True, exist_ok=True)
+        tmp = link.with_name(f".{link.name}.{os.getpid()}")
+        if tmp.is_symlink():
+            tmp.unlink()
+        tmp.symlink_to(target)
+        tmp.replace(link)
+    except OSError as exc:
+        raise UserError(f"{key}: cannot link {path} to {target}: {exc}") from None
+    return link
+
+
+class _Wires:
+    """Every emulated device's cable: pull and plug by device name."""
+
+    def __init__(self, servers: Any, rtu: Any, urcap: Any, ft: Any, camera: Any) -> None:
+        self.servers, self.rtu, self.urcap, self.ft, self.camera = servers, rtu, urcap, ft, camera
+
+    def pull(self, device: str) -> None:
+        if device == "arm":
+            self.servers.pull_cable()
+        elif device == "gripper":
+            self.rtu.pull_cable()
+            self.urcap.pull_cable()
+        elif device == "ft":
+            self.ft.pull_cable()
+        else:
+            self.camera.pull_cable()
+
+    def plug(self, device: str) -> None:
+        if device == "arm":
+            self.servers.plug_cable()
+        elif device == "gripper":
+            self.rtu.restore()
+            self.urcap.restore()
+        elif device == "ft":
+            self.ft.restore()
+        else:
+            self.camera.restore()
+
+
+class _Schedule:
+    """``emulate.faults`` against the emulated controller's clock (the twin's time), checked
+    from the stepping thread after each step; the wire is touched from the main thread."""
+
+    def __init__(self, faults: list[Any]) -> None:
+        self.faults = list(faults)
+        self.first_motion: float | None = None
+        self.fired: list[dict[str, Any]] = []  #: for the report: what happened when
+        self._due: list[tuple[int, str]] = []  # (index, "pull"/"plug"), for the main thread
+        self._pulled_at: dict[int, float] = {}
+        self._done: set[int] = set()
+        self._lock = threading.Lock()
+
+    def check(self, t: float, moving: bool) -> None:
+        """On the stepping thread: ``t`` the controller's time (s), ``moving`` the arm."""
+        if self.first_motion is None:
+            if not moving:
+                return
+            self.first_motion = t
+        since = t - self.first_motion
+        for i, f in enumerate(self.faults):
+            if i in self._done:
+                continue
+            if i not in self._pulled_at:
+                if since >= f.at_s and (moving or not f.mid_motion):
+                    self._pulled_at[i] = t
+                    with self._lock:
+                        self._due.append((i, "pull"))
+                    if f.duration_s is None or f.fault == "protective_stop":
+                        self._done.add(i)
+            elif f.duration_s is not None and t - self._pulled_at[i] >= f.duration_s:
+                self._done.add(i)
+                with self._lock:
+                    self._due.append((i, "plug"))
+
+    def take(self) -> list[tuple[Any, str]]:
+        with self._lock:
+            due, self._due = self._due, []
+        return [(self.faults[i], what) for i, what in due]
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
@@ -69,7 +173,9 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         return 0
     from cell.assemble import build_twin
     from cell.cell_cmds import load_prepared
-    from sim.emulate.realtime import RealTimeLoop
+    from sim.emulate.camera_process import CameraProcess
+    from sim.emulate.ft300_stream import FT300Emulator, TwinWrist
+    from sim.emulate.gripper_server import Gripper2F85, ModbusRtuServer, TwinFingers, UrcapServer
     from sim.emulate.ur_controller import (
         ControllerSettings,
         TwinArmBackend,
@@ -78,35 +184,94 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     )
 
     prep = load_prepared(args.config or EXAMPLE)
+    # Many I/O threads beside one that steps PyBullet: with the default 5 ms switch interval a
+    # thread woken by its socket or line waits up to 5 ms for the interpreter at every wake-up
+    # (the FT300 stream's frames then came 50 ms apart). 0.5 ms keeps them on time.
+    sys.setswitchinterval(0.0005)
     config = prep.config
-    arm = config.devices.arm
+    dev, emu = config.devices, config.emulate
+    if not dev.camera.stream:
+        raise UserError(f"{prep.doc.source}: devices.camera.stream: `cell emulate` serves the "
+                        "D435 as a frame stream; name its host:port")
+    cam_host, _, cam_port = dev.camera.stream.rpartition(":")
     backend = build_twin(prep)
     robot = backend.robot
-    settings = ControllerSettings(frequency=float(config.cell.control_hz))
-    controller = URController(TwinArmBackend(robot.arm, robot.ft), settings)
-    try:
-        servers = URServers(controller, arm.host).start()
-    except OSError as exc:
-        backend.close()
-        raise UserError(f"cannot listen on {arm.host} (devices.arm.host): {exc}") from None
-
     lock = threading.Lock()
+    opened: list[Any] = []  # what to close, in reverse
+    links: list[Path] = []
+    try:
+        # The camera forks the emulator: before any thread of it starts.
+        camera = CameraProcess(backend, prep.layout.tool_T_camera(), cam_host, int(cam_port),
+                               emu.camera_width, emu.camera_height, emu.camera_fps, lock)
+        try:
+            camera.start()
+        except OSError as exc:
+            raise UserError(f"devices.camera.stream: {exc}") from None
+        opened.append(camera.stop)
+        settings = ControllerSettings(frequency=float(config.cell.control_hz))
+        controller = URController(TwinArmBackend(robot.arm, robot.ft), settings)
+        try:
+            servers = URServers(controller, dev.arm.host).start()
+        except OSError as exc:
+            raise UserError(f"cannot listen on {dev.arm.host} (devices.arm.host): {exc}") from None
+        opened.append(servers.stop)
+        gripper = Gripper2F85(TwinFingers(robot.gripper, backend.world))
+        rtu = ModbusRtuServer(gripper, unit_id=dev.gripper.slave_id).start()
+        opened.append(rtu.close)
+        try:
+            urcap = UrcapServer(gripper, dev.arm.host, dev.gripper.urcap_port)
+        except OSError as exc:
+            raise UserError(f"devices.gripper.urcap_port: cannot listen on "
+                            f"{dev.arm.host}:{dev.gripper.urcap_port}: {exc}") from None
+        opened.append(urcap.stop)
+        ft = FT300Emulator(TwinWrist(robot.ft), unit_id=dev.ft.slave_id,
+                           seed=config.sim.seed).start()
+        opened.append(ft.close)
+        links.append(_link(dev.gripper.port, rtu.port, "devices.gripper.port"))
+        links.append(_link(dev.ft.port, ft.port, "devices.ft.port"))
+        wires = _Wires(servers, rtu, urcap, ft, camera)
+        schedule = _Schedule(emu.faults)
+        return _serve(args, backend, controller, servers, wires, schedule, lock, settings)
+    finally:
+        for link in links:
+            try:
+                if link.is_symlink():
+                    link.unlink()
+            except OSError:
+                pass
+        for close in reversed(opened):
+            try:
+                close()
+            except Exception:  # noqa: BLE001 -- every device must be closed
+                pass
+        backend.close()
+
+
+def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any, wires: _Wires,
+           schedule: _Schedule, lock: threading.Lock, settings: Any) -> int:
+    from drivers.arm import MotionState
+    from sim.emulate.realtime import RealTimeLoop
+
     state = {"packed": -1}
 
     def write_report() -> None:
         if args.report is None:
             return
         with lock:
-            report = _report(backend, controller, loop)
+            report = _report(backend, controller, loop, schedule.fired, wires)
         args.report.parent.mkdir(parents=True, exist_ok=True)
         tmp = args.report.with_suffix(args.report.suffix + ".tmp")
         tmp.write_text(json.dumps(report, indent=2))
         tmp.replace(args.report)
 
+    twin_arm = backend.robot.arm
+
     def step() -> None:
         with lock:
             controller.cycle()
             backend.step()
+            if schedule.faults:
+                schedule.check(controller.t, twin_arm.status().state is MotionState.MOVING)
 
     loop = RealTimeLoop(1.0 / settings.frequency, step)
     stop = threading.Event()
@@ -131,8 +296,25 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     thread = threading.Thread(target=loop.run, name="twin", daemon=True)
     thread.start()
     print("ready", flush=True)
+    next_report = 0.0
     try:
-        while not stop.wait(0.5):
+        while not stop.wait(0.01):
+            for fault, what in schedule.take():
+                if fault.fault == "protective_stop":
+                    controller.raise_protective_stop("raised by emulate.faults")
+                elif what == "pull":
+                    wires.pull(fault.device)
+                else:
+                    wires.plug(fault.device)
+                schedule.fired.append({"device": fault.device, "fault": fault.fault,
+                                       "what": what, "t_s": round(controller.t, 3),
+                                       "wall": time.time()})
+                print(f"emulate: {fault.device} {fault.fault} {what} at "
+                      f"{controller.t:.3f} s", file=sys.stderr, flush=True)
+            now = time.monotonic()
+            if now < next_report:
+                continue
+            next_report = now + 0.5
             with lock:
                 packed = backend.account()["packed"]
             if packed != state["packed"]:  # a cycle finished (or the first report)
@@ -142,7 +324,5 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         loop.stop()
         thread.join(timeout=2.0)
         write_report()
-        servers.stop()
-        backend.close()
     print(json.dumps({"realtime": loop.margin_stats()}), file=sys.stderr)
     return 0

@@ -11,6 +11,7 @@ pyserial, pyrealsense2) are imported here, on the hardware path only.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -224,6 +225,11 @@ class HardwareBackend:
 def open_hardware(prep: Any) -> HardwareBackend:
     """Connect and check every device before anything moves; refuse with the reasons."""
     config = prep.config
+    # The drivers' reader threads (FT300 stream, gripper poll, camera feed) wake on their line
+    # and then wait for the interpreter; with the default 5 ms switch interval, beside the tick
+    # loop and each other, the FT300's samples reached the guards more than 50 ms apart
+    # (`cell run` against `cell emulate`). 0.5 ms bounds that wait.
+    sys.setswitchinterval(0.0005)
     clock = WallClock()
     opened: dict[str, Any] = {}
     problems: list[str] = []

@@ -26,6 +26,7 @@ from cell.journal import JournalKind
 from cell.phases import PhaseTimes
 from drivers.clock import Clock
 from drivers.events import EventKind, StopKind
+from drivers.health import DeviceError
 from skills.status import Failure
 
 #: The events that end a cycle (the state file is saved on them).
@@ -305,6 +306,25 @@ class RunResult:
     sim_time: float
     wall_s: float
     signum: int | None = None
+    #: paced runs (`cell run`): the wall-clock period between tick starts (ms): median, p99,
+    #: max, and the jitter |period - 1/control_hz| at the median, p99 and max
+    tick_period_ms: dict[str, float] | None = None
+
+
+def _period_stats(starts: list[float], period: float) -> dict[str, float] | None:
+    if len(starts) < 3:
+        return None
+    d = np.diff(np.asarray(starts)) * 1e3
+    j = np.abs(d - period * 1e3)
+    return {
+        "ticks": len(starts),
+        "period_median_ms": round(float(np.median(d)), 3),
+        "period_p99_ms": round(float(np.percentile(d, 99)), 3),
+        "period_max_ms": round(float(d.max()), 3),
+        "jitter_median_ms": round(float(np.median(j)), 3),
+        "jitter_p99_ms": round(float(np.percentile(j, 99)), 3),
+        "jitter_max_ms": round(float(j.max()), 3),
+    }
 
 
 class TickLoop:
@@ -346,6 +366,7 @@ class TickLoop:
         t_start = clock.now()
         tick = 0
         status = "out of time"
+        starts: list[float] = []  # wall time of each tick's start (paced runs)
         try:
             self.root.setup_with_descendants()
             next_wall = time.monotonic()
@@ -354,6 +375,8 @@ class TickLoop:
                     status = "interrupted"
                     break
                 tick += 1
+                if self.realtime:
+                    starts.append(time.monotonic())
                 self.state.tick, self.state.time = tick, clock.now() - t_start
                 n_events, n_aborts = len(self.state.events), len(self.state.aborts)
                 self.root.tick_once()
@@ -364,7 +387,10 @@ class TickLoop:
                     extra["aborts"] = self.state.aborts[n_aborts:]
                 for tap in self.taps:
                     extra.update(tap())
-                wrench = self.wrench()
+                try:
+                    wrench = self.wrench()
+                except DeviceError:  # a lost sensor is the guards' business; the log has none
+                    wrench = None
                 line = self.log.record(tick, self.state.time, self.root, wrench, extra)
                 if self.monitor is not None:
                     self.monitor.publish(tick, self.state.time, wrench, line, self.log.header)
@@ -395,7 +421,8 @@ class TickLoop:
             for s, h in old.items():
                 signal.signal(s, h)
         return RunResult(
-            status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal
+            status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal,
+            _period_stats(starts, self.period) if self.realtime else None,
         )
 
 

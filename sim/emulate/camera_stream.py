@@ -20,8 +20,9 @@ model included). Rendering calls PyBullet from the streaming thread: pass the ``
 that steps the twin holds while stepping, so a render never runs inside a step.
 
 Depth is quantised to ``depth_units`` (1 mm, the D435's default) and saturates at 65535 counts.
-Frames go out at ``fps`` (a render slower than the period lowers the rate; the frame numbers
-stay consecutive, the timestamps are the render times).
+Frames go out at ``fps`` (a render slower than the period drops the slots it overran; the
+frame numbers stay consecutive, the timestamps are the slots' starts on the camera's own clock,
+exact multiples of the period as a hardware clock gives them).
 
 Wire faults: :meth:`CameraStreamServer.pull_cable` freezes the camera (connections stay open,
 no frame is sent: the driver's capture times out); :meth:`CameraStreamServer.drop_clients`
@@ -100,6 +101,7 @@ class CameraStreamServer:
         self._listen.settimeout(0.05)
         self.host, self.port = self._listen.getsockname()[:2]
         self._clients: list[socket.socket] = []
+        self._started: dict[socket.socket, float] = {}  # each client's stream start (monotonic)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._frozen = threading.Event()
@@ -140,6 +142,7 @@ class CameraStreamServer:
         """Close every connection (the driver sees the stream end)."""
         with self._lock:
             clients, self._clients = self._clients, []
+            self._started.clear()
         for c in clients:
             try:
                 c.shutdown(socket.SHUT_RDWR)
@@ -168,30 +171,45 @@ class CameraStreamServer:
                 continue
             with self._lock:
                 self._clients.append(conn)
+                self._started[conn] = time.monotonic()
 
     def _stream(self) -> None:
+        """Frames at the camera's own clock: exposure slot ``k`` starts at ``t0 + k / fps`` and
+        its frame carries exactly that timestamp, as a camera's hardware clock does. A render
+        that overruns its slot drops the slots it covered (the next frame takes the next slot
+        not yet begun), so the stamps stay on the fps grid: librealsense's syncer expects
+        frames every 1000 / fps ms. Each client's clock starts with its stream (its connection),
+        as a camera's starts when the host starts it: stamped with this machine's monotonic
+        time (hours, in ms) the syncer paired 1 capture in 8 at 30 fps, and with stamps 12 s
+        into the stream it paired none for the first 9 s (librealsense 2.5x, measured)."""
         period = 1.0 / self.fps
-        t_next = time.monotonic()
+        t0 = time.monotonic()
+        k = 0
         while not self._stop.is_set():
             now = time.monotonic()
-            if now < t_next:
-                self._stop.wait(t_next - now)
+            slot = t0 + k * period
+            if now < slot:
+                self._stop.wait(slot - now)
                 continue
-            t_next = max(t_next + period, now)  # a slow render lowers the rate, no burst
+            k = max(k, int((now - t0) / period))  # slots already past are dropped
+            slot = t0 + k * period
+            k += 1
             if self._frozen.is_set() or not self.clients:
                 continue
             rgb, depth = self.source.frame()
-            stamp_ms = time.monotonic() * 1000.0
             self.frame_number += 1
-            msg = encode_frame(self.frame_number, stamp_ms, to_z16(depth, self.depth_units), rgb)
+            z16 = to_z16(depth, self.depth_units)
             with self._lock:
-                clients = list(self._clients)
-            for c in clients:
+                clients = [(c, self._started.get(c, slot)) for c in self._clients]
+            for c, started in clients:
+                # This client's stream clock: on the slot grid, from about one period at its start.
+                stamp_ms = (slot - started) * 1000.0 + period * 1000.0
                 try:
-                    c.sendall(msg)
+                    c.sendall(encode_frame(self.frame_number, stamp_ms, z16, rgb))
                 except OSError:
                     with self._lock:
                         if c in self._clients:
                             self._clients.remove(c)
+                        self._started.pop(c, None)
                     c.close()
             self.frames_sent += 1

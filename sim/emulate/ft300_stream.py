@@ -137,6 +137,8 @@ class FT300Emulator:
         self.streaming = threading.Event()
         self._thread = threading.Thread(target=self._run, name="emu-ft300", daemon=True)
         self.frames_sent = 0
+        self.max_gap = 0.0  #: s, the longest time between two frames sent in one stream
+        self.late_frames = 0  #: frames sent more than two periods after the one before
         self.requests = 0  #: valid Modbus requests for this unit, answered
         self.power_ups = 1
 
@@ -210,6 +212,7 @@ class FT300Emulator:
         ff_run = 0
         period = 1.0 / self.rate_hz
         next_t = time.monotonic()
+        last_sent: float | None = None
         while not self._stop.is_set():
             streaming = self.streaming.is_set()
             wait = max(0.0, next_t - time.monotonic()) if streaming else 0.01
@@ -231,6 +234,7 @@ class FT300Emulator:
                     self._requests(rx)
             if not self.streaming.is_set():
                 next_t = time.monotonic()
+                last_sent = None
                 continue
             now = time.monotonic()
             if now < next_t:
@@ -238,6 +242,12 @@ class FT300Emulator:
             next_t = max(next_t + period, now - period)  # late: no burst to catch up
             if self._write(stream_frame(self.reading())):
                 self.frames_sent += 1
+                sent = time.monotonic()
+                if last_sent is not None:
+                    gap = sent - last_sent
+                    self.max_gap = max(self.max_gap, gap)
+                    self.late_frames += gap > 2 * period
+                last_sent = sent
 
     def _requests(self, rx: bytearray) -> None:
         """Serve complete Modbus requests at the start of ``rx`` (slave mode)."""

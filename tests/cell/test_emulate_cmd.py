@@ -16,15 +16,14 @@ import pytest
 pytest.importorskip("rtde_control")
 
 from cell.emulate_cmd import EXAMPLE  # noqa: E402
-from sim.emulate.ur_standalone import loopback_host  # noqa: E402
+from tests.cell.emulated import emulated_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_emulate_serves_the_arm_and_reports_on_sigterm(tmp_path: Path) -> None:
-    host = loopback_host()
-    config = tmp_path / "emulated.yaml"
-    config.write_text(EXAMPLE.read_text().replace("host: 127.0.0.1", f"host: {host}"))
+    config = emulated_config(tmp_path)
+    host = config.read_text().split("host: ", 1)[1].split()[0]
     report = tmp_path / "report.json"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
