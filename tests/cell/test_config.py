@@ -187,6 +187,7 @@ def test_schema_covers_every_section_and_the_registry_is_documented() -> None:
         "faults",
         "skills",
         "bin",
+        "emulate",
     }
     readme = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
     for name in REGISTRY:
