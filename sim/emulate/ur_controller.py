@@ -764,6 +764,11 @@ class _Listener:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             conn.settimeout(None)
             with self._lock:
+                if self._server is not server:
+                    # The cable was pulled while this connection was being accepted: it must
+                    # not outlive the pull (close() dropped only the ones listed then).
+                    conn.close()
+                    return
                 self._clients.append(conn)
                 self.connections += 1
             threading.Thread(target=self._run, args=(conn,), daemon=True).start()
@@ -792,7 +797,8 @@ class _Listener:
 
     def close(self) -> None:
         """Stop listening (new connections are refused) and drop the live ones."""
-        server, self._server = self._server, None
+        with self._lock:  # no accept in flight may list a connection after this
+            server, self._server = self._server, None
         if server is not None:
             try:  # stops listening at once (close alone waits for a blocked accept to return)
                 server.shutdown(socket.SHUT_RDWR)

@@ -236,3 +236,47 @@ def test_a_protective_stop_ends_the_program_and_unlocks_only_after_the_delay(ctl
     assert c.dashboard("unlock protective stop") == "Protective stop releasing"
     c.cycle()
     assert c.outputs()["safety_status_bits"] == 1
+
+
+def test_a_connection_accepted_while_the_cable_is_pulled_does_not_survive_the_pull(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The race behind a flaky cable-pull test: a connection the accept thread had taken but not
+    yet listed when the cable was pulled stayed open, so a client kept talking over a pulled
+    cable. Here the accept thread is held right after accept() until the pull is done."""
+    import socket
+    import threading
+
+    from sim.emulate.ur_controller import _Listener
+    from sim.emulate.ur_standalone import loopback_host
+
+    accepted, pulled = threading.Event(), threading.Event()
+    served: list[socket.socket] = []
+    real_setsockopt = socket.socket.setsockopt
+
+    def held_setsockopt(self, *args):  # type: ignore[no-untyped-def]
+        if args[:2] == (socket.IPPROTO_TCP, socket.TCP_NODELAY):
+            accepted.set()
+            pulled.wait(5.0)
+        return real_setsockopt(self, *args)
+
+    monkeypatch.setattr(socket.socket, "setsockopt", held_setsockopt)
+    listener = _Listener(loopback_host(), 0, served.append, "test")
+    listener.open()
+    assert listener._server is not None
+    port = listener._server.getsockname()[1]
+    client = socket.create_connection((listener.host, port), timeout=2.0)
+    try:
+        assert accepted.wait(5.0)
+        listener.close()  # the cable is pulled while the accept thread holds the connection
+        pulled.set()
+        client.settimeout(2.0)
+        try:
+            data = client.recv(1)  # closed by the emulator: EOF (b"") or a reset
+        except ConnectionResetError:
+            data = b""
+        assert data == b""
+        assert not served and listener.connections == 0
+    finally:
+        pulled.set()
+        client.close()
+        listener.shutdown()
