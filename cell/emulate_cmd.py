@@ -183,7 +183,13 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         URServers,
     )
 
-    prep = load_prepared(args.config or EXAMPLE)
+    from cell.cell_cmds import report_config_error
+    from trees.yaml_lines import ConfigError
+
+    try:
+        prep = load_prepared(args.config or EXAMPLE)
+    except ConfigError as exc:
+        return report_config_error(exc, "emulate")
     # Many I/O threads beside one that steps PyBullet: with the default 5 ms switch interval a
     # thread woken by its socket or line waits up to 5 ms for the interpreter at every wake-up
     # (the FT300 stream's frames then came 50 ms apart). 0.5 ms keeps them on time.

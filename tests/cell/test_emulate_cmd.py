@@ -63,3 +63,36 @@ def test_print_config_names_the_shipped_example() -> None:
         check=True,
     ).stdout.strip()
     assert Path(out) == EXAMPLE and EXAMPLE.is_file()
+
+
+def test_the_fault_schedule_counts_from_the_first_motion_and_waits_for_motion() -> None:
+    from cell.config import EmulatedFault
+    from cell.emulate_cmd import _Schedule
+
+    pull = EmulatedFault(device="arm", at_s=1.0, duration_s=0.5)
+    ft = EmulatedFault(device="ft", at_s=0.2, mid_motion=False)
+    s = _Schedule([pull, ft])
+    s.check(5.0, moving=False)  # the arm never moved yet: nothing counts
+    assert s.take() == [] and s.first_motion is None
+    s.check(10.0, moving=True)
+    s.check(10.3, moving=False)  # ft: due without motion
+    assert s.take() == [(ft, "pull")]
+    s.check(11.2, moving=False)  # arm: due, but waits for motion
+    assert s.take() == []
+    s.check(11.4, moving=True)
+    assert s.take() == [(pull, "pull")]
+    s.check(11.8, moving=True)
+    assert s.take() == []
+    s.check(11.9, moving=False)  # 0.5 s after the pull: plugged back, once
+    s.check(20.0, moving=True)
+    assert s.take() == [(pull, "plug")]
+
+
+def test_a_protective_stop_is_the_arms_only(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("emulate:\n  faults:\n    - {device: ft, fault: protective_stop, at_s: 1}\n")
+    r = subprocess.run([sys.executable, "-m", "cell.cli", "emulate", "--config", str(bad)],
+                       capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "emulate.faults" in r.stderr and "protective stop is the arm's" in r.stderr
