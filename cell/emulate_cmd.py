@@ -172,7 +172,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         print(EXAMPLE)
         return 0
     from cell.assemble import build_twin
-    from cell.cell_cmds import load_prepared
+    from cell.cell_cmds import load_prepared, report_config_error
     from sim.emulate.camera_process import CameraProcess
     from sim.emulate.ft300_stream import FT300Emulator, TwinWrist
     from sim.emulate.gripper_server import Gripper2F85, ModbusRtuServer, TwinFingers, UrcapServer
@@ -182,8 +182,6 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         URController,
         URServers,
     )
-
-    from cell.cell_cmds import report_config_error
     from trees.yaml_lines import ConfigError
 
     try:
