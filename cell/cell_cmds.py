@@ -238,12 +238,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) -> int:
     from cell.assemble import open_backend
+    from cell.preflight import check_config_outputs
     from cell.runner import TickLoop
 
     if getattr(args, "monitor", None) is not None:
         from cell.monitor.server import parse_address
 
         parse_address(args.monitor)  # a bad address is refused before anything opens
+    check_config_outputs(prep.config)  # before the journal, the twin or a device is opened
     try:
         resume = _open_journal(prep, command, bool(getattr(args, "resume", False)))
     except _NothingToDo as done:
@@ -645,23 +647,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from cell.monitor import serve_replay
 
         return serve_replay(args.log, args.serve)
-    try:
-        text = args.log.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{args.log}: cannot read the tick log: {exc.strerror}") from None
-    lines = []
-    for n, raw in enumerate(text.splitlines(), start=1):
-        if not raw.strip():
-            continue
-        try:
-            lines.append(json.loads(raw))
-        except json.JSONDecodeError as exc:
-            raise UserError(f"{args.log}:{n}: not a JSON line: {exc.msg}") from None
-    if not lines:
-        raise UserError(f"{args.log}: empty tick log")
-    from cell.replay import timeline
+    from cell.replay import read_tick_log, timeline
 
-    for row in timeline(lines, every=args.all):
+    log = read_tick_log(args.log)
+    if log.warning is not None:
+        print(f"cell replay: warning: {log.warning}", file=sys.stderr)
+    for row in timeline(log.lines, every=args.all):
         print(row)
     return 0
 

@@ -27,6 +27,7 @@ import numpy as np
 from cell.catalogue import Catalogue, load_catalogue
 from cell.errors import UserError
 from cell.output import write_json
+from cell.preflight import check_outputs
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, PlannerOptions, plan_pivot
@@ -338,9 +339,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_outputs(args.command, args)
         return int(args.func(args))
     except (UserError, ValueError) as exc:
-        print(f"cell {args.command}: error: {exc}", file=sys.stderr)
+        # One line, whatever the message: a user error never spreads over the terminal.
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        print(f"cell {args.command}: error: {text}", file=sys.stderr)
         return 2
 
 
