@@ -25,8 +25,17 @@ VALID: dict[str, list[str]] = {
     "pivot": ["pivot", "--part", "bushing", "--trials", "1", "--json", "{J}", "--record", "{G}"],
     "sweep": ["sweep", "--part", "bushing", "--trials", "1", "--out", "{D}"],
     "calibrate": ["calibrate", "--cell", "{Y}"],
-    "perceive": ["perceive", "--scenes", "1", "--seed", "0", "--json", "{J}",
-                 "--save-failures", "{D}"],
+    "perceive": [
+        "perceive",
+        "--scenes",
+        "1",
+        "--seed",
+        "0",
+        "--json",
+        "{J}",
+        "--save-failures",
+        "{D}",
+    ],
     "train-perception": ["train-perception", "--scenes", "2", "--epochs", "1", "--out", "{W}"],
     "compare": ["compare", "--part", "bushing", "--trials", "1", "--json", "{J}"],
     "sim": ["sim", "--cycles", "1", "--json", "{J}", "--record", "{G}"],
@@ -37,8 +46,6 @@ VALID: dict[str, list[str]] = {
     "soak": ["soak", "--cycles", "1", "--json", "{J}"],
     "init": ["init", "{D}"],
 }
-PLACEHOLDER = {"json": "{J}", "record": "{G}", "out": None, "cell": "{Y}", "dir": "{D}",
-               "save_failures": "{D}"}
 SUFFIX = {"{J}": "x.json", "{G}": "x.gif", "{D}": "folder", "{Y}": "layout.yaml", "{W}": "w.pt"}
 
 
@@ -65,7 +72,10 @@ def _snapshot(root: Path) -> set[Path]:
 
 @pytest.mark.parametrize(("command", "dest"), _cases())
 def test_an_unwritable_output_is_refused_before_anything_starts(
-    command: str, dest: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    command: str,
+    dest: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.chdir(tmp_path)  # a default output (out/...) would land here too
@@ -110,8 +120,9 @@ def test_a_configured_log_that_cannot_be_written_stops_sim_before_the_twin(
     (tmp_path / "a_file").write_text("")
     for key in ("tick_log", "state_file", "journal"):
         cfg = tmp_path / f"{key}.yaml"
-        paths = {k: str(tmp_path / "logs" / f"{k}.out") for k in ("tick_log", "state_file",
-                                                                  "journal")}
+        paths = {
+            k: str(tmp_path / "logs" / f"{k}.out") for k in ("tick_log", "state_file", "journal")
+        }
         paths[key] = str(tmp_path / "a_file" / "x")
         cfg.write_text("log:\n" + "".join(f"  {k}: {v}\n" for k, v in paths.items()))
         before = _snapshot(tmp_path)
@@ -128,36 +139,60 @@ BAD_CONFIG = "cell:\n  control_hz: abc\n"
 
 MALFORMED: list[tuple[str, list[str], str]] = [
     # (command, argv with {F} for the malformed file, its kind)
-    *[(c, [c, *extra, "--cell", "{F}"], "layout") for c, extra in (
-        ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
-        ("compare", ["--part", "bushing", "--trials", "1"]),
-        ("sweep", ["--part", "bushing", "--trials", "1", "--out", "{D}"]),
-        ("perceive", ["--scenes", "1", "--seed", "0", "--json", "{J}"]),
-        ("calibrate", []),
-    )],
-    *[(c, [c, *extra, "--catalogue", "{F}"], "catalogue") for c, extra in (
-        ("analyze", ["--grid", "5", "--out", "{D}"]),
-        ("plan", ["--part", "bushing"]),
-        ("check-tilt", ["--la", "0.9", "--alpha", "0.3"]),
-        ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
-        ("compare", ["--part", "bushing", "--trials", "1"]),
-        ("sweep", ["--part", "bushing", "--trials", "1", "--out", "{D}"]),
-        ("perceive", ["--scenes", "1", "--seed", "0", "--json", "{J}"]),
-    )],
-    *[(c, [c, *extra, "--config", "{F}"], "config") for c, extra in (
-        ("sim", ["--cycles", "1"]),
-        ("run", []),
-        ("tree", ["--out", "{D}"]),
-        ("soak", ["--cycles", "1"]),
-        ("check-hardware", []),
-        ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
-    )],
+    *[
+        (c, [c, *extra, "--cell", "{F}"], "layout")
+        for c, extra in (
+            ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
+            ("compare", ["--part", "bushing", "--trials", "1"]),
+            ("sweep", ["--part", "bushing", "--trials", "1", "--out", "{D}"]),
+            ("perceive", ["--scenes", "1", "--seed", "0", "--json", "{J}"]),
+            ("calibrate", []),
+        )
+    ],
+    *[
+        (c, [c, *extra, "--catalogue", "{F}"], "catalogue")
+        for c, extra in (
+            ("analyze", ["--grid", "5", "--out", "{D}"]),
+            ("plan", ["--part", "bushing"]),
+            ("check-tilt", ["--la", "0.9", "--alpha", "0.3"]),
+            ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
+            ("compare", ["--part", "bushing", "--trials", "1"]),
+            ("sweep", ["--part", "bushing", "--trials", "1", "--out", "{D}"]),
+            ("perceive", ["--scenes", "1", "--seed", "0", "--json", "{J}"]),
+        )
+    ],
+    *[
+        (c, [c, *extra, "--config", "{F}"], "config")
+        for c, extra in (
+            ("sim", ["--cycles", "1"]),
+            ("run", []),
+            ("tree", ["--out", "{D}"]),
+            ("soak", ["--cycles", "1"]),
+            ("check-hardware", []),
+            ("pivot", ["--part", "bushing", "--trials", "1", "--json", "{J}"]),
+        )
+    ],
     ("replay", ["replay", "{F}"], "log"),
     ("replay", ["replay", "{F}"], "binary"),
     ("replay", ["replay", "{F}"], "array-log"),
     ("replay", ["replay", "{F}"], "other-json"),
-    ("perceive", ["perceive", "--scenes", "1", "--seed", "0", "--json", "{J}",
-                  "--pipeline", "learned", "--weights", "{F}"], "binary"),
+    (
+        "perceive",
+        [
+            "perceive",
+            "--scenes",
+            "1",
+            "--seed",
+            "0",
+            "--json",
+            "{J}",
+            "--pipeline",
+            "learned",
+            "--weights",
+            "{F}",
+        ],
+        "binary",
+    ),
 ]
 CONTENT = {
     "layout": BAD_LAYOUT.encode(),
@@ -174,8 +209,12 @@ CONTENT = {
     ("command", "argv", "kind"), MALFORMED, ids=[f"{c}-{k}" for c, _, k in MALFORMED]
 )
 def test_a_malformed_input_is_refused_in_one_line_naming_the_file(
-    command: str, argv: list[str], kind: str, tmp_path: Path,
-    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+    command: str,
+    argv: list[str],
+    kind: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     if kind == "binary" and command == "perceive":
         pytest.importorskip("torch")
@@ -194,7 +233,10 @@ def test_unwritable_json_of_sim_fails_in_a_real_interpreter_in_seconds(tmp_path:
     (tmp_path / "a_file").write_text("")
     r = subprocess.run(
         [sys.executable, "-m", "cell.cli", "sim", "--json", str(tmp_path / "a_file" / "x.json")],
-        cwd=tmp_path, capture_output=True, text=True, timeout=60,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert_user_error(r.returncode, r.stdout, r.stderr, "sim", "--json")
     assert not (tmp_path / "out").exists()
