@@ -26,6 +26,7 @@ from typing import Any
 from cell.errors import UserError
 from cell.journal import RETURNED_TO_BIN, RETURNED_TO_SLOT
 from cell.output import report_config_error, write_json
+from cell.overrides import add_set_argument
 from drivers.events import EventKind
 from trees.yaml_lines import ConfigError
 
@@ -36,15 +37,19 @@ PROGRESS_KINDS = frozenset(
 )
 
 
-def load_prepared(path: Path | None, **bin_overrides: Any) -> Any:
+def load_prepared(path: Path | None, sets: Any = (), **bin_overrides: Any) -> Any:
     """The configuration at ``path`` (None: the shipped example) validated and prepared
     (:func:`cell.assemble.prepare`): what `cell sim`, `cell run`, `cell tree`, `cell
-    check-hardware` and `cell soak` start from. ``bin_overrides``: keys of the ``bin`` section
-    given on the command line (None: the file's). Raises :class:`ConfigError`."""
+    check-hardware` and `cell soak` start from. ``sets``: the ``--set KEY.PATH=VALUE`` texts,
+    applied before validation (:mod:`cell.overrides`). ``bin_overrides``: keys of the ``bin``
+    section given on the command line (None: the file's). Raises :class:`ConfigError`."""
     from cell.assemble import prepare
-    from cell.config import BinSection, load_config
+    from cell.config import BinSection, default_config_path, validate_document
+    from cell.overrides import apply_sets
+    from trees.yaml_lines import load_yaml
 
-    config, doc = load_config(path)
+    doc = apply_sets(load_yaml(path if path is not None else default_config_path()), sets)
+    config = validate_document(doc)
     given = {k: v for k, v in bin_overrides.items() if v is not None}
     if given:
         from pydantic import ValidationError
@@ -100,6 +105,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="serve a read-only web page of the run (tree, wrench, camera, events) on "
         "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -123,6 +129,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="serve a read-only web page of the run (tree, wrench, camera, events) on "
         "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser(
@@ -154,6 +161,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="read a BehaviorTree.CPP v4 XML tree (e.g. edited in Groot2) into the YAML form",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_tree)
 
     p = sub.add_parser(
@@ -205,7 +213,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.parts is not None and args.parts < 0:
         raise UserError(f"--parts: must be >= 0, got {args.parts}")
     try:
-        prep = load_prepared(args.config, fill=args.fill, parts=args.parts)
+        prep = load_prepared(args.config, args.set, fill=args.fill, parts=args.parts)
     except ConfigError as exc:
         return report_config_error(exc, "sim")
     if prep.config.cell.backend != "sim":
@@ -220,7 +228,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, args.set)
     except ConfigError as exc:
         return report_config_error(exc, "run")
     if prep.config.cell.backend != "hw":
@@ -625,7 +633,7 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
         return from_btcpp(args.from_btcpp, args.out)
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, args.set)
     except ConfigError as exc:
         return report_config_error(exc, "tree")
     if args.format == "btcpp":

@@ -213,11 +213,23 @@ def cmd_check_tilt(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
+def version() -> str:
+    """The installed distribution's version (the source tree's when run uninstalled)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("pivot-cell")
+    except PackageNotFoundError:
+        return "0.1.0 (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cell",
         description="pivot-cell: hole grasps of hollow parts by asymmetric pivot manipulation.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser(
@@ -332,6 +344,10 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.experiments.soak_cmd import add_parser as add_soak
 
     add_soak(sub)
+
+    from cell.init_cmd import add_parser as add_init
+
+    add_init(sub)
     return parser
 
 
