@@ -32,8 +32,14 @@ from trees.yaml_lines import ConfigError
 
 #: Events printed as progress lines by `cell sim`.
 PROGRESS_KINDS = frozenset(
-    {EventKind.PICKED, EventKind.FED, EventKind.MACHINED, EventKind.PACKED,
-     EventKind.CYCLE_FAILED, EventKind.BIN_EMPTY}
+    {
+        EventKind.PICKED,
+        EventKind.FED,
+        EventKind.MACHINED,
+        EventKind.PACKED,
+        EventKind.CYCLE_FAILED,
+        EventKind.BIN_EMPTY,
+    }
 )
 
 
@@ -58,9 +64,7 @@ def load_prepared(path: Path | None, sets: Any = (), **bin_overrides: Any) -> An
             fixed = BinSection.model_validate({**config.bin.model_dump(), **given})
         except ValidationError as exc:
             err = exc.errors()[0]
-            raise UserError(
-                f"--{err['loc'][0]}: {err['msg']}, got {err.get('input')!r}"
-            ) from None
+            raise UserError(f"--{err['loc'][0]}: {err['msg']}, got {err.get('input')!r}") from None
         config = config.model_copy(update={"bin": fixed})
     return prepare(config, doc)
 
@@ -348,10 +352,26 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         print(f"wrote {args.json}")
     if result.status == "interrupted":
         print(
-            f"cell {command}: interrupted: arm stopped, log flushed, state saved", file=sys.stderr
+            f"cell {command}: interrupted: arm stopped, log flushed, state saved; "
+            + _resume_hint(prep, getattr(args, "argv", None), command),
+            file=sys.stderr,
         )
         return 128 + int(result.signum or 2)
     return 0 if result.status == "success" else 1
+
+
+def _resume_hint(prep: Any, argv: list[str] | None, command: str) -> str:
+    """The command that continues this run from its journal (the same command line, plus
+    ``--resume``)."""
+    import shlex
+
+    if prep.config.log.journal is None:
+        return "no journal (log.journal is null), so the run cannot be resumed"
+    words = [w for w in (argv or [command]) if w != "--resume"]
+    run = getattr(prep.state.journal, "run", None)
+    return f"run {run} is in {prep.config.log.journal}; resume with: " + shlex.join(
+        ["cell", *words, "--resume"]
+    )
 
 
 def _box_picture(backend: Any, prep: Any, record: Path) -> Path:
@@ -396,13 +416,14 @@ class _NothingToDo(Exception):
 def _open_journal(prep: Any, command: str, resume: bool) -> Any:
     """Open the crash-safe journal; with ``resume``, restore the cell's state from it.
 
-    A fresh run keeps the previous journal beside it (``.prev``) rather than deleting it. On
+    A fresh run keeps the earlier journals beside it (``NAME.1.sqlite`` the newest, up to
+    :data:`cell.journal.KEEP_JOURNALS`) rather than deleting them, and says so. On
     resume, a part the journal says was in the gripper cannot be re-created in the twin (nor
     trusted on hardware): in the twin it goes back where it came from -- the bin, or for a
     machined part the slot -- and the journal says so; on hardware the run is refused until a
     person has done the same.
     """
-    from cell.journal import Journal, JournalError, Resume
+    from cell.journal import KEEP_JOURNALS, Journal, JournalError, Resume, keep_earlier
 
     path = prep.config.log.journal
     if path is None:
@@ -410,15 +431,18 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
             raise UserError("--resume needs a journal: log.journal is null in the configuration")
         return None
     p = Path(path)
-    if not resume and p.exists():
-        for suffix in ("", "-wal", "-shm"):
-            old = Path(str(p) + suffix)
-            if old.exists():
-                old.replace(Path(str(p.with_suffix(".prev" + p.suffix)) + suffix))
+    if not resume:
+        kept = keep_earlier(p)
+        if kept is not None:
+            print(
+                f"a fresh run: the previous journal is kept as {kept} (the last {KEEP_JOURNALS} "
+                f"are kept; --resume continues one instead)"
+            )
     if resume and not p.exists():
         raise UserError(f"--resume: no journal at {p} (log.journal)")
     try:
         journal = Journal(p)
+        journal.begin_run()
         state = Resume.from_events(journal.events()) if resume else None
     except JournalError as exc:
         raise UserError(f"log.journal: {exc}") from None
@@ -448,8 +472,9 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
             f"{state.cycles_done} of {ctx.limits.cycles} cycles already done (journal {p})"
         )
     print(
-        f"resuming run {state.runs + 1}: {state.cycles_done} cycles done, box places "
-        f"{sorted(state.filled)} filled, slot {state.slot}"
+        f"run {journal.run} resumes where run {journal.run - 1} of {p} stopped: "
+        f"{state.cycles_done} cycles done, box places {sorted(state.filled)} filled, "
+        f"slot {state.slot}"
     )
     return state
 
@@ -526,10 +551,16 @@ def left_reasons(
         return [{"part": "a part", "reason": why}] * (left_in_bin or 0)
     ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
     last = events[-1] if events else None
-    ended_empty = bool(ends) and last is not None and last["kind"] in (
-        EventKind.BIN_EMPTY,
-        EventKind.CYCLE_FAILED,
-    ) and any(e is ends[-1] for e in events[-2:])
+    ended_empty = (
+        bool(ends)
+        and last is not None
+        and last["kind"]
+        in (
+            EventKind.BIN_EMPTY,
+            EventKind.CYCLE_FAILED,
+        )
+        and any(e is ends[-1] for e in events[-2:])
+    )
     if not ended_empty:
         return [{"part": "a part", "reason": "not tried: the run ended first"}] * (left_in_bin or 0)
     seen: list[dict[str, str]] = list(ends[-1].get("left", []))
@@ -677,9 +708,7 @@ def cmd_check_hardware(args: argparse.Namespace) -> int:
     rows = check_hardware(prep.config, prep.layout, move_test=args.move_test)
     print(format_table(rows))
     if args.json is not None:
-        write_json(
-            args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]}
-        )
+        write_json(args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]})
     ok = all(r.ok for r in rows)
     print("all checks passed" if ok else f"{sum(not r.ok for r in rows)} of {len(rows)} failed")
     return 0 if ok else 1
