@@ -32,14 +32,8 @@ from trees.yaml_lines import ConfigError
 
 #: Events printed as progress lines by `cell sim`.
 PROGRESS_KINDS = frozenset(
-    {
-        EventKind.PICKED,
-        EventKind.FED,
-        EventKind.MACHINED,
-        EventKind.PACKED,
-        EventKind.CYCLE_FAILED,
-        EventKind.BIN_EMPTY,
-    }
+    {EventKind.PICKED, EventKind.FED, EventKind.MACHINED, EventKind.PACKED,
+     EventKind.CYCLE_FAILED, EventKind.BIN_EMPTY}
 )
 
 
@@ -64,7 +58,9 @@ def load_prepared(path: Path | None, sets: Any = (), **bin_overrides: Any) -> An
             fixed = BinSection.model_validate({**config.bin.model_dump(), **given})
         except ValidationError as exc:
             err = exc.errors()[0]
-            raise UserError(f"--{err['loc'][0]}: {err['msg']}, got {err.get('input')!r}") from None
+            raise UserError(
+                f"--{err['loc'][0]}: {err['msg']}, got {err.get('input')!r}"
+            ) from None
         config = config.model_copy(update={"bin": fixed})
     return prepare(config, doc)
 
@@ -551,16 +547,10 @@ def left_reasons(
         return [{"part": "a part", "reason": why}] * (left_in_bin or 0)
     ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
     last = events[-1] if events else None
-    ended_empty = (
-        bool(ends)
-        and last is not None
-        and last["kind"]
-        in (
-            EventKind.BIN_EMPTY,
-            EventKind.CYCLE_FAILED,
-        )
-        and any(e is ends[-1] for e in events[-2:])
-    )
+    ended_empty = bool(ends) and last is not None and last["kind"] in (
+        EventKind.BIN_EMPTY,
+        EventKind.CYCLE_FAILED,
+    ) and any(e is ends[-1] for e in events[-2:])
     if not ended_empty:
         return [{"part": "a part", "reason": "not tried: the run ended first"}] * (left_in_bin or 0)
     seen: list[dict[str, str]] = list(ends[-1].get("left", []))
@@ -708,7 +698,9 @@ def cmd_check_hardware(args: argparse.Namespace) -> int:
     rows = check_hardware(prep.config, prep.layout, move_test=args.move_test)
     print(format_table(rows))
     if args.json is not None:
-        write_json(args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]})
+        write_json(
+            args.json, {"ok": all(r.ok for r in rows), "devices": [asdict(r) for r in rows]}
+        )
     ok = all(r.ok for r in rows)
     print("all checks passed" if ok else f"{sum(not r.ok for r in rows)} of {len(rows)} failed")
     return 0 if ok else 1
