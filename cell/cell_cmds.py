@@ -477,21 +477,20 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
 
 class _Progress:
     """A progress bar on a terminal (packed parts against cycles, simulated time, the tree's
-    tip), with a line per workflow step and per abort; just the lines when stderr is a file."""
+    tip), with a line per workflow step and per abort; into a file or a pipe, those lines and a
+    status line every few seconds (:mod:`cell.progress`)."""
 
     def __init__(self, prep: Any, cycles: int, quiet: bool) -> None:
+        from cell.progress import Progress
+
         self.prep, self.cycles, self.quiet = prep, cycles, quiet
         self.seen = 0
         self.aborts = 0
         self.wall0 = time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        self.bar_shown = False
+        self.bar = Progress(cycles, "packed", quiet=quiet)
 
     def _line(self, text: str) -> None:
-        if self.bar_shown:
-            sys.stderr.write("\r\033[K")  # clear the bar, print the line, redraw below
-            self.bar_shown = False
-        sys.stderr.write(text + "\n")
+        self.bar.line(text)
 
     def update(self, tick: int) -> None:
         if self.quiet:
@@ -516,23 +515,15 @@ class _Progress:
         for a in state.aborts[self.aborts :]:
             self._line(f"  t={a['t']:7.1f} s  abort        {a['reason']}")
         self.aborts = len(state.aborts)
-        now = time.perf_counter()
-        if self.tty and now - getattr(self, "_drawn", 0.0) >= 0.2:  # 5 redraws a second
-            self._drawn = now
+        if tick % 25 == 0:  # the bar's own pacing decides what is drawn
             packed = state.counts.get(EventKind.PACKED, 0)
-            width = 30
-            filled = int(round(width * min(packed, self.cycles) / max(1, self.cycles)))
             tip = self.prep.root.tip()
-            sys.stderr.write(
-                f"\r\033[K[{'#' * filled}{'.' * (width - filled)}] {packed}/{self.cycles} packed"
-                f"  t={state.time:6.1f} s  {tip.name if tip else ''}"
+            self.bar.update(
+                min(packed, self.cycles), f"t={state.time:6.1f} s  {tip.name if tip else ''}"
             )
-            self.bar_shown = True
 
     def done(self) -> None:
-        if self.bar_shown:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        self.bar.close()
 
 
 def left_reasons(

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -88,6 +87,9 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     matches, missed, false_pos, times, cpu_times, failed = [], 0, 0, [], [], []
     missed_names: dict[str, int] = {}
+    from cell.progress import Progress
+
+    bar = Progress(args.scenes, "scenes")
     for i in range(args.scenes):
         seed = args.seed + i
         rng = np.random.default_rng(seed)
@@ -132,12 +134,8 @@ def cmd_perceive(args: argparse.Namespace) -> int:
                     dets,
                 )
             )
-        done = i + 1
-        sys.stderr.write(
-            f"\r[{'#' * (30 * done // args.scenes):<30}] {done}/{args.scenes} scenes  "
-            f"missed {missed}  false {false_pos}"
-        )
-    sys.stderr.write("\n")
+        bar.update(i + 1, f"missed {missed}  false {false_pos}")
+    bar.close()
     pos = np.array([x.pos_err for x in matches]) * 1e3 if matches else np.array([math.nan])
     yaw = np.degrees([x.yaw_err for x in matches]) if matches else np.array([math.nan])
     ends = [x for x in matches if x.end_right is not None]

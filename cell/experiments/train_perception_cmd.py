@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import math
 import multiprocessing
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -177,15 +176,18 @@ def _check_args(args: argparse.Namespace) -> None:
         raise TrainPerceptionInputError(f"--out: cannot create {args.out.parent}: {exc}") from None
 
 
+_bars: dict[str, Any] = {}
+
+
 def _bar(what: str, done: int, total: int, wall: float) -> None:
-    width = 30
-    filled = int(round(width * done / max(1, total)))
-    sys.stderr.write(
-        f"\r{what} [{'#' * filled}{'.' * (width - filled)}] {done}/{total}  {wall:.0f} s"
-    )
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    """A :class:`cell.progress.Progress` per phase (a bar on a terminal, lines in a log)."""
+    from cell.progress import Progress
+
+    if what not in _bars or _bars[what].total != total or done <= 1:
+        _bars[what] = Progress(total, what)
+    _bars[what].update(done)
+    if done >= total:
+        _bars.pop(what).close()
 
 
 def _render(job: tuple[int, bool]) -> RenderedScene:
