@@ -198,7 +198,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_check_hardware)
 
     p = sub.add_parser("schema", help="print the configuration's JSON Schema (for editors)")
-    p.add_argument("--out", type=Path, default=None, help="write it to a file instead")
+    p.add_argument(
+        "--json", "--out", dest="out", type=Path, default=None, metavar="FILE",
+        help="write it to this file instead",
+    )
     p.set_defaults(func=cmd_schema)
 
 

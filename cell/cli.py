@@ -348,6 +348,10 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.init_cmd import add_parser as add_init
 
     add_init(sub)
+
+    from cell.help import finish_parser
+
+    finish_parser(parser, sub)
     return parser
 
 

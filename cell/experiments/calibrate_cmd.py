@@ -48,7 +48,9 @@ def add_parser(sub: Any) -> None:
         "and write camera_xyz/camera_rpy into the --cell YAML.",
     )
     p.add_argument(
+        "--layout",
         "--cell",
+        dest="cell",
         type=Path,
         default=None,
         help="cell layout YAML: read (if it exists) and updated with the estimate; comments "

@@ -43,7 +43,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--trials", type=int, default=10, help="trials per method (10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first trial; trial i: S+i")
     p.add_argument("--json", type=Path, default=None, help="where to write the results")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout", "--cell", dest="cell", type=Path, default=None, metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     add_config_argument(p)
     p.set_defaults(func=cmd_compare)

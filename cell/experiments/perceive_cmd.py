@@ -40,7 +40,15 @@ def add_parser(sub: Any) -> None:
         help="segmentation: classical depth pipeline (default) or the learned network",
     )
     p.add_argument("--weights", type=Path, default=None, help="learned: weights file")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout",
+        "--cell",
+        dest="cell",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     p.add_argument(
         "--save-failures", type=Path, default=None, help="directory for images of failed scenes"

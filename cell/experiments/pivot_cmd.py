@@ -60,10 +60,16 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--record", type=Path, default=None, help="GIF of the first trial")
     p.add_argument("--json", type=Path, required=True, help="where to write the results")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout", "--cell", dest="cell", type=Path, default=None, metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     add_config_argument(p)
-    p.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (1)")
+    p.add_argument(
+        "--workers", "--jobs", dest="jobs", type=int, default=1, metavar="K",
+        help="trials run in parallel processes (1)",
+    )
     p.add_argument(
         "--nominal",
         action="store_true",
@@ -163,7 +169,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     if args.trials < 1:
         raise PivotInputError(f"--trials: must be >= 1, got {args.trials}")
     if args.jobs < 1:
-        raise PivotInputError(f"--jobs: must be >= 1, got {args.jobs}")
+        raise PivotInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.mu_ground is not None and not (math.isfinite(args.mu_ground) and args.mu_ground >= 0):
         raise PivotInputError(f"--mu-ground: must be a finite number >= 0, got {args.mu_ground}")
     if args.record is not None and args.record.suffix.lower() != ".gif":

@@ -96,7 +96,13 @@ def add_parser(sub: Any) -> None:
         "--out", type=Path, required=True, metavar="DIR", help="directory for the outputs"
     )
     p.add_argument(
-        "--cell", type=Path, default=None, metavar="FILE", help="cell layout YAML (default layout)"
+        "--layout",
+        "--cell",
+        dest="cell",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
     )
     p.add_argument(
         "--catalogue", type=Path, default=None, metavar="FILE", help="part catalogue YAML"

@@ -155,7 +155,15 @@ def add_parser(sub: Any) -> None:
         default=DEFAULT_WEIGHTS,
         help="where to write the weights (cell/data/perception_unet.pt)",
     )
-    p.add_argument("--jobs", type=int, default=1, help="processes rendering scenes (1)")
+    p.add_argument(
+        "--workers",
+        "--jobs",
+        dest="jobs",
+        type=int,
+        default=1,
+        metavar="K",
+        help="processes rendering scenes (1)",
+    )
     p.set_defaults(func=cmd_train_perception)
 
 
@@ -167,7 +175,7 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.epochs < 1:
         raise TrainPerceptionInputError(f"--epochs: must be >= 1, got {args.epochs}")
     if args.jobs < 1:
-        raise TrainPerceptionInputError(f"--jobs: must be >= 1, got {args.jobs}")
+        raise TrainPerceptionInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.out.is_dir():
         raise TrainPerceptionInputError(f"--out: {args.out} is a directory, need a file path")
     try:
