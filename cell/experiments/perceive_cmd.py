@@ -66,10 +66,10 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
         if weights is not None:
             raise ValueError("--weights: only with --pipeline learned")
         return None
-    try:
-        from skills.perception.learned import LearnedSegmenter
-    except ImportError as exc:  # the learned option is not part of this build
-        raise ValueError(f"--pipeline learned: not available: {exc}") from None
+    from cell.extras import require
+
+    require("torch", "--pipeline learned")
+    from skills.perception.learned import LearnedSegmenter
     return LearnedSegmenter(weights if weights is not None else default_weights())
 
 

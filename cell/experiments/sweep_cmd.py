@@ -597,6 +597,9 @@ def write_outputs(
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from cell.extras import require
+
+    require("ray", "cell sweep")
     rows = prepare(args)
     if not os.access(args.out if args.out.exists() else _existing_parent(args.out), os.W_OK):
         raise UserError(f"--out {args.out}: not writable")

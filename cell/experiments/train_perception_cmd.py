@@ -359,6 +359,9 @@ def train(
 
 
 def cmd_train_perception(args: argparse.Namespace) -> int:
+    from cell.extras import require
+
+    require("torch", "cell train-perception")
     import torch
 
     _check_args(args)
