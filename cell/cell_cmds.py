@@ -282,12 +282,19 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     log = session.log
     recorder = None
     if args.record is not None:
-        from sim.recorder import Recorder
+        from cell.recording import CellRecorder, caption_for
 
         g = prep.geometry
         target = (0.5 * (g.bin_roi[0] + g.bin_roi[1]) - 0.15, 0.0, 0.15)
-        recorder = Recorder(
-            backend.world, target, (0.9, 0.0, 0.45), distance=1.25, height=0.5, size=(320, 240)
+        arm = prep.ctx.devices.arm
+        recorder = CellRecorder(
+            backend.world,
+            target,
+            (0.9, 0.0, 0.45),
+            distance=1.25,
+            height=0.5,
+            tool_position=lambda: arm.tool_pose().position,
+            caption=caption_for(prep),
         )
     progress = _Progress(prep, cycles, quiet=args.quiet)
 
