@@ -40,6 +40,7 @@ from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
 from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
+from skills.pivot.clearance import bin_walls, choose_end
 from skills.status import Failure, Status, StepResult
 
 
@@ -165,6 +166,10 @@ class TrialResult:
     l_a_trace: dict[str, float | None] = field(default_factory=dict)
     #: what the reports count failures by: a skill's Failure or the judge's JudgeFailure code
     failure_code: str | None = None
+    #: the closest the planned sweep of the tool comes to a bin wall (mm; negative: into it)
+    clearance_mm: float | None = None
+    #: the tube was pivoted from the other end than the one the camera's yaw pointed to
+    other_end: bool = False
 
     @property
     def failure_key(self) -> str:
@@ -190,6 +195,17 @@ class TrialWorld:
     frictions: dict[str, float]
     mass: float
     wall0: float
+
+
+def bin_obstacles(layout: CellLayout) -> list:
+    """The bin's walls as the configured layout places them (what the cell knows, not the
+    simulator's bodies)."""
+    return bin_walls(
+        layout.bin_interior(),
+        layout.bin_floor_z,
+        layout.bin_wall_height,
+        layout.bin_wall_thickness,
+    )
 
 
 def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
@@ -352,6 +368,20 @@ def run_trial(
                     center=np.array([d.center[0], d.center[1], 0.5 * setup.part.outer]),
                     yaw=d.yaw,
                 )
+        blocked: StepResult | None = None
+        choice = choose_end(
+            frame,
+            params,
+            bin_obstacles(setup.layout),
+            dev.gripper.finger_width,
+            setup.part.open_ends,
+        )
+        other_end = choice.frame is not frame
+        frame = choice.frame
+        if failure is None and not choice.clearance.clear:
+            failure = blocked = StepResult(
+                Status.FAILURE, f"plan: {choice.clearance.reason()}", Failure.NO_CLEAR_PIVOT
+            )
         tilt = Tilt(frame, params, dev)
         if make_align is None:
             align = Align(lambda: tilt.frame, setup.part, params, dev)
@@ -381,7 +411,7 @@ def run_trial(
             if failure is not None:
                 break
         else:
-            phase_name = "done"
+            phase_name = "plan" if blocked is not None else "done"
         if phase_name == "align" and failure is not None and not robot.arm.status().protective_stop:
             # The in-hand Align failed: the old way (let go, look, pick from above) may still
             # save the part, counted apart.
@@ -419,6 +449,8 @@ def run_trial(
             recovered=recovered,
             phase_times_s={k: phase_times.get(k, 0.0) for k in ("grasp", "tilt", "align", "lift")},
             l_a_trace=watch.l_a_trace(),
+            clearance_mm=round(1e3 * choice.clearance.distance, 1),
+            other_end=other_end,
         )
     finally:
         world.close()

@@ -239,12 +239,23 @@ def choose_end(
     finger_width: float,
     open_ends: int,
     margin: float = 0.003,
+    base_xy: Sequence[float] = (0.0, 0.0),
 ) -> EndChoice:
-    """For a tube (``open_ends`` 2) the end whose pivot keeps the larger clearance; otherwise the
-    one open end. ``clearance.clear`` says whether the choice is pickable where it lies."""
+    """The end to pivot from: for a tube (``open_ends`` 2) either; otherwise the one open end.
+
+    Among the ends whose sweep clears, the one whose open end points away from the robot's base
+    (``base_xy``) -- the pose the pivot was tuned in, the wrist over the part's far side from
+    the base -- else the one with the larger clearance; with none clear, the larger clearance
+    (``clearance.clear`` False: not pickable where it lies)."""
     frames = [frame]
     if open_ends >= 2:
         frames.append(replace(frame, yaw=frame.yaw + math.pi))
     tried = [pivot_clearance(f, params, obstacles, finger_width, margin) for f in frames]
-    best = max(range(len(frames)), key=lambda i: tried[i].distance)
+    radial = np.asarray(frame.center[:2], float) - np.asarray(base_xy, float)
+
+    def rank(i: int) -> tuple[bool, bool, float]:
+        outward = float(frames[i].u[:2] @ radial) > 0.0
+        return (tried[i].clear, outward, tried[i].distance)
+
+    best = max(range(len(frames)), key=rank)
     return EndChoice(frames[best], tried[best], tuple(tried))
