@@ -200,9 +200,12 @@ def pivot_clearance(
     params: PivotParams,
     obstacles: Sequence[Obstacle],
     finger_width: float,
-    margin: float = 0.003,
+    margin: float | None = None,
 ) -> Clearance:
-    """The sweep's closest approach to ``obstacles``, less ``margin`` (m)."""
+    """The sweep's closest approach to ``obstacles``, less ``margin`` (m; default: the
+    pivot's ``clearance_margin``)."""
+    if margin is None:
+        margin = params.clearance_margin
     if not obstacles:
         return Clearance(math.inf)
     best = Clearance(math.inf)
@@ -238,7 +241,7 @@ def choose_end(
     obstacles: Sequence[Obstacle],
     finger_width: float,
     open_ends: int,
-    margin: float = 0.003,
+    margin: float | None = None,
     base_xy: Sequence[float] = (0.0, 0.0),
 ) -> EndChoice:
     """The end to pivot from: for a tube (``open_ends`` 2) either; otherwise the one open end.

@@ -37,6 +37,11 @@ class PivotParams:
     approach_height: float = si(
         0.10, "m", 0.0, 0.5, "above the pre-approach pose the gripper arrives before going down"
     )
+    clearance_margin: float = si(
+        0.006, "m", 0.0, 0.05,
+        "the tool's planned sweep keeps from a bin wall or a neighbour (else the other end, "
+        "a drag, or the part is left)",
+    )
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP on approaches")
     tilt_speed: float = si(
