@@ -32,6 +32,8 @@ from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
 from skills.perception.pick_order import freest_first
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
+from skills.pivot.clearance import bin_walls, choose_end, lying_part
+from skills.reposition import Reposition, RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
@@ -253,37 +255,131 @@ class PlanPick(Behaviour):
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
+        clear, drags = self._clearances(usable, dets, left)
+        if not clear and not drags:
+            self.bb.set("/cell/bin_empty", True)
+            self.feedback_message = (
+                f"plan pick: no {ctx.part.name} a pivot clears or a drag frees ({len(left)} left)"
+            )
+            ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
+            return Status.FAILURE
+        pool = [d for d in usable if id(d) in (clear or drags)]
         if ctx.limits.pick_order == "freest":
-            target = freest_first(usable, dets, ctx.geometry.bin_roi)[0]
-        elif seen is not None and any(d is seen for d in usable):
+            target = freest_first(pool, dets, ctx.geometry.bin_roi)[0]
+        elif seen is not None and any(d is seen for d in pool):
             target = seen  # the one the Look looked at twice
         else:
-            target = min(usable, key=lambda d: math.hypot(d.center[0], d.center[1]))
-        section = ctx.part.section(ctx.devices.gripper.finger_width)
-        frame = PivotFrame(
-            section,
-            np.array(
-                [
-                    target.center[0],
-                    target.center[1],
-                    ctx.geometry.bin_floor_z + 0.5 * ctx.part.outer,
-                ]
-            ),
-            target.yaw,
-            floor_z=ctx.geometry.bin_floor_z,
-        )
-        self.bb.set("/part/target", {"detection": target, "frame": frame})
+            target = min(pool, key=lambda d: math.hypot(d.center[0], d.center[1]))
+        move = None if clear else drags[id(target)]
+        frame = clear[id(target)] if clear else move.frame
+        self.bb.set("/part/target", {"detection": target, "frame": frame, "reposition": move})
+        what = f"drag {1e3 * move.distance:.0f} mm first, " if move is not None else ""
         self.feedback_message = (
             f"plan pick: {ctx.part.name} at ({target.center[0]:.3f}, {target.center[1]:.3f}) m, "
-            f"yaw {math.degrees(target.yaw):.1f} deg, {len(usable)} pickable"
+            f"yaw {math.degrees(frame.yaw):.1f} deg, {what}{len(clear)} pickable as they lie"
         )
         return Status.SUCCESS
+
+    def _clearances(
+        self, usable: list[Detection], dets: list[Detection], left: list[dict[str, str]]
+    ) -> tuple[dict[int, PivotFrame], dict[int, RepositionPlan]]:
+        """Which usable parts a pivot clears as they lie (with the end to use), and which a drag
+        would free (keyed by ``id`` of the detection); the rest go to ``left`` with what is in
+        the way. Walls from the configured layout, neighbours from this look's detections."""
+        ctx = self.ctx
+        g = ctx.geometry
+        pivot = ctx.section("pivot")
+        drag = ctx.section("reposition")
+        width = ctx.devices.gripper.finger_width
+        walls = bin_walls(g.bin_roi, g.bin_floor_z, g.bin_wall_height, g.bin_wall_thickness)
+        section = ctx.part.section(width)
+        clear: dict[int, PivotFrame] = {}
+        drags: dict[int, RepositionPlan] = {}
+        for d in usable:
+            neighbours = [
+                lying_part("a neighbour", o.center, o.yaw, o.length, o.outer, g.bin_floor_z)
+                for o in dets
+                if o is not d
+            ]
+            frame = PivotFrame(
+                section,
+                np.array([d.center[0], d.center[1], g.bin_floor_z + 0.5 * ctx.part.outer]),
+                d.yaw,
+                floor_z=g.bin_floor_z,
+            )
+            choice = choose_end(frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends)
+            if choice.clearance.clear:
+                clear[id(d)] = choice.frame
+                continue
+            move = plan_reposition(
+                frame, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width
+            )
+            if move is not None:
+                drags[id(d)] = move
+                continue
+            left.append(
+                {
+                    "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
+                    "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
+                }
+            )
+        return clear, drags
 
 
 def _target_frame(bb: Any) -> PivotFrame:
     if not bb.exists("/part/target"):
         raise SetupError("no part chosen (/part/target is empty)")
     return bb.get("/part/target")["frame"]
+
+
+class PivotClears(Behaviour):
+    """Condition: SUCCESS when plan_pick found the chosen part pickable where it lies; FAILURE
+    when it needs a drag first (or nothing was chosen)."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/target", access=common.Access.READ)
+
+    def update(self) -> Status:
+        if not self.bb.exists("/part/target"):
+            self.feedback_message = "no part chosen"
+            return Status.FAILURE
+        if self.bb.get("/part/target").get("reposition") is not None:
+            self.feedback_message = "the pivot would hit a wall or a neighbour: drag it first"
+            return Status.FAILURE
+        self.feedback_message = "the pivot clears where the part lies"
+        return Status.SUCCESS
+
+
+class RepositionBehaviour(SkillBehaviour):
+    """Drag the chosen part by plan_pick's plan; the part is then looked at again."""
+
+    section = "reposition"
+
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        if not self.bb.exists("/part/target"):
+            raise SetupError("no part chosen (/part/target is empty)")
+        move = self.bb.get("/part/target").get("reposition")
+        if move is None:
+            raise SetupError("the chosen part needs no drag")
+        self.move = move
+        return Reposition(move, self.ctx.part, self.ctx.devices, self.settings())
+
+    def on_success(self) -> None:
+        c = self.move.target.center
+        self.ctx.events.event(
+            EventKind.REPOSITIONED,
+            x=round(float(c[0]), 4),
+            y=round(float(c[1]), 4),
+            shift_mm=round(1e3 * self.move.distance, 1),
+        )
 
 
 class GraspBehaviour(SkillBehaviour):
