@@ -24,7 +24,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import FINGER_LENGTH, FT_HEIGHT, GRIPPER_BODY_HEIGHT
+from drivers.ur5.kinematics import (
+    FINGER_LENGTH,
+    FT_HEIGHT,
+    GRIPPER_BODY_HEIGHT,
+    HOME_JOINTS,
+    REACH_TOLERANCE,
+    solve_ik,
+)
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -149,6 +156,8 @@ class Clearance:
     def reason(self) -> str:
         if self.clear:
             return f"clear by {self.distance * 1e3:.0f} mm"
+        if self.obstacle == "the edge of the UR5's reach":
+            return f"{self.tool_part} would be beyond {self.obstacle} {self.phase}"
         return (
             f"{self.tool_part} would hit {self.obstacle} {self.phase} "
             f"({-self.distance * 1e3:.0f} mm into it)"
@@ -257,6 +266,18 @@ def pivot_clearance(
     return Clearance(d - margin, name, obstacles[o].what, phase)
 
 
+def reach_problem(frame: PivotFrame, params: PivotParams, finger_width: float) -> Clearance | None:
+    """Where the sweep leaves the UR5's reach (the twin's and the driver's kinematic model,
+    each pose solved from the one before, starting at home), or None when it stays inside."""
+    sweep = pivot_sweep(frame, params, finger_width)
+    q = HOME_JOINTS
+    for phase, pose, _ in (sweep[0], sweep[9], sweep[-1]):  # above, at the grasp, arc's end
+        q, miss = solve_ik(pose, q, iterations=200)
+        if miss > REACH_TOLERANCE:
+            return Clearance(-1.0, "the TCP", "the edge of the UR5's reach", phase)
+    return None
+
+
 @dataclass(frozen=True)
 class EndChoice:
     """The frame to pivot (its ``u`` towards the open end used), its clearance, and the
@@ -285,7 +306,11 @@ def choose_end(
     frames = [frame]
     if open_ends >= 2:
         frames.append(replace(frame, yaw=frame.yaw + math.pi))
-    tried = [pivot_clearance(f, params, obstacles, finger_width, margin) for f in frames]
+    tried = [
+        reach_problem(f, params, finger_width)
+        or pivot_clearance(f, params, obstacles, finger_width, margin)
+        for f in frames
+    ]
     radial = np.asarray(frame.center[:2], float) - np.asarray(base_xy, float)
 
     def rank(i: int) -> tuple[bool, bool, float]:
