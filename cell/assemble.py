@@ -86,6 +86,8 @@ def geometry_from(
         tray_roi=(tx0, tx1, ty0, ty1),
         tray_floor_z=float(layout.tray_floor_z),
         home_joints=np.radians(np.asarray(home_joints_deg, float)),
+        bin_wall_height=float(layout.bin_wall_height),
+        bin_wall_thickness=float(layout.bin_wall_thickness),
     )
 
 

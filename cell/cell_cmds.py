@@ -26,6 +26,7 @@ from typing import Any
 from cell.errors import UserError
 from cell.journal import RETURNED_TO_BIN, RETURNED_TO_SLOT
 from cell.output import report_config_error, write_json
+from cell.overrides import add_set_argument
 from drivers.events import EventKind
 from trees.yaml_lines import ConfigError
 
@@ -36,15 +37,19 @@ PROGRESS_KINDS = frozenset(
 )
 
 
-def load_prepared(path: Path | None, **bin_overrides: Any) -> Any:
+def load_prepared(path: Path | None, sets: Any = (), **bin_overrides: Any) -> Any:
     """The configuration at ``path`` (None: the shipped example) validated and prepared
     (:func:`cell.assemble.prepare`): what `cell sim`, `cell run`, `cell tree`, `cell
-    check-hardware` and `cell soak` start from. ``bin_overrides``: keys of the ``bin`` section
-    given on the command line (None: the file's). Raises :class:`ConfigError`."""
+    check-hardware` and `cell soak` start from. ``sets``: the ``--set KEY.PATH=VALUE`` texts,
+    applied before validation (:mod:`cell.overrides`). ``bin_overrides``: keys of the ``bin``
+    section given on the command line (None: the file's). Raises :class:`ConfigError`."""
     from cell.assemble import prepare
-    from cell.config import BinSection, load_config
+    from cell.config import BinSection, default_config_path, validate_document
+    from cell.overrides import apply_sets
+    from trees.yaml_lines import load_yaml
 
-    config, doc = load_config(path)
+    doc = apply_sets(load_yaml(path if path is not None else default_config_path()), sets)
+    config = validate_document(doc)
     given = {k: v for k, v in bin_overrides.items() if v is not None}
     if given:
         from pydantic import ValidationError
@@ -100,6 +105,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="serve a read-only web page of the run (tree, wrench, camera, events) on "
         "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_sim)
 
     p = sub.add_parser(
@@ -123,6 +129,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="serve a read-only web page of the run (tree, wrench, camera, events) on "
         "HOST:PORT, e.g. 127.0.0.1:8765 (port 0: any free one)",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser(
@@ -154,6 +161,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="read a BehaviorTree.CPP v4 XML tree (e.g. edited in Groot2) into the YAML form",
     )
+    add_set_argument(p)
     p.set_defaults(func=cmd_tree)
 
     p = sub.add_parser(
@@ -190,7 +198,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_check_hardware)
 
     p = sub.add_parser("schema", help="print the configuration's JSON Schema (for editors)")
-    p.add_argument("--out", type=Path, default=None, help="write it to a file instead")
+    p.add_argument(
+        "--json", "--out", dest="out", type=Path, default=None, metavar="FILE",
+        help="write it to this file instead",
+    )
     p.set_defaults(func=cmd_schema)
 
 
@@ -205,7 +216,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if args.parts is not None and args.parts < 0:
         raise UserError(f"--parts: must be >= 0, got {args.parts}")
     try:
-        prep = load_prepared(args.config, fill=args.fill, parts=args.parts)
+        prep = load_prepared(args.config, args.set, fill=args.fill, parts=args.parts)
     except ConfigError as exc:
         return report_config_error(exc, "sim")
     if prep.config.cell.backend != "sim":
@@ -220,7 +231,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, args.set)
     except ConfigError as exc:
         return report_config_error(exc, "run")
     if prep.config.cell.backend != "hw":
@@ -238,12 +249,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) -> int:
     from cell.assemble import open_backend
+    from cell.preflight import check_config_outputs
     from cell.runner import TickLoop
 
     if getattr(args, "monitor", None) is not None:
         from cell.monitor.server import parse_address
 
         parse_address(args.monitor)  # a bad address is refused before anything opens
+    check_config_outputs(prep.config)  # before the journal, the twin or a device is opened
     try:
         resume = _open_journal(prep, command, bool(getattr(args, "resume", False)))
     except _NothingToDo as done:
@@ -269,12 +282,19 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     log = session.log
     recorder = None
     if args.record is not None:
-        from sim.recorder import Recorder
+        from cell.recording import CellRecorder, caption_for
 
         g = prep.geometry
         target = (0.5 * (g.bin_roi[0] + g.bin_roi[1]) - 0.15, 0.0, 0.15)
-        recorder = Recorder(
-            backend.world, target, (0.9, 0.0, 0.45), distance=1.25, height=0.5, size=(320, 240)
+        arm = prep.ctx.devices.arm
+        recorder = CellRecorder(
+            backend.world,
+            target,
+            (0.9, 0.0, 0.45),
+            distance=1.25,
+            height=0.5,
+            tool_position=lambda: arm.tool_pose().position,
+            caption=caption_for(prep),
         )
     progress = _Progress(prep, cycles, quiet=args.quiet)
 
@@ -338,10 +358,26 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         print(f"wrote {args.json}")
     if result.status == "interrupted":
         print(
-            f"cell {command}: interrupted: arm stopped, log flushed, state saved", file=sys.stderr
+            f"cell {command}: interrupted: arm stopped, log flushed, state saved; "
+            + _resume_hint(prep, getattr(args, "argv", None), command),
+            file=sys.stderr,
         )
         return 128 + int(result.signum or 2)
     return 0 if result.status == "success" else 1
+
+
+def _resume_hint(prep: Any, argv: list[str] | None, command: str) -> str:
+    """The command that continues this run from its journal (the same command line, plus
+    ``--resume``)."""
+    import shlex
+
+    if prep.config.log.journal is None:
+        return "no journal (log.journal is null), so the run cannot be resumed"
+    words = [w for w in (argv or [command]) if w != "--resume"]
+    run = getattr(prep.state.journal, "run", None)
+    return f"run {run} is in {prep.config.log.journal}; resume with: " + shlex.join(
+        ["cell", *words, "--resume"]
+    )
 
 
 def _box_picture(backend: Any, prep: Any, record: Path) -> Path:
@@ -386,13 +422,14 @@ class _NothingToDo(Exception):
 def _open_journal(prep: Any, command: str, resume: bool) -> Any:
     """Open the crash-safe journal; with ``resume``, restore the cell's state from it.
 
-    A fresh run keeps the previous journal beside it (``.prev``) rather than deleting it. On
+    A fresh run keeps the earlier journals beside it (``NAME.1.sqlite`` the newest, up to
+    :data:`cell.journal.KEEP_JOURNALS`) rather than deleting them, and says so. On
     resume, a part the journal says was in the gripper cannot be re-created in the twin (nor
     trusted on hardware): in the twin it goes back where it came from -- the bin, or for a
     machined part the slot -- and the journal says so; on hardware the run is refused until a
     person has done the same.
     """
-    from cell.journal import Journal, JournalError, Resume
+    from cell.journal import KEEP_JOURNALS, Journal, JournalError, Resume, keep_earlier
 
     path = prep.config.log.journal
     if path is None:
@@ -400,15 +437,18 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
             raise UserError("--resume needs a journal: log.journal is null in the configuration")
         return None
     p = Path(path)
-    if not resume and p.exists():
-        for suffix in ("", "-wal", "-shm"):
-            old = Path(str(p) + suffix)
-            if old.exists():
-                old.replace(Path(str(p.with_suffix(".prev" + p.suffix)) + suffix))
+    if not resume:
+        kept = keep_earlier(p)
+        if kept is not None:
+            print(
+                f"a fresh run: the previous journal is kept as {kept} (the last {KEEP_JOURNALS} "
+                f"are kept; --resume continues one instead)"
+            )
     if resume and not p.exists():
         raise UserError(f"--resume: no journal at {p} (log.journal)")
     try:
         journal = Journal(p)
+        journal.begin_run()
         state = Resume.from_events(journal.events()) if resume else None
     except JournalError as exc:
         raise UserError(f"log.journal: {exc}") from None
@@ -438,29 +478,29 @@ def _open_journal(prep: Any, command: str, resume: bool) -> Any:
             f"{state.cycles_done} of {ctx.limits.cycles} cycles already done (journal {p})"
         )
     print(
-        f"resuming run {state.runs + 1}: {state.cycles_done} cycles done, box places "
-        f"{sorted(state.filled)} filled, slot {state.slot}"
+        f"run {journal.run} resumes where run {journal.run - 1} of {p} stopped: "
+        f"{state.cycles_done} cycles done, box places {sorted(state.filled)} filled, "
+        f"slot {state.slot}"
     )
     return state
 
 
 class _Progress:
     """A progress bar on a terminal (packed parts against cycles, simulated time, the tree's
-    tip), with a line per workflow step and per abort; just the lines when stderr is a file."""
+    tip), with a line per workflow step and per abort; into a file or a pipe, those lines and a
+    status line every few seconds (:mod:`cell.progress`)."""
 
     def __init__(self, prep: Any, cycles: int, quiet: bool) -> None:
+        from cell.progress import Progress
+
         self.prep, self.cycles, self.quiet = prep, cycles, quiet
         self.seen = 0
         self.aborts = 0
         self.wall0 = time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        self.bar_shown = False
+        self.bar = Progress(cycles, "packed", quiet=quiet)
 
     def _line(self, text: str) -> None:
-        if self.bar_shown:
-            sys.stderr.write("\r\033[K")  # clear the bar, print the line, redraw below
-            self.bar_shown = False
-        sys.stderr.write(text + "\n")
+        self.bar.line(text)
 
     def update(self, tick: int) -> None:
         if self.quiet:
@@ -485,23 +525,15 @@ class _Progress:
         for a in state.aborts[self.aborts :]:
             self._line(f"  t={a['t']:7.1f} s  abort        {a['reason']}")
         self.aborts = len(state.aborts)
-        now = time.perf_counter()
-        if self.tty and now - getattr(self, "_drawn", 0.0) >= 0.2:  # 5 redraws a second
-            self._drawn = now
+        if tick % 25 == 0:  # the bar's own pacing decides what is drawn
             packed = state.counts.get(EventKind.PACKED, 0)
-            width = 30
-            filled = int(round(width * min(packed, self.cycles) / max(1, self.cycles)))
             tip = self.prep.root.tip()
-            sys.stderr.write(
-                f"\r\033[K[{'#' * filled}{'.' * (width - filled)}] {packed}/{self.cycles} packed"
-                f"  t={state.time:6.1f} s  {tip.name if tip else ''}"
+            self.bar.update(
+                min(packed, self.cycles), f"t={state.time:6.1f} s  {tip.name if tip else ''}"
             )
-            self.bar_shown = True
 
     def done(self) -> None:
-        if self.bar_shown:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        self.bar.close()
 
 
 def left_reasons(
@@ -624,7 +656,7 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
         return from_btcpp(args.from_btcpp, args.out)
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, args.set)
     except ConfigError as exc:
         return report_config_error(exc, "tree")
     if args.format == "btcpp":
@@ -646,23 +678,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from cell.monitor import serve_replay
 
         return serve_replay(args.log, args.serve)
-    try:
-        text = args.log.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UserError(f"{args.log}: cannot read the tick log: {exc.strerror}") from None
-    lines = []
-    for n, raw in enumerate(text.splitlines(), start=1):
-        if not raw.strip():
-            continue
-        try:
-            lines.append(json.loads(raw))
-        except json.JSONDecodeError as exc:
-            raise UserError(f"{args.log}:{n}: not a JSON line: {exc.msg}") from None
-    if not lines:
-        raise UserError(f"{args.log}: empty tick log")
-    from cell.replay import timeline
+    from cell.replay import read_tick_log, timeline
 
-    for row in timeline(lines, every=args.all):
+    log = read_tick_log(args.log)
+    if log.warning is not None:
+        print(f"cell replay: warning: {log.warning}", file=sys.stderr)
+    for row in timeline(log.lines, every=args.all):
         print(row)
     return 0
 

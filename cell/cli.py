@@ -27,6 +27,7 @@ import numpy as np
 from cell.catalogue import Catalogue, load_catalogue
 from cell.errors import UserError
 from cell.output import write_json
+from cell.preflight import check_outputs
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, PlannerOptions, plan_pivot
@@ -212,11 +213,23 @@ def cmd_check_tilt(args: argparse.Namespace) -> int:
     return 0 if result.ok else 1
 
 
+def version() -> str:
+    """The installed distribution's version (the source tree's when run uninstalled)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("pivot-cell")
+    except PackageNotFoundError:
+        return "0.1.0 (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cell",
         description="pivot-cell: hole grasps of hollow parts by asymmetric pivot manipulation.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser(
@@ -331,19 +344,32 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.experiments.soak_cmd import add_parser as add_soak
 
     add_soak(sub)
+
+    from cell.init_cmd import add_parser as add_init
+
+    add_init(sub)
+
     from cell.emulate_cmd import add_parser as add_emulate
 
     add_emulate(sub)
+
+    from cell.help import finish_parser
+
+    finish_parser(parser, sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for "resume with: ..." hints
     try:
+        check_outputs(args.command, args)
         return int(args.func(args))
     except (UserError, ValueError) as exc:
-        print(f"cell {args.command}: error: {exc}", file=sys.stderr)
+        # One line, whatever the message: a user error never spreads over the terminal.
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        print(f"cell {args.command}: error: {text}", file=sys.stderr)
         return 2
 
 

@@ -216,7 +216,9 @@ class SafetySection(_Section):
 
 class LogSection(_Section):
     tick_log: str | None = Field(
-        "out/cell_ticks.jsonl", description="JSONL tick log (relative to the working directory)"
+        "out/cell_ticks.jsonl",
+        description="JSONL tick log; every output path is relative to the folder `cell` runs "
+        "in (paths the configuration reads are relative to the configuration)",
     )
     state_file: str | None = Field(
         "out/cell_state.json", description="the cell's state, saved after each cycle and on exit"
@@ -224,7 +226,7 @@ class LogSection(_Section):
     journal: str | None = Field(
         "out/cell_journal.sqlite",
         description="crash-safe journal (SQLite, WAL) of every workflow event; `--resume` "
-        "continues from it",
+        "continues from it; a fresh run keeps the last 5 earlier journals (NAME.1 newest)",
     )
     frames: bool = Field(
         True,

@@ -46,17 +46,24 @@ class Journal:
             )
             row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
             if row is None:
-                self._db.execute(
-                    "INSERT INTO meta VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
-                )
+                self._db.execute("INSERT INTO meta VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
             elif row[0] != str(SCHEMA_VERSION):
                 raise JournalError(
                     f"{self.path}: journal schema {row[0]}, this build reads {SCHEMA_VERSION}"
                 )
             last = self._db.execute("SELECT MAX(run) FROM events").fetchone()[0]
+            # Runs are counted in meta too: a run that ended before its first event still
+            # has its number, so the next run's number is never given twice.
+            row = self._db.execute("SELECT value FROM meta WHERE key='runs'").fetchone()
+            counted = int(row[0]) if row is not None else 0
+            self.run = max(counted, 0 if last is None else int(last)) + 1
         except sqlite3.DatabaseError as exc:
             raise JournalError(f"{self.path}: not a readable cell journal: {exc}") from None
-        self.run = 1 if last is None else int(last) + 1
+
+    def begin_run(self) -> int:
+        """Count this run in the journal (a reader that only opens it counts nothing)."""
+        self._db.execute("INSERT OR REPLACE INTO meta VALUES ('runs', ?)", (str(self.run),))
+        return self.run
 
     def append(self, tick: int, t: float, kind: str, data: dict[str, Any]) -> None:
         self._db.execute(
@@ -78,6 +85,38 @@ class Journal:
 
     def close(self) -> None:
         self._db.close()
+
+
+#: How many earlier journals a fresh run keeps beside the new one (``NAME.1.sqlite`` the newest).
+KEEP_JOURNALS = 5
+
+
+def _with_wal(path: Path) -> list[tuple[Path, str]]:
+    return [(Path(str(path) + s), s) for s in ("", "-wal", "-shm")]
+
+
+def numbered(path: Path, k: int) -> Path:
+    """``out/cell_journal.sqlite`` -> ``out/cell_journal.2.sqlite``."""
+    return path.with_name(f"{path.stem}.{k}{path.suffix}")
+
+
+def keep_earlier(path: Path, keep: int = KEEP_JOURNALS) -> Path | None:
+    """Before a fresh run: move the journal at ``path`` to ``NAME.1.SUFFIX``, shifting the
+    earlier ones up (``.1`` to ``.2`` ...) and dropping the one past ``keep``. Returns where the
+    journal went (None when there was none). Never deletes the newest earlier journals: a run
+    started by mistake without ``--resume`` can still be resumed by moving ``.1`` back."""
+    if not path.exists():
+        return None
+    for src, _suffix in _with_wal(numbered(path, keep)):
+        src.unlink(missing_ok=True)
+    for k in range(keep - 1, 0, -1):
+        for src, suffix in _with_wal(numbered(path, k)):
+            if src.exists():
+                src.replace(Path(str(numbered(path, k + 1)) + suffix))
+    for src, suffix in _with_wal(path):
+        if src.exists():
+            src.replace(Path(str(numbered(path, 1)) + suffix))
+    return numbered(path, 1)
 
 
 class JournalKind(StrEnum):
@@ -140,4 +179,4 @@ class Resume:
         return r
 
 
-__all__ = ["Journal", "JournalError", "JournalKind", "Resume"]
+__all__ = ["KEEP_JOURNALS", "Journal", "JournalError", "JournalKind", "Resume", "keep_earlier"]

@@ -1,9 +1,86 @@
-"""`cell replay`: the timeline of a run from its JSONL tick log."""
+"""`cell replay`: the timeline of a run from its JSONL tick log.
+
+A crash (a killed process, a lost power supply) can leave the log's last line cut off: the log is
+written a line at a time and flushed every few lines. That log is still the best record of what
+happened, so it replays up to the cut with a warning; anything else that is not a tick log --
+another JSON file, a line that is not an object, binary data -- is refused naming the file and
+the line.
+"""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+from cell.errors import UserError
+
+
+@dataclass
+class TickLogText:
+    """The lines of a tick log, and a warning when its last line was cut off."""
+
+    lines: list[dict[str, Any]]
+    warning: str | None = None
+
+
+def _kind(value: Any) -> str:
+    return {list: "a JSON array", str: "a JSON string", bool: "a JSON boolean"}.get(
+        type(value), "a JSON number" if isinstance(value, int | float) else "JSON null"
+    )
+
+
+def read_tick_log(path: Path) -> TickLogText:
+    """The parsed lines of the tick log at ``path``; :class:`UserError` naming the file and the
+    line when it is not one."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise UserError(f"{path}: cannot read the tick log: {exc.strerror}") from None
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        raise UserError(f"{path}: not a tick log: binary data (byte {nul})")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{path}: not a tick log: not UTF-8 text (byte {exc.start})") from None
+    rows = text.splitlines()
+    last = max((n for n, r in enumerate(rows, start=1) if r.strip()), default=0)
+    lines: list[dict[str, Any]] = []
+    warning = None
+    for n, row in enumerate(rows, start=1):
+        if not row.strip():
+            continue
+        try:
+            value = json.loads(row)
+        except json.JSONDecodeError as exc:
+            if n == last and lines and not text.endswith("\n"):
+                warning = (
+                    f"{path}:{n}: the last line is cut off (the run ended abruptly); "
+                    f"replaying the {len(lines)} complete lines before it"
+                )
+                break
+            where = f"{path}:{n}"
+            raise UserError(f"{where}: not a JSON line: {exc.msg} (column {exc.colno})") from None
+        if not isinstance(value, dict):
+            raise UserError(
+                f"{path}:{n}: not a tick log: {_kind(value)}, expected an object with a 'tick'"
+            )
+        if "header" in value and n == 1:  # the tree's shape (format 2 on): kept for the timeline
+            lines.append(value)
+            continue
+        if not isinstance(value.get("tick"), int):
+            keys = ", ".join(list(value)[:6]) or "none"
+            raise UserError(
+                f"{path}:{n}: not a tick log: the object has no integer 'tick' (its keys: {keys})"
+            )
+        lines.append(value)
+    if not lines:
+        raise UserError(f"{path}: empty tick log")
+    return TickLogText(lines, warning)
+
 
 #: Names of tree plumbing whose status changes are noise in a timeline.
 _PLUMBING = ("cell", "ft sampler")

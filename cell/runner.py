@@ -124,6 +124,9 @@ class CellState:
             "events": _jsonable(self.events),
             "stop_reason": self.stop_reason,
             "stop_code": self.stop_code,
+            # the journal's run number (None without a journal): the state file and the
+            # journal name the same run
+            "run": getattr(self.journal, "run", None),
             "tick": self.tick,
             "time": round(self.time, 4),
         }
@@ -373,6 +376,8 @@ class TickLoop:
             while clock.now() - t_start < max_time:
                 if self._signal is not None:
                     status = "interrupted"
+                    name = signal.Signals(self._signal).name
+                    self.state.stop(f"interrupted by {name}", StopKind.INTERRUPTED)
                     break
                 tick += 1
                 if self.realtime:

@@ -286,7 +286,11 @@ class CellLayout:
             data = yaml.safe_load(p.read_text(encoding="utf-8"))
         except OSError as exc:
             raise ValueError(f"{p}: cannot read the cell layout: {exc.strerror}") from None
-        except yaml.YAMLError as exc:
+        except yaml.MarkedYAMLError as exc:
+            mark = exc.problem_mark or exc.context_mark
+            where = f"{p}:{mark.line + 1}" if mark is not None else str(p)
+            raise ValueError(f"{where}: not valid YAML: {exc.problem or exc.context}") from None
+        except (yaml.YAMLError, UnicodeDecodeError) as exc:
             raise ValueError(f"{p}: not valid YAML: {exc}") from None
         return cls.from_dict(data if data is not None else {}, source=str(p))
 

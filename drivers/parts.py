@@ -71,7 +71,7 @@ def delta_rectangular(outer: float, hole: float, finger_width: float) -> float:
     """``delta`` (m) for a rectangular hole: the finger's face lies flat on the inner wall.
 
     The contact is then the wall's inner edge, one wall thickness ``(D - d)/2`` below the top.
-    (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see README.)
+    (The paper's Table 3 lists ``D - d`` for its two prismatic parts; see docs/results.md.)
     """
     outer = _finite("outer size D", outer)
     hole, _ = _finger_fits(hole, finger_width)

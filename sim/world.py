@@ -4,7 +4,7 @@ Every sim device gets the :class:`SimWorld` it lives in. The control loop calls 
 once per control period (8 ms at 125 Hz, like a CB3 UR5's RTDE); the world runs the physics
 substeps and lets devices act before each substep (force-limited fingers, sensor sampling).
 
-Physics settings and why (measured for this cell; see README):
+Physics settings and why (measured for this cell; see docs/design.md):
 * 250 Hz physics, 2 substeps per control step: fine enough for stable finger-part contacts.
 * 100 solver iterations: with fewer the part creeps in the pinch during a lift.
 * Deterministic: one seeded ``numpy`` generator feeds every random choice of the twin.

@@ -30,6 +30,7 @@ class Failure(StrEnum):
     CANNOT_START = "cannot_start"  #: nothing to act on (no part chosen, the box full)
     BLOCKED = "blocked"  #: something stands where the part must go (a box place not free)
     NO_CONTACT = "no_contact"  #: a push met nothing where a wall or a packed part should be
+    NO_CLEAR_PIVOT = "no_clear_pivot"  #: the pivot's gripper would hit a wall or a neighbour
 
 
 @dataclass(frozen=True)

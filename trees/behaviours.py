@@ -18,6 +18,7 @@ Blackboard keys, each written by one behaviour only:
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, Protocol
 
 import numpy as np
@@ -32,6 +33,8 @@ from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
 from skills.perception.pick_order import freest_first
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
+from skills.pivot.clearance import bin_walls, choose_end, lying_part
+from skills.reposition import Reposition, RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
@@ -201,6 +204,10 @@ def location_key(xy: Any) -> tuple[int, int]:
     return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
 
 
+#: One worker for the planning that must not run inside a tick (numpy releases the GIL).
+_PLANNER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-pick")
+
+
 class PlanPick(Behaviour):
     """Choose the part to pick from the detections and the pivot frame the skills use.
 
@@ -220,8 +227,27 @@ class PlanPick(Behaviour):
         self.bb.register_key(key="/part/target", access=common.Access.WRITE)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.WRITE)
         self.bb.set("/cell/bin_empty", False)
+        #: the clearance sweeps run off the tick (tens of milliseconds a part); the leaf stays
+        #: RUNNING until they are done, so no tick blocks on them
+        self._work: Future | None = None
+        self._pending: tuple | None = None
+
+    def initialise(self) -> None:
+        self._work, self._pending = None, None
+
+    def terminate(self, new_status: Status) -> None:
+        if self._work is not None and new_status == Status.INVALID:
+            self._work.cancel()
+        self._work = None
 
     def update(self) -> Status:
+        if self._work is not None:
+            if not self._work.done():
+                self.feedback_message = "plan pick: checking where the pivot's gripper goes"
+                return Status.RUNNING
+            work, self._work = self._work, None
+            assert self._pending is not None
+            return self._choose(*self._pending, *work.result())
         ctx = self.ctx
         dets: list[Detection] = (
             self.bb.get("/part/detections") if self.bb.exists("/part/detections") else []
@@ -252,38 +278,146 @@ class PlanPick(Behaviour):
             self.feedback_message = f"plan pick: no {ctx.part.name} left to pick{extra}"
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
+        self._pending = (usable, dets, left, skipped)
+        self._work = _PLANNER.submit(self._clearances, usable, dets, left)
+        self.feedback_message = "plan pick: checking where the pivot's gripper goes"
+        return Status.RUNNING
+
+    def _choose(
+        self,
+        usable: list[Detection],
+        dets: list[Detection],
+        left: list[dict[str, str]],
+        skipped: int,
+        clear: dict[int, PivotFrame],
+        drags: dict[int, RepositionPlan],
+    ) -> Status:
+        ctx = self.ctx
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
+        if not clear and not drags:
+            self.bb.set("/cell/bin_empty", True)
+            self.feedback_message = (
+                f"plan pick: no {ctx.part.name} a pivot clears or a drag frees ({len(left)} left)"
+            )
+            ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
+            return Status.FAILURE
+        pool = [d for d in usable if id(d) in (clear or drags)]
         if ctx.limits.pick_order == "freest":
-            target = freest_first(usable, dets, ctx.geometry.bin_roi)[0]
-        elif seen is not None and any(d is seen for d in usable):
+            target = freest_first(pool, dets, ctx.geometry.bin_roi)[0]
+        elif seen is not None and any(d is seen for d in pool):
             target = seen  # the one the Look looked at twice
         else:
-            target = min(usable, key=lambda d: math.hypot(d.center[0], d.center[1]))
-        section = ctx.part.section(ctx.devices.gripper.finger_width)
-        frame = PivotFrame(
-            section,
-            np.array(
-                [
-                    target.center[0],
-                    target.center[1],
-                    ctx.geometry.bin_floor_z + 0.5 * ctx.part.outer,
-                ]
-            ),
-            target.yaw,
-            floor_z=ctx.geometry.bin_floor_z,
-        )
-        self.bb.set("/part/target", {"detection": target, "frame": frame})
+            target = min(pool, key=lambda d: math.hypot(d.center[0], d.center[1]))
+        move = None if clear else drags[id(target)]
+        frame = clear[id(target)] if clear else move.frame
+        self.bb.set("/part/target", {"detection": target, "frame": frame, "reposition": move})
+        what = f"drag {1e3 * move.distance:.0f} mm first, " if move is not None else ""
         self.feedback_message = (
             f"plan pick: {ctx.part.name} at ({target.center[0]:.3f}, {target.center[1]:.3f}) m, "
-            f"yaw {math.degrees(target.yaw):.1f} deg, {len(usable)} pickable"
+            f"yaw {math.degrees(frame.yaw):.1f} deg, {what}{len(clear)} pickable as they lie"
         )
         return Status.SUCCESS
+
+    def _clearances(
+        self, usable: list[Detection], dets: list[Detection], left: list[dict[str, str]]
+    ) -> tuple[dict[int, PivotFrame], dict[int, RepositionPlan]]:
+        """Which usable parts a pivot clears as they lie (with the end to use), and which a drag
+        would free (keyed by ``id`` of the detection); the rest go to ``left`` with what is in
+        the way. Walls from the configured layout, neighbours from this look's detections."""
+        ctx = self.ctx
+        g = ctx.geometry
+        pivot = ctx.section("pivot")
+        drag = ctx.section("reposition")
+        width = ctx.devices.gripper.finger_width
+        walls = bin_walls(g.bin_roi, g.bin_floor_z, g.bin_wall_height, g.bin_wall_thickness)
+        section = ctx.part.section(width)
+        clear: dict[int, PivotFrame] = {}
+        drags: dict[int, RepositionPlan] = {}
+        for d in usable:
+            neighbours = [
+                lying_part("a neighbour", o.center, o.yaw, o.length, o.outer, g.bin_floor_z)
+                for o in dets
+                if o is not d
+            ]
+            frame = PivotFrame(
+                section,
+                np.array([d.center[0], d.center[1], g.bin_floor_z + 0.5 * ctx.part.outer]),
+                d.yaw,
+                floor_z=g.bin_floor_z,
+            )
+            choice = choose_end(frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends)
+            if choice.clearance.clear:
+                clear[id(d)] = choice.frame
+                continue
+            move = plan_reposition(
+                frame, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width
+            )
+            if move is not None:
+                drags[id(d)] = move
+                continue
+            left.append(
+                {
+                    "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
+                    "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
+                }
+            )
+        return clear, drags
 
 
 def _target_frame(bb: Any) -> PivotFrame:
     if not bb.exists("/part/target"):
         raise SetupError("no part chosen (/part/target is empty)")
     return bb.get("/part/target")["frame"]
+
+
+class PivotClears(Behaviour):
+    """Condition: SUCCESS when plan_pick found the chosen part pickable where it lies; FAILURE
+    when it needs a drag first (or nothing was chosen)."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/target", access=common.Access.READ)
+
+    def update(self) -> Status:
+        if not self.bb.exists("/part/target"):
+            self.feedback_message = "no part chosen"
+            return Status.FAILURE
+        if self.bb.get("/part/target").get("reposition") is not None:
+            self.feedback_message = "the pivot would hit a wall or a neighbour: drag it first"
+            return Status.FAILURE
+        self.feedback_message = "the pivot clears where the part lies"
+        return Status.SUCCESS
+
+
+class RepositionBehaviour(SkillBehaviour):
+    """Drag the chosen part by plan_pick's plan; the part is then looked at again."""
+
+    section = "reposition"
+
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        if not self.bb.exists("/part/target"):
+            raise SetupError("no part chosen (/part/target is empty)")
+        move = self.bb.get("/part/target").get("reposition")
+        if move is None:
+            raise SetupError("the chosen part needs no drag")
+        self.move = move
+        return Reposition(move, self.ctx.part, self.ctx.devices, self.settings())
+
+    def on_success(self) -> None:
+        c = self.move.target.center
+        self.ctx.events.event(
+            EventKind.REPOSITIONED,
+            x=round(float(c[0]), 4),
+            y=round(float(c[1]), 4),
+            shift_mm=round(1e3 * self.move.distance, 1),
+        )
 
 
 class GraspBehaviour(SkillBehaviour):

@@ -43,6 +43,8 @@ BTCPP_IDS: dict[str, tuple[str, str]] = {
     "stop_on_failure": ("StopOnFailure", "Decorator"),
     "perceive": ("Perceive", "Action"),
     "plan_pick": ("PlanPick", "Action"),
+    "pivot_clears": ("PivotClears", "Condition"),
+    "reposition": ("Reposition", "Action"),
     "grasp": ("Grasp", "Action"),
     "tilt": ("Tilt", "Action"),
     "align": ("Align", "Action"),

@@ -23,6 +23,7 @@ from skills.motion import Guard
 from skills.packing import PackParams
 from skills.perception.look import LookParams
 from skills.pivot import PivotParams
+from skills.reposition import RepositionParams
 from skills.slot import SlotParams
 from skills.status import Failure
 
@@ -35,6 +36,7 @@ SKILL_SECTIONS: dict[str, type] = {
     "pack_in_box": PackParams,
     "put_back": PutBackParams,
     "go_home": HomeParams,
+    "reposition": RepositionParams,
 }
 SECTION_DOCS: dict[str, str] = {
     "pivot": "Grasp, Tilt, Align and the recovery's pick from above (the paper's maneuver)",
@@ -43,6 +45,7 @@ SECTION_DOCS: dict[str, str] = {
     "pack_in_box": "packing in the box by force-guided pushes",
     "put_back": "the recovery after a failed pick",
     "go_home": "the joint move home",
+    "reposition": "the drag of a part no pivot clears where it lies",
 }
 
 
@@ -60,6 +63,8 @@ class CellGeometry:
     tray_roi: tuple[float, float, float, float]
     tray_floor_z: float
     home_joints: NDArray[np.float64]  #: home joint angles (rad)
+    bin_wall_height: float = 0.08  #: m above the bin's floor
+    bin_wall_thickness: float = 0.005  #: m
 
 
 class Events(Protocol):

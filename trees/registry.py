@@ -113,6 +113,18 @@ REGISTRY: dict[str, NodeType] = {
         "leaf", "wrist camera over the bin, find the parts", dict(MOTION), lv.Perceive
     ),
     "plan_pick": NodeType("leaf", "choose the part and its pivot frame", {}, lv.PlanPick),
+    "pivot_clears": NodeType(
+        "leaf",
+        "condition: the chosen part's pivot clears the walls and neighbours where it lies",
+        {},
+        lv.PivotClears,
+    ),
+    "reposition": NodeType(
+        "leaf",
+        "drag the chosen part to where a pivot clears (counted apart as repositioned)",
+        dict(MOTION),
+        lv.RepositionBehaviour,
+    ),
     "grasp": NodeType("leaf", "the pivot's Grasp (Sec. III-C)", dict(MOTION), lv.GraspBehaviour),
     "tilt": NodeType("leaf", "the pivot's Tilt about P_c", dict(MOTION), lv.TiltBehaviour),
     "align": NodeType(

@@ -13,10 +13,23 @@ import py_trees
 from py_trees.behaviour import Behaviour
 
 _COLOURS = {
-    "Sequence": "#ffa500",
-    "Selector": "#00ffff",
+    "Sequence": "#ffb84d",
+    "Selector": "#7fe5f0",
     "Parallel": "#ffd700",
+    "Guard": "#f4a6a6",  # FT guard and timeout: the safety limits
+    "Decorator": "#dddddd",  # retry, cycles, stop on failure
+    "Condition": "#d7b8f3",
+    "Leaf": "#9be39b",  # an action
 }
+_LEGEND = (
+    ("Sequence", "sequence (all in turn)"),
+    ("Selector", "selector (first that succeeds)"),
+    ("Parallel", "parallel"),
+    ("Guard", "FT guard / timeout (limits)"),
+    ("Decorator", "retry / cycles / stop"),
+    ("Condition", "condition (checks, never moves)"),
+    ("Leaf", "action"),
+)
 
 
 def _kind(node: Behaviour) -> str:
@@ -27,20 +40,36 @@ def _kind(node: Behaviour) -> str:
     if isinstance(node, py_trees.composites.Parallel):
         return "Parallel"
     if isinstance(node, py_trees.decorators.Decorator):
-        return "Decorator"
+        from trees.decorators import FTGuard, Timeout
+
+        return "Guard" if isinstance(node, FTGuard | Timeout) else "Decorator"
+    from trees.behaviours import HoldingPart, SlotHolds
+
+    if isinstance(node, SlotHolds | HoldingPart):
+        return "Condition"
     return "Leaf"
 
 
 def _label(node: Behaviour) -> str:
-    """A node's name, and for a guard or a timeout the limits it holds (safety is in the
-    picture, not only in the YAML)."""
-    from trees.decorators import FTGuard, Timeout
+    """A node's name, and the parameters that decide what it does: a guard's force and torque,
+    a timeout's seconds, a retry's attempts and pause, the cycles' count, a stop's reason
+    (safety and persistence are in the picture, not only in the YAML)."""
+    from trees.decorators import Cycles, FTGuard, Retry, StopOnFailure, Timeout
 
     name = node.name.replace(" ", "\n", 1) if len(node.name) > 14 else node.name
     if isinstance(node, FTGuard):
         return f"{name}\n{node.max_force:g} N, {node.max_torque:g} N*m"
     if isinstance(node, Timeout):
         return f"{name}\n{node.seconds:g} s"
+    if isinstance(node, Retry):
+        pause = f", pause {node.pause_s:g} s" if node.pause_s else ""
+        return f"{name}\n{node.attempts} attempts{pause}"
+    if isinstance(node, Cycles):
+        count = getattr(getattr(node, "ctx", None), "limits", None)
+        return f"{name}\n{count.cycles} cycles" if count is not None else name
+    if isinstance(node, StopOnFailure) and node.reason:
+        reason = node.reason if len(node.reason) <= 28 else node.reason[:27] + "..."
+        return f"{name}\n{reason}"
     return name
 
 
@@ -101,7 +130,7 @@ def _draw_png(root: Behaviour, path: Path) -> None:
     for node in root.iterate():
         x, d = pos[id(node)]
         kind = _kind(node)
-        colour = _COLOURS.get(kind, "#dddddd" if kind == "Decorator" else "#90ee90")
+        colour = _COLOURS.get(kind, _COLOURS["Leaf"])
         ax.text(
             x,
             -d,
@@ -115,10 +144,16 @@ def _draw_png(root: Behaviour, path: Path) -> None:
     ax.set_xlim(-1, slot[0])
     ax.set_ylim(-depth, 0.7)
     ax.axis("off")
-    ax.set_title(
-        "cell behaviour tree (orange: sequence, cyan: selector, grey: decorator, green: leaf)",
-        fontsize=8,
+    from matplotlib.patches import Patch
+
+    ax.legend(
+        handles=[Patch(fc=_COLOURS[k], ec="#333333", lw=0.6, label=t) for k, t in _LEGEND],
+        loc="upper left",
+        fontsize=7,
+        frameon=False,
+        ncol=len(_LEGEND),
     )
+    ax.set_title(f"behaviour tree: {root.name}", fontsize=9, loc="left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

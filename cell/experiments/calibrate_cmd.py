@@ -48,7 +48,9 @@ def add_parser(sub: Any) -> None:
         "and write camera_xyz/camera_rpy into the --cell YAML.",
     )
     p.add_argument(
+        "--layout",
         "--cell",
+        dest="cell",
         type=Path,
         default=None,
         help="cell layout YAML: read (if it exists) and updated with the estimate; comments "
@@ -87,7 +89,7 @@ def _read_cell(path: Path | None) -> tuple[dict[str, Any], Any]:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as exc:
         raise ValueError(f"{path}: cannot read the cell layout: {exc.strerror}") from None
-    except yaml.YAMLError as exc:
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
     data = {} if data is None else data
     layout = CellLayout.from_dict(data, source=str(path))  # a non-mapping is refused here

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -44,7 +43,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--trials", type=int, default=10, help="trials per method (10)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first trial; trial i: S+i")
     p.add_argument("--json", type=Path, default=None, help="where to write the results")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout", "--cell", dest="cell", type=Path, default=None, metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     add_config_argument(p)
     p.set_defaults(func=cmd_compare)
@@ -87,8 +89,10 @@ def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, An
     """Both methods on every seed; the summary dict ``cell compare --json`` writes."""
     from cell.experiments.pivot_run import run_trial
     from cell.experiments.regrasp_run import GripperProbe, run_regrasp_trial
+    from cell.progress import Progress
 
     rows: dict[str, list[dict[str, Any]]] = {"pivot": [], "regrasp": []}
+    bar = Progress(len(seeds), "seeds", quiet=not progress)
     wall0 = time.perf_counter()
     for i, seed in enumerate(seeds):
         for method, runner in (("pivot", run_trial), ("regrasp", run_regrasp_trial)):
@@ -103,15 +107,9 @@ def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, An
                 }
             )
             rows[method].append(row)
-        if progress:
-            ok = {m: sum(r["success"] for r in v) for m, v in rows.items()}
-            sys.stderr.write(
-                f"\r{i + 1}/{len(seeds)} seeds  pivot ok {ok['pivot']}  regrasp ok "
-                f"{ok['regrasp']}  {time.perf_counter() - wall0:.0f} s"
-            )
-            sys.stderr.flush()
-    if progress:
-        sys.stderr.write("\n")
+        ok = {m: sum(r["success"] for r in v) for m, v in rows.items()}
+        bar.update(i + 1, f"pivot ok {ok['pivot']}  regrasp ok {ok['regrasp']}")
+    bar.close()
     pivot = summarize_method("pivot", rows["pivot"])
     regrasp = summarize_method("regrasp", rows["regrasp"])
     ratio_mean = _ratio(pivot["tact_s"]["mean"], regrasp["tact_s"]["mean"])

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -41,7 +40,15 @@ def add_parser(sub: Any) -> None:
         help="segmentation: classical depth pipeline (default) or the learned network",
     )
     p.add_argument("--weights", type=Path, default=None, help="learned: weights file")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout",
+        "--cell",
+        dest="cell",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     p.add_argument(
         "--save-failures", type=Path, default=None, help="directory for images of failed scenes"
@@ -59,10 +66,10 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
         if weights is not None:
             raise ValueError("--weights: only with --pipeline learned")
         return None
-    try:
-        from skills.perception.learned import LearnedSegmenter
-    except ImportError as exc:  # the learned option is not part of this build
-        raise ValueError(f"--pipeline learned: not available: {exc}") from None
+    from cell.extras import require
+
+    require("torch", "--pipeline learned")
+    from skills.perception.learned import LearnedSegmenter
     return LearnedSegmenter(weights if weights is not None else default_weights())
 
 
@@ -88,6 +95,9 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     matches, missed, false_pos, times, cpu_times, failed = [], 0, 0, [], [], []
     missed_names: dict[str, int] = {}
+    from cell.progress import Progress
+
+    bar = Progress(args.scenes, "scenes")
     for i in range(args.scenes):
         seed = args.seed + i
         rng = np.random.default_rng(seed)
@@ -132,12 +142,8 @@ def cmd_perceive(args: argparse.Namespace) -> int:
                     dets,
                 )
             )
-        done = i + 1
-        sys.stderr.write(
-            f"\r[{'#' * (30 * done // args.scenes):<30}] {done}/{args.scenes} scenes  "
-            f"missed {missed}  false {false_pos}"
-        )
-    sys.stderr.write("\n")
+        bar.update(i + 1, f"missed {missed}  false {false_pos}")
+    bar.close()
     pos = np.array([x.pos_err for x in matches]) * 1e3 if matches else np.array([math.nan])
     yaw = np.degrees([x.yaw_err for x in matches]) if matches else np.array([math.nan])
     ends = [x for x in matches if x.end_right is not None]

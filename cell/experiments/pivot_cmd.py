@@ -21,7 +21,6 @@ import argparse
 import dataclasses
 import math
 import multiprocessing
-import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -61,10 +60,16 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--record", type=Path, default=None, help="GIF of the first trial")
     p.add_argument("--json", type=Path, required=True, help="where to write the results")
-    p.add_argument("--cell", type=Path, default=None, help="cell layout YAML (default layout)")
+    p.add_argument(
+        "--layout", "--cell", dest="cell", type=Path, default=None, metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
+    )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
     add_config_argument(p)
-    p.add_argument("--jobs", type=int, default=1, help="trials run in parallel processes (1)")
+    p.add_argument(
+        "--workers", "--jobs", dest="jobs", type=int, default=1, metavar="K",
+        help="trials run in parallel processes (1)",
+    )
     p.add_argument(
         "--nominal",
         action="store_true",
@@ -91,14 +96,8 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_pivot)
 
 
-def _progress(done: int, total: int, ok: int, wall: float) -> None:
-    width = 30
-    filled = int(round(width * done / max(1, total)))
-    rate = wall / max(1, done)
-    sys.stderr.write(
-        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total}  ok {ok}  {rate:.1f} s/trial"
-    )
-    sys.stderr.flush()
+def _progress(bar: Any, done: int, ok: int, wall: float) -> None:
+    bar.update(done, f"ok {ok}  {wall / max(1, done):.1f} s/trial")
 
 
 def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
@@ -170,7 +169,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     if args.trials < 1:
         raise PivotInputError(f"--trials: must be >= 1, got {args.trials}")
     if args.jobs < 1:
-        raise PivotInputError(f"--jobs: must be >= 1, got {args.jobs}")
+        raise PivotInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.mu_ground is not None and not (math.isfinite(args.mu_ground) and args.mu_ground >= 0):
         raise PivotInputError(f"--mu-ground: must be a finite number >= 0, got {args.mu_ground}")
     if args.record is not None and args.record.suffix.lower() != ".gif":
@@ -244,6 +243,9 @@ def cmd_pivot(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     seeds = [args.seed + i for i in range(args.trials)]
     wall0 = time.perf_counter()
+    from cell.progress import Progress
+
+    bar = Progress(len(seeds), "trials")
     results: list[TrialResult] = []
     recorded: Path | None = None
     first = 0
@@ -251,15 +253,15 @@ def cmd_pivot(args: argparse.Namespace) -> int:
         results.append(_recorded_trial(setup, seeds[0], args.record))
         recorded = args.record
         first = 1
-        _progress(1, len(seeds), sum(r.success for r in results), time.perf_counter() - wall0)
+        _progress(bar, 1, sum(r.success for r in results), time.perf_counter() - wall0)
     rest = [(setup, s) for s in seeds[first:]]
     if args.jobs > 1 and len(rest) > 1:
         with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
             for r in pool.imap(_trial, rest):
                 results.append(r)
                 _progress(
+                    bar,
                     len(results),
-                    len(seeds),
                     sum(x.success for x in results),
                     time.perf_counter() - wall0,
                 )
@@ -267,12 +269,12 @@ def cmd_pivot(args: argparse.Namespace) -> int:
         for item in rest:
             results.append(_trial(item))
             _progress(
+                bar,
                 len(results),
-                len(seeds),
                 sum(x.success for x in results),
                 time.perf_counter() - wall0,
             )
-    sys.stderr.write("\n")
+    bar.close()
     wall = time.perf_counter() - wall0
     summary = summarize(setup.part.name, results)
     summary.update(

@@ -40,6 +40,8 @@ from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
 from skills.perception.look import Look
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
+from skills.pivot.clearance import EndChoice, bin_walls, choose_end
+from skills.reposition import Reposition, RepositionParams, plan_reposition
 from skills.status import Failure, Status, StepResult
 
 
@@ -165,6 +167,12 @@ class TrialResult:
     l_a_trace: dict[str, float | None] = field(default_factory=dict)
     #: what the reports count failures by: a skill's Failure or the judge's JudgeFailure code
     failure_code: str | None = None
+    #: the closest the planned sweep of the tool comes to a bin wall (mm; negative: into it)
+    clearance_mm: float | None = None
+    #: the tube was pivoted from the other end than the one the camera's yaw pointed to
+    other_end: bool = False
+    #: no end cleared where the part lay: it was dragged first (counted apart, not the pivot)
+    repositioned: bool = False
 
     @property
     def failure_key(self) -> str:
@@ -190,6 +198,17 @@ class TrialWorld:
     frictions: dict[str, float]
     mass: float
     wall0: float
+
+
+def bin_obstacles(layout: CellLayout) -> list:
+    """The bin's walls as the configured layout places them (what the cell knows, not the
+    simulator's bodies)."""
+    return bin_walls(
+        layout.bin_interior(),
+        layout.bin_floor_z,
+        layout.bin_wall_height,
+        layout.bin_wall_thickness,
+    )
 
 
 def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
@@ -335,23 +354,62 @@ def run_trial(
             frame = dataclasses.replace(
                 frame, center=np.array([t["x"], t["y"], 0.5 * setup.part.outer]), yaw=t["yaw"]
             )
-        if setup.perceive:
+        def look_near(near: tuple[float, float]) -> tuple[StepResult | None, PivotFrame | None]:
             look = Look(
                 dev,
                 [setup.part],
                 setup.layout.bin_interior(),
                 (setup.layout.bin_center[0], setup.layout.bin_center[1]),
-                setup.nominal_center(),
+                near,
             )
-            failure = run_skill("look", look, world, robot, t_end, on_frame, frame_every)
-            if failure is None and look.result is not None:
-                d = look.result
-                seen = {"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw}
-                frame = dataclasses.replace(
-                    frame,
-                    center=np.array([d.center[0], d.center[1], 0.5 * setup.part.outer]),
-                    yaw=d.yaw,
-                )
+            result = run_skill("look", look, world, robot, t_end, on_frame, frame_every)
+            if result is not None or look.result is None:
+                return result, None
+            d = look.result
+            seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
+            return None, dataclasses.replace(
+                frame,
+                center=np.array([d.center[0], d.center[1], 0.5 * setup.part.outer]),
+                yaw=d.yaw,
+            )
+
+        early = "look"  #: the phase a failure before the Grasp is counted in
+        if setup.perceive:
+            failure, looked = look_near(setup.nominal_center())
+            frame = looked or frame
+        walls = bin_obstacles(setup.layout)
+        width = dev.gripper.finger_width
+
+        def choose(f: PivotFrame) -> EndChoice:
+            return choose_end(f, params, walls, width, setup.part.open_ends)
+
+        choice = choose(frame)
+        repositioned = False
+        if failure is None and not choice.clearance.clear:
+            # No end clears where the part lies: drag it to where one does, look again.
+            move = plan_reposition(
+                frame, setup.part, params, RepositionParams(), walls, [],
+                setup.layout.bin_interior(), width,
+            )
+            if move is not None:
+                early, repositioned = "reposition", True
+                t_end += setup.max_time
+                skill = Reposition(move, setup.part, dev)
+                failure = run_skill("reposition", skill, world, robot, t_end, on_frame, frame_every)
+                frame = move.target
+                if failure is None and setup.perceive:
+                    early = "look"
+                    target_xy = (float(move.target.center[0]), float(move.target.center[1]))
+                    failure, looked = look_near(target_xy)
+                    frame = looked or frame
+                choice = choose(frame)
+        other_end = choice.frame is not frame
+        frame = choice.frame
+        if failure is None and not choice.clearance.clear:
+            early = "plan"
+            failure = StepResult(
+                Status.FAILURE, f"plan: {choice.clearance.reason()}", Failure.NO_CLEAR_PIVOT
+            )
         tilt = Tilt(frame, params, dev)
         if make_align is None:
             align = Align(lambda: tilt.frame, setup.part, params, dev)
@@ -381,7 +439,7 @@ def run_trial(
             if failure is not None:
                 break
         else:
-            phase_name = "done"
+            phase_name = early if failure is not None else "done"
         if phase_name == "align" and failure is not None and not robot.arm.status().protective_stop:
             # The in-hand Align failed: the old way (let go, look, pick from above) may still
             # save the part, counted apart.
@@ -419,6 +477,9 @@ def run_trial(
             recovered=recovered,
             phase_times_s={k: phase_times.get(k, 0.0) for k in ("grasp", "tilt", "align", "lift")},
             l_a_trace=watch.l_a_trace(),
+            clearance_mm=round(1e3 * choice.clearance.distance, 1),
+            other_end=other_end,
+            repositioned=repositioned,
         )
     finally:
         world.close()

@@ -78,7 +78,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f"process; shard k seeds its scenes and faults with S + {SHARD_SEED_STEP}*k, so shard 0 "
         "is the serial run (default: 1)",
     )
+    p.add_argument(
+        "--fill",
+        choices=("rows", "random"),
+        default=None,
+        help="how the bin is filled and refilled (bin.fill; default: the configuration's)",
+    )
+    p.add_argument(
+        "--parts", type=int, default=None,
+        help="parts tipped in at each refill (bin.parts; default: the configuration's)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    from cell.overrides import add_set_argument
+
+    add_set_argument(p)
     p.set_defaults(func=cmd_soak)
 
 
@@ -90,8 +103,16 @@ def cmd_soak(args: argparse.Namespace) -> int:
         raise UserError(f"--cycles: must be >= 1, got {args.cycles}")
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed: must be >= 0, got {args.seed}")
+    if args.parts is not None and args.parts < 1:
+        raise UserError(f"--parts: must be >= 1, got {args.parts}")
+    # --fill / --parts are the bin keys set from the command line (shards get them too)
+    args.set = [*(args.set or ())]
+    if args.fill is not None:
+        args.set.append(f"bin.fill={args.fill}")
+    if args.parts is not None:
+        args.set.append(f"bin.parts={args.parts}")
     try:
-        prep = load_prepared(args.config)
+        prep = load_prepared(args.config, args.set)
     except ConfigError as exc:
         return report_config_error(exc, "soak")
     config = prep.config
@@ -114,7 +135,14 @@ def cmd_soak(args: argparse.Namespace) -> int:
         result = Soak(prep, rates, scene_seed, fault_seed, args.cycles, quiet=args.quiet).run()
     else:
         result = run_shards(
-            args.config, rates, scene_seed, fault_seed, args.cycles, args.workers, args.quiet
+            args.config,
+            rates,
+            scene_seed,
+            fault_seed,
+            args.cycles,
+            args.workers,
+            args.quiet,
+            tuple(args.set),
         )
     _print(result)
     if args.json is not None:
@@ -509,11 +537,12 @@ def _shard(
     cycles: int,
     label: str,
     quiet: bool,
+    sets: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """One shard in a worker process: its own configuration load, twin and person."""
     from cell.cell_cmds import load_prepared
 
-    prep = load_prepared(config_path)
+    prep = load_prepared(config_path, sets)
     return Soak(prep, rates, scene_seed, fault_seed, cycles, quiet, label=label).run()
 
 
@@ -525,6 +554,7 @@ def run_shards(
     cycles: int,
     workers: int,
     quiet: bool = False,
+    sets: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Why shards: the twin steps its physics on one core (about 10 s of wall per cycle), so a
     1000-cycle soak in one process takes hours; shards are independent cells (each with its own
@@ -548,6 +578,7 @@ def run_shards(
                 n,
                 f"shard {k}",
                 quiet,
+                sets,
             )
             for k, n in enumerate(share)
         ]

@@ -96,7 +96,13 @@ def add_parser(sub: Any) -> None:
         "--out", type=Path, required=True, metavar="DIR", help="directory for the outputs"
     )
     p.add_argument(
-        "--cell", type=Path, default=None, metavar="FILE", help="cell layout YAML (default layout)"
+        "--layout",
+        "--cell",
+        dest="cell",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="cell layout YAML (default: the default layout)",
     )
     p.add_argument(
         "--catalogue", type=Path, default=None, metavar="FILE", help="part catalogue YAML"
@@ -591,6 +597,9 @@ def write_outputs(
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    from cell.extras import require
+
+    require("ray", "cell sweep")
     rows = prepare(args)
     if not os.access(args.out if args.out.exists() else _existing_parent(args.out), os.W_OK):
         raise UserError(f"--out {args.out}: not writable")

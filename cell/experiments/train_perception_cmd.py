@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import math
 import multiprocessing
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,7 +155,15 @@ def add_parser(sub: Any) -> None:
         default=DEFAULT_WEIGHTS,
         help="where to write the weights (cell/data/perception_unet.pt)",
     )
-    p.add_argument("--jobs", type=int, default=1, help="processes rendering scenes (1)")
+    p.add_argument(
+        "--workers",
+        "--jobs",
+        dest="jobs",
+        type=int,
+        default=1,
+        metavar="K",
+        help="processes rendering scenes (1)",
+    )
     p.set_defaults(func=cmd_train_perception)
 
 
@@ -168,7 +175,7 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.epochs < 1:
         raise TrainPerceptionInputError(f"--epochs: must be >= 1, got {args.epochs}")
     if args.jobs < 1:
-        raise TrainPerceptionInputError(f"--jobs: must be >= 1, got {args.jobs}")
+        raise TrainPerceptionInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.out.is_dir():
         raise TrainPerceptionInputError(f"--out: {args.out} is a directory, need a file path")
     try:
@@ -177,15 +184,18 @@ def _check_args(args: argparse.Namespace) -> None:
         raise TrainPerceptionInputError(f"--out: cannot create {args.out.parent}: {exc}") from None
 
 
+_bars: dict[str, Any] = {}
+
+
 def _bar(what: str, done: int, total: int, wall: float) -> None:
-    width = 30
-    filled = int(round(width * done / max(1, total)))
-    sys.stderr.write(
-        f"\r{what} [{'#' * filled}{'.' * (width - filled)}] {done}/{total}  {wall:.0f} s"
-    )
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    """A :class:`cell.progress.Progress` per phase (a bar on a terminal, lines in a log)."""
+    from cell.progress import Progress
+
+    if what not in _bars or _bars[what].total != total or done <= 1:
+        _bars[what] = Progress(total, what)
+    _bars[what].update(done)
+    if done >= total:
+        _bars.pop(what).close()
 
 
 def _render(job: tuple[int, bool]) -> RenderedScene:
@@ -349,6 +359,9 @@ def train(
 
 
 def cmd_train_perception(args: argparse.Namespace) -> int:
+    from cell.extras import require
+
+    require("torch", "cell train-perception")
     import torch
 
     _check_args(args)

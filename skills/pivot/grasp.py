@@ -60,11 +60,7 @@ class Grasp:
         arm, gripper = dev.arm, dev.gripper
         return [
             dev.grip("open", g, lambda: gripper.open(self._start_width)),
-            dev.move(
-                "above the open end",
-                g,
-                lambda: arm.move_to(self._pre, 2 * p.approach_speed, p.acceleration),
-            ),
+            dev.move("above the open end", g, self._over_pre),
             dev.move(
                 "approach at alpha",
                 g,
@@ -72,6 +68,16 @@ class Grasp:
             ),
             GuardedMotion("close onto H", self._close, self._closed, arm, dev.ft, dev.clock, g),
         ]
+
+    def _over_pre(self) -> None:
+        """To the pre-approach pose from ``approach_height`` straight above it (or from where
+        the tool is, if that is higher): only the last, vertical leg comes near the bin."""
+        p, arm = self.params, self.dev.arm
+        pre = self._pre
+        above = pre.position + p.approach_height * self.frame.up
+        tool = arm.tool_pose()
+        above[2] = max(above[2], float(tool.position[2]))
+        arm.move_path([Pose(above, pre.rotation), pre], 2 * p.approach_speed, p.acceleration)
 
     def _close(self) -> None:
         p, gripper = self.params, self.dev.gripper

@@ -32,6 +32,16 @@ class PivotParams:
     approach_distance: float = si(
         0.06, "m", 0.0, 0.2, "back along the fingers before the final approach"
     )
+    #: The pre-approach pose is reached from straight above it: a straight move from wherever the
+    #: camera looked from would sweep the open jaws through the bin's walls or a neighbour.
+    approach_height: float = si(
+        0.10, "m", 0.0, 0.5, "above the pre-approach pose the gripper arrives before going down"
+    )
+    clearance_margin: float = si(
+        0.006, "m", 0.0, 0.05,
+        "the tool's planned sweep keeps from a bin wall or a neighbour (else the other end, "
+        "a drag, or the part is left)",
+    )
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP on approaches")
     tilt_speed: float = si(

@@ -4,6 +4,7 @@ its replay; SIGTERM stops the run cleanly."""
 from __future__ import annotations
 
 import json
+import shlex
 import signal
 import subprocess
 import sys
@@ -129,9 +130,7 @@ def test_replay_of_a_broken_log_is_a_clear_error(tmp_path) -> None:
 
 
 def test_sigterm_stops_the_arm_flushes_the_log_saves_the_state(tmp_path) -> None:
-    long_run = CONFIG.replace("parts: 2", "parts: 6").replace(
-        "cycles: 1", "cycles: 6"
-    )
+    long_run = CONFIG.replace("parts: 2", "parts: 6").replace("cycles: 1", "cycles: 6")
     cfg, log, state = _write_config(tmp_path, long_run)
     proc = subprocess.Popen(
         [sys.executable, "-m", "cell.cli", "sim", "--config", str(cfg), "--quiet"],
@@ -153,3 +152,22 @@ def test_sigterm_stops_the_arm_flushes_the_log_saves_the_state(tmp_path) -> None
     assert saved["tick"] > 0
     for line in log.read_text().splitlines():  # every line whole: the log was flushed
         json.loads(line)
+    # The state file and the journal agree: the same run, stopped for the same reason.
+    assert saved["stop_reason"] == "interrupted by SIGTERM"
+    assert saved["stop_code"] == "interrupted"
+    from cell.journal import Journal
+
+    events = Journal(Path(f"{state}.sqlite")).events()
+    stops = [e for e in events if e["kind"] == "stop"]
+    assert saved["run"] == 1 and {e["run"] for e in events} == {1}
+    assert stops and stops[-1]["code"] == "interrupted"
+    # The message names the command that resumes it; that command resumes run 1 as run 2.
+    hint = err.split("resume with: ", 1)[1].strip().splitlines()[0]
+    assert hint == f"cell sim --config {cfg} --quiet --resume", hint
+    words = shlex.split(hint)[1:] + ["--max-sim-time", "1"]
+    r = subprocess.run(
+        [sys.executable, "-m", "cell.cli", *words], capture_output=True, text=True, timeout=300
+    )
+    assert "Traceback" not in r.stderr, r.stderr
+    assert f"run 2 resumes where run 1 of {state}.sqlite stopped" in r.stdout, r.stdout
+    assert json.loads(state.read_text())["run"] == 2

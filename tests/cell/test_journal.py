@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from cell.journal import Journal, JournalError, Resume
+from cell.journal import KEEP_JOURNALS, Journal, JournalError, Resume, keep_earlier
 
 
 def _ev(kind: str, seq: int, **data: object) -> dict:
@@ -53,6 +53,33 @@ def test_events_survive_reopening_and_runs_are_numbered(tmp_path) -> None:
     j = Journal(tmp_path / "j.sqlite")
     assert j.run == 2
     assert [e["kind"] for e in j.events()] == ["picked"] and j.events()[0]["x"] == 0.5
+
+
+def test_a_run_without_events_keeps_its_number_and_readers_count_none(tmp_path) -> None:
+    j = Journal(tmp_path / "j.sqlite")
+    assert j.begin_run() == 1
+    j.close()  # run 1 ended before its first event (a crash at start-up)
+    assert Journal(tmp_path / "j.sqlite").run == 2  # a reader: counts nothing
+    j = Journal(tmp_path / "j.sqlite")
+    assert j.begin_run() == 2
+    j.close()
+    assert Journal(tmp_path / "j.sqlite").run == 3
+
+
+def test_a_fresh_run_keeps_the_earlier_journals_numbered(tmp_path) -> None:
+    path = tmp_path / "j.sqlite"
+    assert keep_earlier(path) is None  # nothing to keep
+    for n in range(KEEP_JOURNALS + 2):
+        j = Journal(path)
+        j.append(0, 0.0, "picked", {"generation": n})
+        j.close()
+        kept = keep_earlier(path)
+        assert kept == tmp_path / "j.1.sqlite" and not path.exists()
+    names = sorted(p.name for p in tmp_path.glob("j.*.sqlite"))
+    assert names == [f"j.{k}.sqlite" for k in range(1, KEEP_JOURNALS + 1)]
+    newest = Journal(tmp_path / "j.1.sqlite").events()[0]["generation"]
+    oldest = Journal(tmp_path / f"j.{KEEP_JOURNALS}.sqlite").events()[0]["generation"]
+    assert (newest, oldest) == (KEEP_JOURNALS + 1, 2)  # generations 0 and 1 dropped
 
 
 def test_a_corrupt_journal_is_an_error_naming_it_never_discarded(tmp_path) -> None:
@@ -118,7 +145,7 @@ def test_sigkill_mid_run_then_resume_finishes_without_doing_anything_twice(tmp_p
         timeout=300,
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "resuming run" in r.stdout
+    assert "run 2 resumes where run 1 of" in r.stdout
     after = Resume.from_events(Journal(journal).events())  # raises on a double feed or fill
     assert sorted(after.filled) == [0, 1] and after.cycles_done == 2
     parts = json.loads(out.read_text())["parts"]

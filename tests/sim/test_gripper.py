@@ -68,7 +68,7 @@ def test_closing_on_a_box_stalls_and_detects_it(world: SimWorld) -> None:
 @pytest.mark.parametrize("force", [2.0, 15.0])
 def test_grip_force_is_the_commanded_force(world: SimWorld, force: float) -> None:
     """The forces the pivot uses (2 N pivoting, 15 N holding). Above about 25 N per finger the
-    coupled twin saturates (measured 25.5 N for 30, 60 and 100 N commanded; see the README)."""
+    coupled twin saturates (measured 25.5 N for 30, 60 and 100 N commanded; see docs/design.md)."""
     add_floor(world)
     robot = SimRobot(world)
     box = add_box(world, [0.02, 0.015, 0.03], [0.5, 0.0, 0.03], mass=0.1)

@@ -20,6 +20,7 @@ from py_trees.common import Access, Status
 
 from drivers.arm import MotionState
 from drivers.camera import Frame, Intrinsics
+from drivers.events import EventKind
 from drivers.pose import Pose
 from skills.perception.bin_parts import Detection
 from skills.pivot import PivotFrame
@@ -72,8 +73,11 @@ class World:
         if self.weight and self.held():
             force[2] -= self.ctx.part.mass * GRAVITY
         name = self.step_name()
+        arm.blocked = name in self.contacts  # a force-mode push stands on its contact
         if name in self.contacts and arm.state is MotionState.MOVING and arm.queue:
             arm.pose = arm.queue[-1]
+            force += np.asarray(self.contacts[name], float)
+        elif name in self.contacts and arm.state is MotionState.MOVING and arm.force is not None:
             force += np.asarray(self.contacts[name], float)
         dev.ft.value = np.concatenate([arm.pose.rotation.T @ force, np.zeros(3)]) + self.extra
 
@@ -551,3 +555,95 @@ def test_an_empty_bin_is_an_answer_by_its_code(ctx, seeing) -> None:
     node = lv.Perceive("perceive", ctx)
     assert run(node, ctx)[-1] == Status.SUCCESS
     assert node.failure is None and ctx.events.codes == []
+
+
+# ------------------------------------------------------- plan_pick: walls, ends, drags
+def lying(x: float, y: float, yaw: float) -> Detection:
+    return Detection(
+        center=np.array([x, y, 0.017]), yaw=yaw, length=0.068, outer=0.034, part="bushing",
+        open_end=np.array([x + 0.034 * np.cos(yaw), y + 0.034 * np.sin(yaw), 0.017]),
+        open_end_seen=True, confidence=0.9, pixels=500,
+    )
+
+
+def settle(node) -> None:  # type: ignore[no-untyped-def]
+    """Tick a planning leaf until it is done (its sweeps run off the tick)."""
+    import time
+
+    node.tick_once()
+    for _ in range(2000):
+        if node.status != Status.RUNNING:
+            return
+        time.sleep(0.005)
+        node.tick_once()
+
+
+def test_plan_pick_prefers_a_part_the_pivot_clears_and_takes_a_tube_from_the_end_that_does(
+    ctx,
+) -> None:
+    bb = blackboard()
+    walled = lying(0.283, 0.069, np.radians(165))  # its end 29 mm from the -x wall
+    free = lying(0.47, 0.07, -np.pi / 2)  # its Tilt would swing into the +y wall from this end
+    bb.set("/part/detections", [walled, free])
+    bb.set("/part/seen", walled)
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.SUCCESS
+    tgt = bb.get("/part/target")
+    assert tgt["detection"] is free and tgt["reposition"] is None
+    assert tgt["frame"].u[1] == pytest.approx(1.0)  # pivoted from its other end
+    clears = lv.PivotClears("clears", ctx)
+    clears.tick_once()
+    assert clears.status == Status.SUCCESS
+
+
+def test_plan_pick_plans_a_drag_when_no_part_clears_and_the_drag_leaf_needs_one(ctx) -> None:
+    bb = blackboard()
+    walled = lying(0.283, 0.069, np.radians(165))
+    bb.set("/part/detections", [walled])
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.SUCCESS
+    tgt = bb.get("/part/target")
+    assert tgt["detection"] is walled and tgt["reposition"] is not None
+    assert tgt["reposition"].shift[0] > 0.0  # away from the -x wall
+    clears = lv.PivotClears("clears", ctx)
+    clears.tick_once()
+    assert clears.status == Status.FAILURE
+    drag = lv.RepositionBehaviour("drag", ctx)
+    statuses = run(drag, ctx)
+    assert statuses[-1] == Status.SUCCESS, drag.feedback_message
+    assert [e for e in ctx.events.events if e[0] == EventKind.REPOSITIONED]
+
+
+def test_plan_pick_names_a_part_nothing_frees_and_leaves_it(ctx) -> None:
+    bb = blackboard()
+    walled = lying(0.283, 0.069, np.radians(165))
+    # neighbours of another kind pressed against both its sides: not picked, but in the way
+    hem = [
+        dataclasses.replace(lying(0.283, 0.069 + s * 0.036, np.radians(165)), part="cup")
+        for s in (-1.0, 1.0)
+    ]
+    bb.set("/part/detections", [walled, *hem])
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.FAILURE and bb.get("/cell/bin_empty") is True
+    ends = [e for e in ctx.events.events if e[0] == EventKind.BIN_EMPTY]
+    reasons = [x["reason"] for x in ends[-1][1]["left"]]
+    assert any(r.startswith("no pivot clears") and "no drag frees it" in r for r in reasons)
+
+
+def test_plan_pick_runs_its_sweeps_off_the_tick(ctx) -> None:
+    bb = blackboard()
+    bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
+    node = lv.PlanPick("plan", ctx)
+    node.tick_once()
+    assert node.status == Status.RUNNING  # the first tick only starts the work
+    settle(node)
+    assert node.status == Status.SUCCESS
+    # halted mid-way, it starts afresh the next time
+    node2 = lv.PlanPick("plan again", ctx)
+    node2.tick_once()
+    node2.stop(Status.INVALID)
+    settle(node2)
+    assert node2.status == Status.SUCCESS

@@ -117,9 +117,11 @@ def test_the_shipped_tree_has_the_limits_its_yaml_states(ctx) -> None:
     assert guards["put back"] == (250.0, 50.0, 20.0)  # opens under load after an abort
     assert guards["via home"] == (80.0, 8.0, 20.0)
     assert guards["pack in box"] == (60.0, 8.0, 40.0)
+    assert guards["reposition"] == (60.0, 8.0, 30.0)
+    assert guards["look again"] == (80.0, 8.0, 20.0)
     # every motion leaf in the shipped tree is guarded, and nothing else is
     moving = [n for n in root.iterate() if getattr(type(n), "moves", False)]
-    assert len(moving) == len(guards) == 11
+    assert len(moving) == len(guards) == 13
     assert isinstance(root, Cycles)
 
 
@@ -373,4 +375,4 @@ def test_the_shipped_trees_limits_are_listed_for_cell_tree(ctx) -> None:
     root = TreeBuilder(ctx, doc, DEFAULTS).build(doc.data, ())
     lines = limits_table(root)
     assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 50 N*m, 20 s" in lines
-    assert len(lines) == 11  # every guarded motion leaf, once
+    assert len(lines) == 13  # every guarded motion leaf, once

@@ -37,7 +37,7 @@ def test_ground_friction_is_required_at_beta_zero(bushing: Section) -> None:
     assert not without.any()
     assert with_ground.any(axis=1).all()  # every l_a gains a stable start
     # Friction at S and H alone also gives a stable start for some alpha in this model
-    # (README: where the analysis differs from the paper's wording).
+    # (docs/results.md: where the analysis differs from the paper's wording).
     assert stable(bushing, 0.9, al, 0.0, Frictions(0.2, 0.4, 0.0)).any()
 
 

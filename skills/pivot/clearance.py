@@ -1,0 +1,321 @@
+"""Will the pivot's gripper clear the bin's walls and the neighbours? Which end to pivot from?
+
+A part lying where physics left it may have a wall or a neighbour where the Grasp puts the palm
+(beyond the open end, tilted by alpha) or where the Tilt carries it (over the pivot end, up to
+upright). In the twin, most pivots from a random pose that the FT guard stopped had the gripper
+body or a finger on a wall's top edge, not a problem of the mechanics. Before the first motion,
+this module sweeps a box model of the tool (fingers at the planned opening, the 2F-85's body,
+the FT300 puck, the wrist) along the Grasp's approach and the Tilt's arc and tests it against
+the walls (from the cell's configured layout) and the neighbours (from the cell's own
+detections), never against the simulator's truth.
+
+For a tube (two open ends) both ends are tried and the one with the larger clearance is
+pivoted from; for a part with one open end only that end exists. When neither clears, the
+caller passes the part over (or moves it) and says what was in the way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.pose import Pose
+from drivers.ur5.kinematics import (
+    FINGER_LENGTH,
+    FT_HEIGHT,
+    GRIPPER_BODY_HEIGHT,
+    HOME_JOINTS,
+    REACH_TOLERANCE,
+    solve_ik,
+)
+from skills.pivot.frame import PivotFrame
+from skills.pivot.params import PivotParams
+
+#: The tool above the fingers, as boxes in the TCP frame (x: closing axis, z: along the
+#: fingers, origin at the TCP, the fingertips ``tip_offset`` below it): (centre, half sizes).
+_FINGER_TOP = -FINGER_LENGTH  # relative to the fingertips
+_BODY = (0.075, 0.035, GRIPPER_BODY_HEIGHT)  #: the 2F-85's body, x along the closing axis
+_PUCK = (0.075, 0.075, FT_HEIGHT)  #: the FT300, its cylinder's bounding box
+_WRIST = (0.09, 0.09, 0.10)  #: the UR5's wrist 3 and the end of wrist 2 above the flange
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A box in the world (m): centre, half sizes along its own axes, yaw of its x axis."""
+
+    what: str
+    center: NDArray[np.float64]
+    half: NDArray[np.float64]
+    yaw: float = 0.0
+
+    def distance(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Signed distance (m) of each point to the box: negative inside."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        d = points - self.center
+        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+        q = np.abs(local) - self.half
+        outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+        inside = np.minimum(np.max(q, axis=1), 0.0)
+        return outside + inside
+
+
+def bin_walls(
+    interior: tuple[float, float, float, float],
+    floor_z: float,
+    wall_height: float,
+    wall_thickness: float,
+) -> list[Obstacle]:
+    """The bin's four walls around its free inside ``(xmin, xmax, ymin, ymax)``."""
+    x0, x1, y0, y1 = interior
+    t, h = max(wall_thickness, 0.002), wall_height
+    zc = floor_z + 0.5 * h
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    hx, hy = 0.5 * (x1 - x0) + t, 0.5 * (y1 - y0) + t
+    return [
+        Obstacle(
+            "the bin's -x wall", np.array([x0 - 0.5 * t, cy, zc]), np.array([0.5 * t, hy, 0.5 * h])
+        ),
+        Obstacle(
+            "the bin's +x wall", np.array([x1 + 0.5 * t, cy, zc]), np.array([0.5 * t, hy, 0.5 * h])
+        ),
+        Obstacle(
+            "the bin's -y wall", np.array([cx, y0 - 0.5 * t, zc]), np.array([hx, 0.5 * t, 0.5 * h])
+        ),
+        Obstacle(
+            "the bin's +y wall", np.array([cx, y1 + 0.5 * t, zc]), np.array([hx, 0.5 * t, 0.5 * h])
+        ),
+    ]
+
+
+def lying_part(
+    what: str, center_xy: Sequence[float], yaw: float, length: float, outer: float, floor_z: float
+) -> Obstacle:
+    """A neighbour lying on the floor, as the cell saw it: its footprint up to its diameter."""
+    return Obstacle(
+        what,
+        np.array([float(center_xy[0]), float(center_xy[1]), floor_z + 0.5 * outer]),
+        np.array([0.5 * length, 0.5 * outer, 0.5 * outer]),
+        yaw,
+    )
+
+
+def _box_points(center: Sequence[float], size: Sequence[float], step: float = 0.005) -> NDArray:
+    """Points on the surface of an axis-aligned box (tool frame), ``step`` apart at most."""
+    c, s = np.asarray(center, float), np.asarray(size, float)
+    axes = [np.linspace(-0.5 * n, 0.5 * n, max(2, int(math.ceil(n / step)) + 1)) for n in s]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    on_face = np.any(np.isclose(np.abs(grid), 0.5 * s, atol=1e-12), axis=1)
+    return grid[on_face] + c
+
+
+def tool_points(
+    width: float, tip_offset: float, thickness: float, finger_width: float
+) -> dict[str, NDArray]:
+    """The tool's model as point sets in the TCP frame, by name, at jaw opening ``width``."""
+    tip = tip_offset
+    top = tip + _FINGER_TOP
+    fz = 0.5 * (tip + top)
+    fingers = {
+        "the outer finger": _box_points(
+            (0.5 * width + 0.5 * thickness, 0.0, fz), (thickness, finger_width, tip - top)
+        ),
+        "the inner finger": _box_points(
+            (-0.5 * width - 0.5 * thickness, 0.0, fz), (thickness, finger_width, tip - top)
+        ),
+    }
+    body_z = top - 0.5 * _BODY[2]
+    puck_z = top - _BODY[2] - 0.5 * _PUCK[2]
+    wrist_z = top - _BODY[2] - _PUCK[2] - 0.5 * _WRIST[2]
+    fingers["the gripper body"] = _box_points((0.0, 0.0, body_z), _BODY, 0.01)
+    fingers["the wrist"] = np.vstack(
+        [
+            _box_points((0.0, 0.0, puck_z), _PUCK, 0.012),
+            _box_points((0.0, 0.0, wrist_z), _WRIST, 0.012),
+        ]
+    )
+    return fingers
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The closest the swept tool comes to an obstacle (m, negative: into it), and what."""
+
+    distance: float
+    tool_part: str = ""
+    obstacle: str = ""
+    phase: str = ""
+
+    @property
+    def clear(self) -> bool:
+        return self.distance >= 0.0
+
+    def reason(self) -> str:
+        if self.clear:
+            return f"clear by {self.distance * 1e3:.0f} mm"
+        if self.obstacle == "the edge of the UR5's reach":
+            return f"{self.tool_part} would be beyond {self.obstacle} {self.phase}"
+        return (
+            f"{self.tool_part} would hit {self.obstacle} {self.phase} "
+            f"({-self.distance * 1e3:.0f} mm into it)"
+        )
+
+
+def pivot_sweep(
+    frame: PivotFrame, params: PivotParams, finger_width: float
+) -> list[tuple[str, Pose, float]]:
+    """The tool's poses the pivot passes through, with the jaw opening at each: the last leg of
+    the approach (from ``approach_height`` above the pre-approach pose down to it and on to the
+    grasp), then the Tilt's arc to upright."""
+    p = params
+    assert p.l_a is not None and p.alpha is not None
+    target = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
+    opening = frame.opening(p.l_a, p.alpha)
+    z = target.rotation[:, 2]
+    pre = target.position - p.approach_distance * z
+    above = pre + p.approach_height * frame.up
+    poses: list[tuple[str, Pose, float]] = []
+    wide = opening + p.approach_clearance
+    for k in np.linspace(0.0, 1.0, 6):
+        poses.append(
+            (
+                "coming down over the open end",
+                Pose(above + k * (pre - above), target.rotation),
+                wide,
+            )
+        )
+    for k in np.linspace(0.0, 1.0, 5)[1:]:
+        poses.append(
+            (
+                "on the approach at alpha",
+                Pose(pre + k * (target.position - pre), target.rotation),
+                wide,
+            )
+        )
+    # As far as the Tilt goes: past the tip-over angle by ``tilt_past_tip`` (or the configured
+    # angle); the part's weight stands it up the rest of the way.
+    end = (
+        p.tilt_angle
+        if p.tilt_angle is not None
+        else min(0.5 * math.pi, frame.section.tip_angle + p.tilt_past_tip)
+    )
+    for theta in np.linspace(0.0, end, 16)[1:]:
+        poses.append(("on the Tilt's arc", frame.tilt_pose(target, float(theta)), opening))
+    return poses
+
+
+#: m: clearances beyond this are not worked out exactly (reported as at least this)
+FAR = 0.05
+
+
+def nearest(points: NDArray[np.float64], obstacles: Sequence[Obstacle]) -> tuple[float, int, int]:
+    """The smallest signed distance (m) from ``points`` to ``obstacles`` and where it is:
+    ``(distance, obstacle index, point index)``; ``(FAR, -1, -1)`` when nothing is nearer.
+
+    Only the points inside an obstacle's bounding box grown by :data:`FAR` are measured, so a
+    sweep high over the bin or far from a neighbour costs little."""
+    best, where = FAR, (-1, -1)
+    for k, ob in enumerate(obstacles):
+        c, s = math.cos(ob.yaw), math.sin(ob.yaw)
+        hx, hy, hz = ob.half
+        reach = np.array([abs(c) * hx + abs(s) * hy, abs(s) * hx + abs(c) * hy, hz]) + FAR
+        near = np.all(np.abs(points - ob.center) <= reach, axis=1)
+        if not near.any():
+            continue
+        idx = np.flatnonzero(near)
+        d = ob.distance(points[idx])
+        i = int(np.argmin(d))
+        if d[i] < best:
+            best, where = float(d[i]), (k, int(idx[i]))
+    return best, where[0], where[1]
+
+
+def pivot_clearance(
+    frame: PivotFrame,
+    params: PivotParams,
+    obstacles: Sequence[Obstacle],
+    finger_width: float,
+    margin: float | None = None,
+) -> Clearance:
+    """The sweep's closest approach to ``obstacles``, less ``margin`` (m; default: the
+    pivot's ``clearance_margin``)."""
+    if margin is None:
+        margin = params.clearance_margin
+    if not obstacles:
+        return Clearance(math.inf)
+    models: dict[float, dict[str, NDArray]] = {}
+    chunks, labels = [], []  #: world points; (phase, tool part) of each chunk
+    for phase, pose, width in pivot_sweep(frame, params, finger_width):
+        model = models.get(width)
+        if model is None:
+            model = models[width] = tool_points(
+                width, params.tip_offset, params.finger_thickness, finger_width
+            )
+        for name, pts in model.items():
+            chunks.append(pts @ pose.rotation.T + pose.position)
+            labels.append((phase, name))
+    points = np.vstack(chunks)
+    d, o, n = nearest(points, obstacles)
+    if o < 0:
+        return Clearance(FAR - margin)
+    chunk = int(np.searchsorted(np.cumsum([len(c) for c in chunks]), n, side="right"))
+    phase, name = labels[chunk]
+    return Clearance(d - margin, name, obstacles[o].what, phase)
+
+
+def reach_problem(frame: PivotFrame, params: PivotParams, finger_width: float) -> Clearance | None:
+    """Where the sweep leaves the UR5's reach (the twin's and the driver's kinematic model,
+    each pose solved from the one before, starting at home), or None when it stays inside."""
+    sweep = pivot_sweep(frame, params, finger_width)
+    q = HOME_JOINTS
+    for phase, pose, _ in (sweep[0], sweep[9], sweep[-1]):  # above, at the grasp, arc's end
+        q, miss = solve_ik(pose, q, iterations=200)
+        if miss > REACH_TOLERANCE:
+            return Clearance(-1.0, "the TCP", "the edge of the UR5's reach", phase)
+    return None
+
+
+@dataclass(frozen=True)
+class EndChoice:
+    """The frame to pivot (its ``u`` towards the open end used), its clearance, and the
+    clearance of every end tried (for the record)."""
+
+    frame: PivotFrame
+    clearance: Clearance
+    tried: tuple[Clearance, ...]
+
+
+def choose_end(
+    frame: PivotFrame,
+    params: PivotParams,
+    obstacles: Sequence[Obstacle],
+    finger_width: float,
+    open_ends: int,
+    margin: float | None = None,
+    base_xy: Sequence[float] = (0.0, 0.0),
+) -> EndChoice:
+    """The end to pivot from: for a tube (``open_ends`` 2) either; otherwise the one open end.
+
+    Among the ends whose sweep clears, the one whose open end points away from the robot's base
+    (``base_xy``) -- the pose the pivot was tuned in, the wrist over the part's far side from
+    the base -- else the one with the larger clearance; with none clear, the larger clearance
+    (``clearance.clear`` False: not pickable where it lies)."""
+    frames = [frame]
+    if open_ends >= 2:
+        frames.append(replace(frame, yaw=frame.yaw + math.pi))
+    tried = [
+        reach_problem(f, params, finger_width)
+        or pivot_clearance(f, params, obstacles, finger_width, margin)
+        for f in frames
+    ]
+    radial = np.asarray(frame.center[:2], float) - np.asarray(base_xy, float)
+
+    def rank(i: int) -> tuple[bool, bool, float]:
+        outward = float(frames[i].u[:2] @ radial) > 0.0
+        return (tried[i].clear, outward, tried[i].distance)
+
+    best = max(range(len(frames)), key=rank)
+    return EndChoice(frames[best], tried[best], tuple(tried))

@@ -1,0 +1,232 @@
+"""Moving a lying part that no pivot can reach where it lies, so that one can.
+
+A part tipped into a bin often ends with an end a few centimetres from a wall: the Grasp would
+put the palm into that wall, and the Tilt from the other end would carry the fingers into it
+(see :mod:`skills.pivot.clearance`). :func:`plan_reposition` finds the shortest drag --
+along the part's axis or across it, never into a wall or a neighbour -- after which the pivot's
+sweep clears; :class:`Reposition` does it: the jaws come straight down on either side of the
+part's middle, pinch it across its diameter, lift it a few millimetres, carry it over, set it
+down and let go. The part is then looked at again and pivoted where it now lies.
+
+This is not the pivot: it is a preparatory move, counted apart (``repositioned``), and it ends
+with the jaws open and the part lying on the floor -- the hole grasp is still reached by the
+paper's maneuver, without letting go.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence as Seq
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.devices import Devices
+from drivers.parts import Part
+from drivers.pose import Pose
+from skills.motion import Guard, Sequence, wait
+from skills.params import guard_field, si
+from skills.pivot.clearance import Obstacle, choose_end, tool_points
+from skills.pivot.frame import PivotFrame
+from skills.pivot.params import PivotParams
+from skills.slot import ContactMove, SequenceSkill, check
+from skills.status import Failure
+
+
+@dataclass(frozen=True)
+class RepositionParams:
+    """Parameters of :class:`Reposition` (SI units); the fields declared with
+    :func:`~skills.params.si` are the ``skills.reposition`` section of a cell's configuration."""
+
+    tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
+    finger_thickness: float = 0.008  #: m from a pad's face to its back (the gripper model's)
+    side_gap: float = si(0.008, "m", 0.002, 0.03, "between each pad and the part, jaws open")
+    grip_height: float = si(
+        0.006, "m", 0.0, 0.05, "above the floor the fingertips pinch the lying part at"
+    )
+    approach_height: float = si(0.08, "m", 0.0, 0.3, "above the part the jaws come down from")
+    lift: float = si(0.003, "m", 0.0, 0.02, "the part is lifted off the floor to be carried")
+    grip_force: float = si(20.0, "N", 1.0, 100.0, "per finger of the pinch")
+    speed: float = si(0.08, "m/s", 0.005, 0.5, "of the TCP over and down to the part")
+    drag_speed: float = si(0.03, "m/s", 0.005, 0.2, "of the TCP carrying the part")
+    acceleration: float = si(0.5, "m/s^2", 0.01, 3.0, "of the TCP")
+    contact_force: float = si(5.0, "N", 0.5, 50.0, "against the descent that means contact")
+    max_shift: float = si(0.15, "m", 0.01, 0.5, "the farthest a part is carried")
+    shift_step: float = si(0.01, "m", 0.002, 0.05, "between the drags tried, shortest first")
+    wall_margin: float = si(0.01, "m", 0.0, 0.05, "kept between the part's new place and a wall")
+    #: the drag lands a few millimetres off its plan (the part slips in the pinch, the look
+    #: after it errs): the pivot's sweep from the new place is planned with this margin
+    plan_margin: float = si(
+        0.012, "m", 0.0, 0.05, "the pivot's sweep keeps from walls, planned from the new place"
+    )
+    guard: Guard = field(default_factory=Guard)
+    descent_guard: Guard = guard_field(25.0, 10.0, "the jaws down beside the part")
+
+
+@dataclass(frozen=True)
+class RepositionPlan:
+    """Where the part goes: its frame now and after the drag, the drag (m, world xy)."""
+
+    frame: PivotFrame
+    target: PivotFrame
+    shift: NDArray[np.float64]
+
+    @property
+    def distance(self) -> float:
+        return float(np.linalg.norm(self.shift))
+
+
+def pinch_pose(frame: PivotFrame, part: Part, params: RepositionParams) -> Pose:
+    """The TCP pinching the lying part across its middle: fingers down, jaws across the axis."""
+    z = np.array([0.0, 0.0, -1.0])
+    x = frame.normal
+    rot = np.column_stack([x, np.cross(z, x), z])
+    tips = np.array([frame.center[0], frame.center[1], frame.floor_z + params.grip_height])
+    return Pose(tips - params.tip_offset * z, rot)
+
+
+def _footprint_inside(frame: PivotFrame, part: Part, interior: Seq[float], margin: float) -> bool:
+    x0, x1, y0, y1 = interior
+    u, n = frame.u[:2], frame.normal[:2]
+    c = np.asarray(frame.center[:2], float)
+    for su in (-1.0, 1.0):
+        for sn in (-1.0, 1.0):
+            px, py = c + su * 0.5 * part.length * u + sn * 0.5 * part.outer * n
+            if not (x0 + margin <= px <= x1 - margin and y0 + margin <= py <= y1 - margin):
+                return False
+    return True
+
+
+def _pinch_clear(
+    frame: PivotFrame, part: Part, params: RepositionParams, obstacles: Seq[Obstacle],
+    finger_width: float,
+) -> bool:
+    """The open jaws come down beside the part, here, without touching a wall or a neighbour."""
+    pose = pinch_pose(frame, part, params)
+    width = part.outer + 2.0 * params.side_gap
+    model = tool_points(width, params.tip_offset, params.finger_thickness, finger_width)
+    for lift in (0.0, params.approach_height):
+        p = Pose(pose.position + np.array([0.0, 0.0, lift + params.lift]), pose.rotation)
+        for pts in model.values():
+            world = pts @ p.rotation.T + p.position
+            if any(float(np.min(ob.distance(world))) < 0.0 for ob in obstacles):
+                return False
+    return True
+
+
+def plan_reposition(
+    frame: PivotFrame,
+    part: Part,
+    pivot: PivotParams,
+    params: RepositionParams,
+    walls: Seq[Obstacle],
+    neighbours: Seq[Obstacle],
+    interior: Seq[float],
+    finger_width: float,
+    base_xy: Seq[float] = (0.0, 0.0),
+) -> RepositionPlan | None:
+    """The shortest drag (along the axis, then across it) after which a pivot clears, the
+    pinch clears both here and there, and the part lies inside the bin clear of its
+    neighbours; None when no drag up to ``max_shift`` does."""
+    obstacles = [*walls, *neighbours]
+    if not _pinch_clear(frame, part, params, obstacles, finger_width):
+        return None
+    steps = np.arange(params.shift_step, params.max_shift + 1e-9, params.shift_step)
+    directions = [frame.u[:2], -frame.u[:2], frame.normal[:2], -frame.normal[:2]]
+    for s in steps:
+        for d in directions:
+            shift = float(s) * np.asarray(d, float)
+            center = np.asarray(frame.center, float).copy()
+            center[:2] += shift
+            moved = replace(frame, center=center)
+            if not _footprint_inside(moved, part, interior, params.wall_margin):
+                continue
+            body = Obstacle("the part", center, np.array([0.5 * part.length, 0.5 * part.outer,
+                                                          0.5 * part.outer]), moved.yaw)
+            corners = body.center + np.array(
+                [[a * body.half[0] * math.cos(moved.yaw) - b * body.half[1] * math.sin(moved.yaw),
+                  a * body.half[0] * math.sin(moved.yaw) + b * body.half[1] * math.cos(moved.yaw),
+                  0.0] for a in (-1, 0, 1) for b in (-1, 0, 1)]
+            )
+            if any(float(np.min(nb.distance(corners))) < params.wall_margin for nb in neighbours):
+                continue
+            if not _pinch_clear(moved, part, params, obstacles, finger_width):
+                continue
+            choice = choose_end(moved, pivot, obstacles, finger_width, part.open_ends,
+                                margin=params.plan_margin, base_xy=base_xy)
+            if choice.clearance.clear:
+                return RepositionPlan(frame, moved, shift)
+    return None
+
+
+class Reposition(SequenceSkill):
+    """Carry a lying part by ``plan.shift``: pinch it across its middle, lift, carry, set down.
+
+    Before: the part lies where ``plan.frame`` says, the jaws anywhere. After SUCCESS: the part
+    lies about ``plan.shift`` further, the jaws open ``approach_height`` above it. A descent
+    that meets something before the floor fails (``blocked``); a pinch that closes on nothing
+    fails (``missed``).
+    """
+
+    def __init__(
+        self, plan: RepositionPlan, part: Part, dev: Devices,
+        params: RepositionParams | None = None, **overrides: Any,
+    ) -> None:
+        p = replace(params or RepositionParams(), **overrides)
+        self.plan, self.part, self.dev, self.params = plan, part, dev, p
+        self._pinch = pinch_pose(plan.frame, part, p)
+        up = np.array([0.0, 0.0, 1.0])
+        self._above = Pose(self._pinch.position + (part.outer + p.approach_height) * up,
+                           self._pinch.rotation)
+        self.descend = ContactMove(
+            "down beside the part", dev, p.descent_guard, lambda: self._pinch, p.speed,
+            p.acceleration, p.contact_force,
+        )
+        g = p.guard
+        gripper = dev.gripper
+        shift = np.array([plan.shift[0], plan.shift[1], 0.0])
+        self.sequence = Sequence(
+            "reposition",
+            [
+                dev.grip("open", g, lambda: gripper.open(part.outer + 2.0 * p.side_gap)),
+                dev.move("over the part", g, self._over),
+                self.descend.motion,
+                check("down to the floor", dev, g, self._down, Failure.BLOCKED),
+                dev.grip("pinch", g, lambda: gripper.close(p.grip_force, 0.05)),
+                check("holding it", dev, g, self._holding, Failure.MISSED),
+                dev.move("lift it", g, lambda: self._move_by(up * p.lift, p.speed)),
+                dev.move("carry it", g, lambda: self._move_by(shift, p.drag_speed)),
+                dev.move("set it down", g, lambda: self._move_by(-up * p.lift, p.speed)),
+                dev.grip("let go", g, lambda: gripper.open(part.outer + 2.0 * p.side_gap)),
+                wait("settle", dev, g, 0.1),
+                dev.move("up", g, lambda: self._move_by(up * (part.outer + p.approach_height),
+                                                        p.speed)),
+            ],
+        )
+
+    def _over(self) -> None:
+        arm, p = self.dev.arm, self.params
+        tool = arm.tool_pose()
+        high = self._above.position.copy()
+        high[2] = max(high[2], float(tool.position[2]))
+        arm.move_path([Pose(high, self._above.rotation), self._above], p.speed, p.acceleration)
+
+    def _move_by(self, d: NDArray[np.float64], speed: float) -> None:
+        arm = self.dev.arm
+        tool = arm.tool_pose()
+        arm.move_to(Pose(tool.position + d, tool.rotation), speed, self.params.acceleration)
+
+    def _down(self) -> str | None:
+        if self.descend.contact:
+            return (
+                f"the jaws met something ({self.descend.resisting:.1f} N) on the way down "
+                "beside the part"
+            )
+        return None
+
+    def _holding(self) -> str | None:
+        if not self.dev.gripper.object_detected():
+            return "the pinch closed on nothing"
+        return None

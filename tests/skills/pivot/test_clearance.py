@@ -1,0 +1,93 @@
+"""The pivot's sweep against the bin's walls and the neighbours, and the choice of a tube's end.
+
+The bin: the default layout's (0.22..0.72 m x -0.16..0.16 m, walls 80 mm high); the part: the
+catalogue's bushing (68 mm long, 34 mm across) with its plan's l_a and alpha."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from cell.catalogue import load_catalogue
+from drivers.parts import Gripper
+from skills.mechanics.contact import Frictions
+from skills.mechanics.planner import plan_pivot
+from skills.pivot.clearance import Obstacle, bin_walls, choose_end, lying_part, pivot_clearance
+from skills.pivot.frame import PivotFrame
+from skills.pivot.params import PivotParams
+
+ROI = (0.22, 0.72, -0.16, 0.16)
+WALLS = bin_walls(ROI, 0.0, 0.08, 0.005)
+W = Gripper().finger_width
+
+
+@pytest.fixture(scope="module")
+def bushing():  # type: ignore[no-untyped-def]
+    part = load_catalogue(None).get("bushing")
+    plan = plan_pivot(part, Gripper(), Frictions())
+    return part, PivotParams(l_a=plan.l_a, alpha=plan.alpha)
+
+
+def frame(part, x: float, y: float, yaw: float) -> PivotFrame:  # type: ignore[no-untyped-def]
+    return PivotFrame(part.section(W), np.array([x, y, 0.5 * part.outer]), yaw, floor_z=0.0)
+
+
+def test_a_box_measures_signed_distance_inside_and_out() -> None:
+    box = Obstacle("b", np.array([0.0, 0.0, 0.0]), np.array([0.1, 0.05, 0.02]), math.pi / 2)
+    # turned 90 deg: its long side runs along y
+    d = box.distance(np.array([[0.0, 0.0, 0.0], [0.0, 0.12, 0.0], [0.08, 0.0, 0.0]]))
+    assert d[0] == pytest.approx(-0.02)  # the centre: the nearest face 20 mm away (z)
+    assert d[1] == pytest.approx(0.02) and d[2] == pytest.approx(0.03)
+
+
+def test_a_part_in_the_middle_of_the_bin_clears(bushing) -> None:
+    part, params = bushing
+    c = pivot_clearance(frame(part, 0.47, 0.0, 0.0), params, WALLS, W)
+    assert c.clear and c.distance > 0.02, c.reason()
+
+
+def test_a_tube_whose_tilt_would_swing_into_a_near_wall_is_pivoted_from_its_other_end(
+    bushing,
+) -> None:
+    part, params = bushing
+    # 90 mm from the +y wall to its centre, the open end away from it: the Tilt carries the
+    # gripper back over the pivot end, into that wall; from the other end it clears (the
+    # approach beyond an open end needs less room than the arc behind the pivot)
+    f = frame(part, 0.47, 0.07, -math.pi / 2)
+    away = pivot_clearance(f, params, WALLS, W)
+    assert not away.clear and away.obstacle == "the bin's +y wall", away.reason()
+    assert away.phase == "on the Tilt's arc"
+    choice = choose_end(f, params, WALLS, W, open_ends=2)
+    assert choice.clearance.clear
+    assert choice.frame.u[1] == pytest.approx(1.0)  # the open end used now points to +y
+    # a part with one open end has no other end: left blocked, saying by what
+    one = choose_end(f, params, WALLS, W, open_ends=1)
+    assert not one.clearance.clear and one.frame is f
+    assert "the bin's +y wall" in one.clearance.reason()
+
+
+def test_between_two_ends_that_clear_the_one_pointing_away_from_the_base_is_kept(bushing) -> None:
+    part, params = bushing
+    toward_base = frame(part, 0.47, 0.0, math.pi)
+    choice = choose_end(toward_base, params, WALLS, W, open_ends=2)
+    assert choice.clearance.clear and choice.frame.u[0] == pytest.approx(1.0)
+
+
+def test_a_neighbour_where_the_tilt_goes_blocks_the_pivot(bushing) -> None:
+    part, params = bushing
+    f = frame(part, 0.47, 0.0, 0.0)
+    # lying crosswise just behind the pivot end, where the Tilt carries the gripper
+    behind = lying_part("a neighbour", (0.47 - 0.034 - 0.03, 0.0), math.pi / 2, 0.068, 0.034, 0.0)
+    c = pivot_clearance(f, params, [*WALLS, behind], W)
+    assert not c.clear and c.obstacle == "a neighbour" and c.phase == "on the Tilt's arc"
+
+
+def test_the_margin_is_the_configured_one(bushing) -> None:
+    part, params = bushing
+    f = frame(part, 0.47, 0.0, 0.0)
+    loose = pivot_clearance(f, dataclasses.replace(params, clearance_margin=0.0), WALLS, W)
+    tight = pivot_clearance(f, dataclasses.replace(params, clearance_margin=0.01), WALLS, W)
+    assert loose.distance - tight.distance == pytest.approx(0.01)
