@@ -40,6 +40,22 @@ class LookParams:
     guard: Guard = field(default_factory=Guard)
 
 
+def second_view_xy(d: Detection, offset: float) -> tuple[float, float]:
+    """Where the camera looks from to see an end face of ``d``: ``offset`` beyond one of its
+    ends on its axis. From there that end's face (and, through an open end, the inside) is in
+    sight; the end nearer the robot, where the arm reaches."""
+    u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+    ends = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
+    xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
+    return float(xy[0]), float(xy[1])
+
+
+def same_part(d: Detection, later: list[Detection], gate: float = 0.02) -> Detection | None:
+    """The detection in a later view that is ``d`` again (same kind, centre within ``gate``)."""
+    near = [x for x in later if x.part == d.part and math.dist(x.center[:2], d.center[:2]) < gate]
+    return min(near, key=lambda x: math.dist(x.center[:2], d.center[:2])) if near else None
+
+
 class Look:
     """``result``: the detection to pick (nearest ``near_xy``), or a failure.
 
@@ -123,13 +139,7 @@ class Look:
         d = self.result
         if d is None or d.open_end_seen:  # decided: look again from where it is
             return float(self._view_xy[0]), float(self._view_xy[1])
-        u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-        # From beyond an end, that end's face is in sight; take the end nearer the robot,
-        # where the arm reaches.
-        offset = self.params.second_offset
-        ends = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
-        xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
-        return float(xy[0]), float(xy[1])
+        return second_view_xy(d, self.params.second_offset)
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
