@@ -195,6 +195,7 @@ class Situation:
     touching: bool  #: in contact with another part
     wall: bool  #: in contact with the bin's walls
     in_bin: bool  #: its centre over the bin's inside
+    raised: float  #: m, its lowest point above the bin floor (0 lying on the floor)
 
     @property
     def standing(self) -> bool:
@@ -207,13 +208,16 @@ class Situation:
         return math.radians(4.0) < self.tilt <= math.radians(45.0)
 
     def label(self) -> str:
-        """One word: standing, leaning, touching, wall (alone against a wall) or free."""
+        """One word: standing, leaning, on_top (level, on other parts), touching, wall (alone
+        against a wall) or free."""
         if not self.in_bin:
             return "outside"
         if self.standing:
             return "standing"
         if self.leaning:
             return "leaning"
+        if self.raised > 0.003:
+            return "on_top"  # lying level on other parts
         if self.touching:
             return "touching"
         return "wall" if self.wall else "free"
@@ -238,4 +242,8 @@ def situation(
     wall = bool(p.getClosestPoints(body.body_id, wall_body, reach))
     x0, x1, y0, y1 = layout.bin_interior()
     c = body.pose().position
-    return Situation(tilt, touching, wall, bool(x0 < c[0] < x1 and y0 < c[1] < y1))
+    lo, _ = p.getAABB(body.body_id)
+    return Situation(
+        tilt, touching, wall, bool(x0 < c[0] < x1 and y0 < c[1] < y1),
+        max(0.0, float(lo[2]) - layout.bin_floor_z),
+    )

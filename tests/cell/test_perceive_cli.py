@@ -67,7 +67,7 @@ def test_random_fill_splits_by_part_and_situation(tmp_path: Path, capsys) -> Non
     for key in ("by_part", "by_situation"):
         assert sum(r["parts"] for r in data[key].values()) == data["parts"]
         assert sum(r["found"] for r in data[key].values()) == data["found"]
-    assert set(data["by_situation"]) <= {"free", "touching", "wall", "leaning"}
+    assert set(data["by_situation"]) <= {"free", "touching", "wall", "leaning", "on_top"}
     assert data["open_end_decided_right"] <= data["open_end_decided"]
     assert data["open_end_decided"] <= data["open_end_one_ended_parts"]
     assert "by situation" in capsys.readouterr().out
