@@ -172,7 +172,8 @@ def dropped_bin_fill(
         tilt = rng.uniform(-0.35, 0.35)  # rad off horizontal: one end leads the fall
         roll = rng.uniform(-math.pi, math.pi)
         rotation = (
-            Rotation.from_euler("z", yaw) * Rotation.from_euler("y", tilt)
+            Rotation.from_euler("z", yaw)
+            * Rotation.from_euler("y", tilt)
             * Rotation.from_euler("x", roll)
         ).as_matrix()
         tops = [b.pose().position[2] + 0.5 * b.part.outer for b in bodies]
@@ -244,6 +245,9 @@ def situation(
     c = body.pose().position
     lo, _ = p.getAABB(body.body_id)
     return Situation(
-        tilt, touching, wall, bool(x0 < c[0] < x1 and y0 < c[1] < y1),
+        tilt,
+        touching,
+        wall,
+        bool(x0 < c[0] < x1 and y0 < c[1] < y1),
         max(0.0, float(lo[2]) - layout.bin_floor_z),
     )

@@ -77,7 +77,7 @@ def add_parser(sub: Any) -> None:
         choices=("auto", "on", "off"),
         default="auto",
         help="for a cup or bottle whose open end the wide view did not decide, look again "
-        "from beyond one end as the Look skill does (auto: on with --fill random)",
+        "from beyond its ends as the Look skill does (auto: on with --fill random)",
     )
     p.set_defaults(func=cmd_perceive)
 
@@ -96,6 +96,7 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
 
     require("torch", "--pipeline learned")
     from skills.perception.learned import LearnedSegmenter
+
     return LearnedSegmenter(weights if weights is not None else default_weights())
 
 
@@ -153,8 +154,13 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         if (miss or fp) and args.save_failures is not None:
             failed.append(
                 _save_failure(
-                    args.save_failures, seed, scene.frame, scene.intrinsics,
-                    scene.world_T_camera, truths, dets,
+                    args.save_failures,
+                    seed,
+                    scene.frame,
+                    scene.intrinsics,
+                    scene.world_T_camera,
+                    truths,
+                    dets,
                 )
             )
         bar.update(i + 1, f"missed {missed}  false {false_pos}")
@@ -202,8 +208,7 @@ def cmd_perceive(args: argparse.Namespace) -> int:
     }
     write_json(args.json, result)
     lines = [
-        f"pipeline    {args.pipeline}, fill {args.fill}, second view "
-        f"{'on' if second else 'off'}",
+        f"pipeline    {args.pipeline}, fill {args.fill}, second view {'on' if second else 'off'}",
         f"scenes      {args.scenes} ({total} parts)",
         f"recall      {result['recall']:.3f}  ({len(matches)}/{total}), false positives "
         f"{false_pos}",
@@ -305,8 +310,8 @@ def _render(
     from sim.part_body import spawn_part
     from sim.scenes import dropped_bin_fill, look_down_pose, random_bin_scene, situation
     from sim.world import SimWorld
-    from skills.perception.bin_parts import detect_parts
-    from skills.perception.look import LookParams, same_part, second_view_xy
+    from skills.perception.bin_parts import detect_parts, open_end_from_view
+    from skills.perception.look import LookParams, end_views
     from skills.perception.scoring import Truth
 
     out = _Scene()
@@ -318,7 +323,11 @@ def _render(
         if args.fill == "random":
             n = args.parts if args.parts is not None else int(rng.integers(3, 11))
             bodies = dropped_bin_fill(
-                world, layout, parts, rng, n,
+                world,
+                layout,
+                parts,
+                rng,
+                n,
                 lambda kind, pose: spawn_part(world, kind, pose, lateral_friction=1.0),
             )
             for b in bodies:
@@ -359,18 +368,17 @@ def _render(
                 part = kinds.get(d.part or "")
                 if part is None or part.open_ends != 1 or d.open_end_seen:
                     continue
-                # The Look's second view: the camera beyond one end, closer.
-                xy = second_view_xy(d, look.second_offset)
-                tool = view[0] = look_down_pose(xy, look.second_height, mount)
-                frame2 = camera.capture()
-                t0 = time.perf_counter()
-                later = detect_parts(
-                    frame2, intr, tool @ camera.tool_T_camera(), parts, roi, segmenter=segmenter
-                )
-                out.second_wall.append(time.perf_counter() - t0)
-                again = same_part(d, later)
-                if again is not None and again.open_end_seen:
-                    dets[k] = again
+                # The Look's views beyond the ends: the better placed first, the other if
+                # that one did not decide.
+                for xy in end_views(d, look.second_offset, roi, dets):
+                    tool = view[0] = look_down_pose(xy, look.second_height, mount)
+                    frame2 = camera.capture()
+                    t0 = time.perf_counter()
+                    d = open_end_from_view(d, part, frame2, intr, tool @ mount, roi)
+                    out.second_wall.append(time.perf_counter() - t0)
+                    if d.open_end_seen:
+                        dets[k] = d
+                        break
         out.detections = dets
     return out
 
