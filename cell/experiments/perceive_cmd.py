@@ -310,7 +310,11 @@ def _render(
     from sim.part_body import spawn_part
     from sim.scenes import dropped_bin_fill, look_down_pose, random_bin_scene, situation
     from sim.world import SimWorld
-    from skills.perception.bin_parts import detect_parts, open_end_from_view
+    from skills.perception.bin_parts import (
+        combine_end_views,
+        detect_parts,
+        open_end_from_view,
+    )
     from skills.perception.look import LookParams, end_views
     from skills.perception.scoring import Truth
 
@@ -368,17 +372,15 @@ def _render(
                 part = kinds.get(d.part or "")
                 if part is None or part.open_ends != 1 or d.open_end_seen:
                     continue
-                # The Look's views beyond the ends: the better placed first, the other if
-                # that one did not decide.
+                # The Look's views beyond both ends; decided where those that decide agree.
+                judged = []
                 for xy in end_views(d, look.second_offset, roi, dets):
                     tool = view[0] = look_down_pose(xy, look.second_height, mount)
                     frame2 = camera.capture()
                     t0 = time.perf_counter()
-                    d = open_end_from_view(d, part, frame2, intr, tool @ mount, roi)
+                    judged.append(open_end_from_view(d, part, frame2, intr, tool @ mount, roi))
                     out.second_wall.append(time.perf_counter() - t0)
-                    if d.open_end_seen:
-                        dets[k] = d
-                        break
+                dets[k] = combine_end_views(d, judged)
         out.detections = dets
     return out
 

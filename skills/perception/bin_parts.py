@@ -153,8 +153,45 @@ def _drop_climbed(
         if seed is None or len(seed) == 0:
             continue
         top = float(np.median(hflat[seed]))
-        high = idx[hflat[idx] > top + max(0.003, 0.1 * top)]
+        limit = top + max(0.003, 0.1 * top)
+        rise = _seed_slope(seed, hflat[seed], hs.shape[1])
+        if rise is not None:
+            # A part leaning on a neighbour or a wall: its top rises along it, and so does
+            # the seed; the limit follows the seed's plane (its high end is its own).
+            a, b, c = rise
+            v, u = np.divmod(idx, hs.shape[1])
+            plane = a + b * u + c * v
+            keep = np.zeros(len(idx), bool)
+            keep[np.isin(idx, seed)] = True
+            high = idx[(hflat[idx] > plane + max(0.003, 0.1 * top)) & ~keep]
+        else:
+            high = idx[hflat[idx] > limit]
         flat[high] = 0
+
+
+def _seed_slope(
+    seed: NDArray[np.int64], h: NDArray[np.float32], cols: int
+) -> tuple[float, float, float] | None:
+    """The plane ``h = a + b u + c v`` (pixels) through a seed's heights when they rise by
+    more than 10 mm across it (a leaning part's top), else None (a level part: its median)."""
+    if len(seed) < 30:
+        return None
+    v, u = np.divmod(seed, cols)
+    u = u.astype(np.float64)
+    v = v.astype(np.float64)
+    hh = h.astype(np.float64)
+    um, vm, hm_ = u.mean(), v.mean(), hh.mean()
+    du, dv, dh = u - um, v - vm, hh - hm_
+    m = np.array([[np.sum(du * du), np.sum(du * dv)], [np.sum(du * dv), np.sum(dv * dv)]])
+    r = np.array([np.sum(du * dh), np.sum(dv * dh)])
+    if abs(float(np.linalg.det(m))) < 1e-9:
+        return None
+    b, c = np.linalg.solve(m, r)
+    fit = dh - (b * du + c * dv)
+    span = float(np.percentile(b * du + c * dv, 98) - np.percentile(b * du + c * dv, 2))
+    if span < 0.010 or float(np.std(fit)) > 0.25 * span:
+        return None
+    return float(hm_ - b * um - c * vm), float(b), float(c)
 
 
 def _principal(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -375,6 +412,7 @@ class _Placement:
     across: NDArray[np.float64]
     center_uv: NDArray[np.float64]
     length: float
+    tilted: bool = False  #: not level on the floor (:func:`_raised`): its ends are not judged
 
 
 def _fit_one(idx: NDArray[np.int64], inputs: _FitInputs, split: bool = True) -> list[Detection]:
@@ -554,13 +592,47 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     if part is not None:
         return _Placement(part, err, False, axis, across, center_uv, length)
     if seg.thin is None:
-        return None
+        return _raised(seg, inputs)
     # A thin part partly hidden under a taller one: see _hidden_thin_part.
     hidden = _hidden_under_neighbour(seg, inputs, seg.thin, axis, s_lo, s_hi, c_mid)
     if hidden is None:
         return None
     part, axis, across, center_uv = hidden
     return _Placement(part, settings.match_tolerance, True, axis, across, center_uv, length)
+
+
+def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
+    """A part leaning (one end on a neighbour or a wall): its height above the floor is then
+    no measure of its size, nor is its upper half all of it; seen from above, its width still
+    is its outer size, and its length is the extent along it stretched by the slope of its
+    crest (over 4 deg). None when the segment is level or this matches no part either."""
+    settings = inputs.settings
+    uv = inputs.uv[seg.idx].astype(np.float64)
+    h = inputs.smooth[seg.idx].astype(np.float64)
+    mean, axis = _principal(uv)
+    across = np.array([-axis[1], axis[0]])
+    s = dot_last(uv - mean, axis)
+    c = dot_last(uv - mean, across)
+    c_lo, c_hi = float(np.percentile(c, 2)), float(np.percentile(c, 98))
+    outer = c_hi - c_lo
+    c_mid = 0.5 * (c_lo + c_hi)
+    band = np.abs(c - c_mid) < 0.2 * outer  # the crest's strip along the axis
+    if np.count_nonzero(band) < 30:
+        return None
+    sb, hb = s[band], h[band]
+    ds = sb - sb.mean()
+    slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), 1e-12))
+    if abs(slope) < 0.07:
+        # Level: on the floor the height fit said what it shows; level on other parts looks
+        # like a strip cut off a taller part (a duct's half as a bushing), so it is not taken.
+        return None
+    s_lo, s_hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
+    length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
+    part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
+    if part is None or part.outer < settings.thin_part:
+        return None
+    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across
+    return _Placement(part, err, False, axis, across, center_uv, length, tilted=True)
 
 
 def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -670,7 +742,9 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
     direction = axis[0] * e1 + axis[1] * e2
     half = 0.5 * part.length
     ends = [center + half * direction, center - half * direction]
-    if part.open_ends == 1:
+    if part.open_ends == 1 and placed.tilted:
+        choice, seen = 0, False  # the end tests assume a part level on the floor
+    elif part.open_ends == 1:
         choice, seen = _open_end_in_view(seg, placed, inputs)
     else:  # a tube: the end farther from the robot
         d = [math.hypot(e[0] - inputs.robot_xy[0], e[1] - inputs.robot_xy[1]) for e in ends]
@@ -824,6 +898,24 @@ def open_end_from_view(
         open_end_seen=True,
         confidence=min(1.0, 2.0 * det.confidence),
     )
+
+
+def combine_end_views(det: Detection, judged: list[Detection]) -> Detection:
+    """``det`` (undecided) with the open end the views beyond its ends agree on (each
+    :func:`open_end_from_view` on ``det``): decided when those that decided agree, undecided
+    when they disagree (a neighbour's surface in the band inside an end reads as a view inside;
+    a wrong end is worse than none, the planner passes an undecided part over)."""
+    decided = [j for j in judged if j.open_end_seen]
+    if not decided:
+        return det
+    first = decided[0]
+    if all(abs(_wrap(j.yaw - first.yaw)) < 0.5 * math.pi for j in decided):
+        return first
+    return det
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _thin_match(outer: float, catalogue: list[Part], settings: DetectorSettings) -> Part | None:

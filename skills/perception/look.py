@@ -14,7 +14,12 @@ from drivers.parts import Part
 from drivers.pose import Pose
 from skills.motion import Guard, GuardedMotion, Sequence
 from skills.params import si
-from skills.perception.bin_parts import Detection, detect_parts, open_end_from_view
+from skills.perception.bin_parts import (
+    Detection,
+    combine_end_views,
+    detect_parts,
+    open_end_from_view,
+)
 from skills.status import Failure, Status, StepResult
 
 DOWN = np.diag([1.0, -1.0, -1.0])
@@ -89,6 +94,8 @@ class Look:
         self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
         self.detections: list[Detection] = []
+        self._undecided: Detection | None = None  #: the part the end views are for
+        self._judged: list[Detection] = []  #: what each end view said of it
         g = self.params.guard
         self.sequence = Sequence(
             "look",
@@ -126,8 +133,10 @@ class Look:
     def _beyond_end(self, which: int) -> None:
         """The camera beyond the chosen part's ``which`` end (0: the better place); where the
         open end is decided (or nothing is chosen) it stays where it is."""
-        p, d = self.params, self.result
-        if d is None or d.open_end_seen:
+        if self._undecided is None and self.result is not None and not self.result.open_end_seen:
+            self._undecided = self.result
+        p, d = self.params, self._undecided
+        if d is None:
             return
         xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
         self.dev.arm.move_to(camera_over(xy, p.second_height, self.dev), p.speed, p.acceleration)
@@ -142,10 +151,11 @@ class Look:
         self._remember(dets)
 
     def _judge_end(self) -> None:
-        """A view beyond an end of the chosen cup or bottle: its open end judged from what that
-        end shows (:func:`open_end_from_view`); nothing to do once decided."""
-        d = self.result
-        if d is None or d.open_end_seen:
+        """A view beyond an end of the chosen cup or bottle whose open end the wide view did
+        not decide: what that end shows (:func:`open_end_from_view`); after both, the end the
+        views agree on (:func:`combine_end_views`). Nothing to do for a part decided."""
+        d = self._undecided  # set by the move beyond the end
+        if d is None:
             return
         part = next((p for p in self.catalogue if p.name == d.part), None)
         if part is None:
@@ -154,7 +164,8 @@ class Look:
         assert camera is not None
         frame = camera.capture()
         pose = self.dev.arm.tool_pose() @ camera.tool_T_camera()
-        self.result = open_end_from_view(d, part, frame, camera.intrinsics(), pose, self.roi)
+        self._judged.append(open_end_from_view(d, part, frame, camera.intrinsics(), pose, self.roi))
+        self.result = combine_end_views(d, self._judged)
 
     def _choose(self, dets: list[Detection]) -> None:
         """The part nearest ``near_xy``; a later view replaces the choice only when it decided
