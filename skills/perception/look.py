@@ -78,7 +78,7 @@ class Look:
     Steps: camera over the bin, find the parts; for a cup or bottle whose open end that view
     did not decide, the camera beyond the end with more room in front of it, its open end
     judged from there, and, still undecided, the same from beyond its other end (for a part
-    decided, those steps take no motion and no frame)."""
+    decided, one closer look from above instead)."""
 
     def __init__(
         self,
@@ -96,6 +96,7 @@ class Look:
         self.detections: list[Detection] = []
         self._undecided: Detection | None = None  #: the part the end views are for
         self._judged: list[Detection] = []  #: what each end view said of it
+        self._looked_again = False  #: the closer look from above taken (a part decided)
         g = self.params.guard
         self.sequence = Sequence(
             "look",
@@ -137,6 +138,9 @@ class Look:
             self._undecided = self.result
         p, d = self.params, self._undecided
         if d is None:
+            if which == 0:  # decided in the wide view: look again, closer, from above it
+                target = camera_over(self._view_xy, p.second_height, self.dev)
+                self.dev.arm.move_to(target, p.speed, p.acceleration)
             return
         xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
         self.dev.arm.move_to(camera_over(xy, p.second_height, self.dev), p.speed, p.acceleration)
@@ -156,6 +160,9 @@ class Look:
         views agree on (:func:`combine_end_views`). Nothing to do for a part decided."""
         d = self._undecided  # set by the move beyond the end
         if d is None:
+            if not self._judged and self._looked_again is False:
+                self._looked_again = True
+                self._detect()  # the closer look from above: refines what it sees again
             return
         part = next((p for p in self.catalogue if p.name == d.part), None)
         if part is None:
