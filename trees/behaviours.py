@@ -18,6 +18,7 @@ Blackboard keys, each written by one behaviour only:
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any, Protocol
 
 import numpy as np
@@ -203,6 +204,10 @@ def location_key(xy: Any) -> tuple[int, int]:
     return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
 
 
+#: One worker for the planning that must not run inside a tick (numpy releases the GIL).
+_PLANNER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-pick")
+
+
 class PlanPick(Behaviour):
     """Choose the part to pick from the detections and the pivot frame the skills use.
 
@@ -222,8 +227,27 @@ class PlanPick(Behaviour):
         self.bb.register_key(key="/part/target", access=common.Access.WRITE)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.WRITE)
         self.bb.set("/cell/bin_empty", False)
+        #: the clearance sweeps run off the tick (tens of milliseconds a part); the leaf stays
+        #: RUNNING until they are done, so no tick blocks on them
+        self._work: Future | None = None
+        self._pending: tuple | None = None
+
+    def initialise(self) -> None:
+        self._work, self._pending = None, None
+
+    def terminate(self, new_status: Status) -> None:
+        if self._work is not None and new_status == Status.INVALID:
+            self._work.cancel()
+        self._work = None
 
     def update(self) -> Status:
+        if self._work is not None:
+            if not self._work.done():
+                self.feedback_message = "plan pick: checking where the pivot's gripper goes"
+                return Status.RUNNING
+            work, self._work = self._work, None
+            assert self._pending is not None
+            return self._choose(*self._pending, *work.result())
         ctx = self.ctx
         dets: list[Detection] = (
             self.bb.get("/part/detections") if self.bb.exists("/part/detections") else []
@@ -254,8 +278,22 @@ class PlanPick(Behaviour):
             self.feedback_message = f"plan pick: no {ctx.part.name} left to pick{extra}"
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
+        self._pending = (usable, dets, left, skipped)
+        self._work = _PLANNER.submit(self._clearances, usable, dets, left)
+        self.feedback_message = "plan pick: checking where the pivot's gripper goes"
+        return Status.RUNNING
+
+    def _choose(
+        self,
+        usable: list[Detection],
+        dets: list[Detection],
+        left: list[dict[str, str]],
+        skipped: int,
+        clear: dict[int, PivotFrame],
+        drags: dict[int, RepositionPlan],
+    ) -> Status:
+        ctx = self.ctx
         seen = self.bb.get("/part/seen") if self.bb.exists("/part/seen") else None
-        clear, drags = self._clearances(usable, dets, left)
         if not clear and not drags:
             self.bb.set("/cell/bin_empty", True)
             self.feedback_message = (

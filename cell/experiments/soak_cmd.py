@@ -78,6 +78,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f"process; shard k seeds its scenes and faults with S + {SHARD_SEED_STEP}*k, so shard 0 "
         "is the serial run (default: 1)",
     )
+    p.add_argument(
+        "--fill",
+        choices=("rows", "random"),
+        default=None,
+        help="how the bin is filled and refilled (bin.fill; default: the configuration's)",
+    )
+    p.add_argument(
+        "--parts", type=int, default=None,
+        help="parts tipped in at each refill (bin.parts; default: the configuration's)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     from cell.overrides import add_set_argument
 
@@ -93,6 +103,14 @@ def cmd_soak(args: argparse.Namespace) -> int:
         raise UserError(f"--cycles: must be >= 1, got {args.cycles}")
     if args.seed is not None and args.seed < 0:
         raise UserError(f"--seed: must be >= 0, got {args.seed}")
+    if args.parts is not None and args.parts < 1:
+        raise UserError(f"--parts: must be >= 1, got {args.parts}")
+    # --fill / --parts are the bin keys set from the command line (shards get them too)
+    args.set = [*(args.set or ())]
+    if args.fill is not None:
+        args.set.append(f"bin.fill={args.fill}")
+    if args.parts is not None:
+        args.set.append(f"bin.parts={args.parts}")
     try:
         prep = load_prepared(args.config, args.set)
     except ConfigError as exc:

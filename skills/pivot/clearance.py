@@ -24,7 +24,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import FINGER_LENGTH, FT_HEIGHT, GRIPPER_BODY_HEIGHT
+from drivers.ur5.kinematics import (
+    FINGER_LENGTH,
+    FT_HEIGHT,
+    GRIPPER_BODY_HEIGHT,
+    HOME_JOINTS,
+    REACH_TOLERANCE,
+    solve_ik,
+)
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -96,7 +103,7 @@ def lying_part(
     )
 
 
-def _box_points(center: Sequence[float], size: Sequence[float], step: float = 0.006) -> NDArray:
+def _box_points(center: Sequence[float], size: Sequence[float], step: float = 0.005) -> NDArray:
     """Points on the surface of an axis-aligned box (tool frame), ``step`` apart at most."""
     c, s = np.asarray(center, float), np.asarray(size, float)
     axes = [np.linspace(-0.5 * n, 0.5 * n, max(2, int(math.ceil(n / step)) + 1)) for n in s]
@@ -123,9 +130,12 @@ def tool_points(
     body_z = top - 0.5 * _BODY[2]
     puck_z = top - _BODY[2] - 0.5 * _PUCK[2]
     wrist_z = top - _BODY[2] - _PUCK[2] - 0.5 * _WRIST[2]
-    fingers["the gripper body"] = _box_points((0.0, 0.0, body_z), _BODY)
+    fingers["the gripper body"] = _box_points((0.0, 0.0, body_z), _BODY, 0.01)
     fingers["the wrist"] = np.vstack(
-        [_box_points((0.0, 0.0, puck_z), _PUCK), _box_points((0.0, 0.0, wrist_z), _WRIST)]
+        [
+            _box_points((0.0, 0.0, puck_z), _PUCK, 0.012),
+            _box_points((0.0, 0.0, wrist_z), _WRIST, 0.012),
+        ]
     )
     return fingers
 
@@ -146,6 +156,8 @@ class Clearance:
     def reason(self) -> str:
         if self.clear:
             return f"clear by {self.distance * 1e3:.0f} mm"
+        if self.obstacle == "the edge of the UR5's reach":
+            return f"{self.tool_part} would be beyond {self.obstacle} {self.phase}"
         return (
             f"{self.tool_part} would hit {self.obstacle} {self.phase} "
             f"({-self.distance * 1e3:.0f} mm into it)"
@@ -195,6 +207,32 @@ def pivot_sweep(
     return poses
 
 
+#: m: clearances beyond this are not worked out exactly (reported as at least this)
+FAR = 0.05
+
+
+def nearest(points: NDArray[np.float64], obstacles: Sequence[Obstacle]) -> tuple[float, int, int]:
+    """The smallest signed distance (m) from ``points`` to ``obstacles`` and where it is:
+    ``(distance, obstacle index, point index)``; ``(FAR, -1, -1)`` when nothing is nearer.
+
+    Only the points inside an obstacle's bounding box grown by :data:`FAR` are measured, so a
+    sweep high over the bin or far from a neighbour costs little."""
+    best, where = FAR, (-1, -1)
+    for k, ob in enumerate(obstacles):
+        c, s = math.cos(ob.yaw), math.sin(ob.yaw)
+        hx, hy, hz = ob.half
+        reach = np.array([abs(c) * hx + abs(s) * hy, abs(s) * hx + abs(c) * hy, hz]) + FAR
+        near = np.all(np.abs(points - ob.center) <= reach, axis=1)
+        if not near.any():
+            continue
+        idx = np.flatnonzero(near)
+        d = ob.distance(points[idx])
+        i = int(np.argmin(d))
+        if d[i] < best:
+            best, where = float(d[i]), (k, int(idx[i]))
+    return best, where[0], where[1]
+
+
 def pivot_clearance(
     frame: PivotFrame,
     params: PivotParams,
@@ -208,8 +246,8 @@ def pivot_clearance(
         margin = params.clearance_margin
     if not obstacles:
         return Clearance(math.inf)
-    best = Clearance(math.inf)
     models: dict[float, dict[str, NDArray]] = {}
+    chunks, labels = [], []  #: world points; (phase, tool part) of each chunk
     for phase, pose, width in pivot_sweep(frame, params, finger_width):
         model = models.get(width)
         if model is None:
@@ -217,12 +255,27 @@ def pivot_clearance(
                 width, params.tip_offset, params.finger_thickness, finger_width
             )
         for name, pts in model.items():
-            world = pts @ pose.rotation.T + pose.position
-            for ob in obstacles:
-                d = float(np.min(ob.distance(world))) - margin
-                if d < best.distance:
-                    best = Clearance(d, name, ob.what, phase)
-    return best
+            chunks.append(pts @ pose.rotation.T + pose.position)
+            labels.append((phase, name))
+    points = np.vstack(chunks)
+    d, o, n = nearest(points, obstacles)
+    if o < 0:
+        return Clearance(FAR - margin)
+    chunk = int(np.searchsorted(np.cumsum([len(c) for c in chunks]), n, side="right"))
+    phase, name = labels[chunk]
+    return Clearance(d - margin, name, obstacles[o].what, phase)
+
+
+def reach_problem(frame: PivotFrame, params: PivotParams, finger_width: float) -> Clearance | None:
+    """Where the sweep leaves the UR5's reach (the twin's and the driver's kinematic model,
+    each pose solved from the one before, starting at home), or None when it stays inside."""
+    sweep = pivot_sweep(frame, params, finger_width)
+    q = HOME_JOINTS
+    for phase, pose, _ in (sweep[0], sweep[9], sweep[-1]):  # above, at the grasp, arc's end
+        q, miss = solve_ik(pose, q, iterations=200)
+        if miss > REACH_TOLERANCE:
+            return Clearance(-1.0, "the TCP", "the edge of the UR5's reach", phase)
+    return None
 
 
 @dataclass(frozen=True)
@@ -253,7 +306,11 @@ def choose_end(
     frames = [frame]
     if open_ends >= 2:
         frames.append(replace(frame, yaw=frame.yaw + math.pi))
-    tried = [pivot_clearance(f, params, obstacles, finger_width, margin) for f in frames]
+    tried = [
+        reach_problem(f, params, finger_width)
+        or pivot_clearance(f, params, obstacles, finger_width, margin)
+        for f in frames
+    ]
     radial = np.asarray(frame.center[:2], float) - np.asarray(base_xy, float)
 
     def rank(i: int) -> tuple[bool, bool, float]:

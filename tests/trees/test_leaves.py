@@ -566,6 +566,18 @@ def lying(x: float, y: float, yaw: float) -> Detection:
     )
 
 
+def settle(node) -> None:  # type: ignore[no-untyped-def]
+    """Tick a planning leaf until it is done (its sweeps run off the tick)."""
+    import time
+
+    node.tick_once()
+    for _ in range(2000):
+        if node.status != Status.RUNNING:
+            return
+        time.sleep(0.005)
+        node.tick_once()
+
+
 def test_plan_pick_prefers_a_part_the_pivot_clears_and_takes_a_tube_from_the_end_that_does(
     ctx,
 ) -> None:
@@ -575,7 +587,7 @@ def test_plan_pick_prefers_a_part_the_pivot_clears_and_takes_a_tube_from_the_end
     bb.set("/part/detections", [walled, free])
     bb.set("/part/seen", walled)
     node = lv.PlanPick("plan", ctx)
-    node.tick_once()
+    settle(node)
     assert node.status == Status.SUCCESS
     tgt = bb.get("/part/target")
     assert tgt["detection"] is free and tgt["reposition"] is None
@@ -590,7 +602,7 @@ def test_plan_pick_plans_a_drag_when_no_part_clears_and_the_drag_leaf_needs_one(
     walled = lying(0.283, 0.069, np.radians(165))
     bb.set("/part/detections", [walled])
     node = lv.PlanPick("plan", ctx)
-    node.tick_once()
+    settle(node)
     assert node.status == Status.SUCCESS
     tgt = bb.get("/part/target")
     assert tgt["detection"] is walled and tgt["reposition"] is not None
@@ -614,8 +626,24 @@ def test_plan_pick_names_a_part_nothing_frees_and_leaves_it(ctx) -> None:
     ]
     bb.set("/part/detections", [walled, *hem])
     node = lv.PlanPick("plan", ctx)
-    node.tick_once()
+    settle(node)
     assert node.status == Status.FAILURE and bb.get("/cell/bin_empty") is True
     ends = [e for e in ctx.events.events if e[0] == EventKind.BIN_EMPTY]
     reasons = [x["reason"] for x in ends[-1][1]["left"]]
     assert any(r.startswith("no pivot clears") and "no drag frees it" in r for r in reasons)
+
+
+def test_plan_pick_runs_its_sweeps_off_the_tick(ctx) -> None:
+    bb = blackboard()
+    bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
+    node = lv.PlanPick("plan", ctx)
+    node.tick_once()
+    assert node.status == Status.RUNNING  # the first tick only starts the work
+    settle(node)
+    assert node.status == Status.SUCCESS
+    # halted mid-way, it starts afresh the next time
+    node2 = lv.PlanPick("plan again", ctx)
+    node2.tick_once()
+    node2.stop(Status.INVALID)
+    settle(node2)
+    assert node2.status == Status.SUCCESS
