@@ -5,7 +5,7 @@ camera's view of them. Ground truth is returned for *scoring only*; nothing here
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,10 +145,10 @@ def random_floor_pose(
 def dropped_bin_fill(
     world: SimWorld,
     layout: CellLayout,
-    part: Part,
+    part: Part | Sequence[Part],
     rng: np.random.Generator,
     n_parts: int,
-    spawn: Callable[[Pose], PartBody],
+    spawn: Callable[[Pose], PartBody] | Callable[[Part, Pose], PartBody],
     drop_height: float = 0.04,
     wall_margin: float = 0.005,
     settle_s: float = 1.5,
@@ -158,23 +158,96 @@ def dropped_bin_fill(
     one after the other, then left to settle. Where they end -- against walls, touching or
     leaning on a neighbour -- is physics' answer, not a staged pose.
 
-    ``spawn`` creates one part at a pose (the caller's body options: friction, sleeping).
+    ``part``: one kind, or several, one drawn at random for each drop (a mixed bin); ``spawn``
+    creates one part at a pose (the caller's body options: friction, sleeping), and for a
+    mixed bin is called with the kind first.
     """
-    half_diag = 0.5 * math.hypot(part.length, part.outer)
+    mixed = not isinstance(part, Part)
+    kinds = list(part) if mixed else [part]  # type: ignore[arg-type]
     bodies: list[PartBody] = []
     for _ in range(n_parts):
-        x, y, yaw = random_floor_pose(layout, part, rng, wall_margin)
+        kind = kinds[int(rng.integers(len(kinds)))] if mixed else kinds[0]
+        half_diag = 0.5 * math.hypot(kind.length, kind.outer)
+        x, y, yaw = random_floor_pose(layout, kind, rng, wall_margin)
         tilt = rng.uniform(-0.35, 0.35)  # rad off horizontal: one end leads the fall
         roll = rng.uniform(-math.pi, math.pi)
         rotation = (
-            Rotation.from_euler("z", yaw) * Rotation.from_euler("y", tilt)
+            Rotation.from_euler("z", yaw)
+            * Rotation.from_euler("y", tilt)
             * Rotation.from_euler("x", roll)
         ).as_matrix()
-        top = max([layout.bin_floor_z] + [b.pose().position[2] + 0.5 * part.outer for b in bodies])
+        tops = [b.pose().position[2] + 0.5 * b.part.outer for b in bodies]
+        top = max([layout.bin_floor_z, *tops])
         z = top + drop_height + half_diag
-        bodies.append(spawn(Pose(np.array([x, y, z]), rotation)))
+        pose = Pose(np.array([x, y, z]), rotation)
+        bodies.append(spawn(kind, pose) if mixed else spawn(pose))  # type: ignore[call-arg]
         for _ in range(int(0.25 / world.settings.control_dt)):  # it lands before the next
             world.step()
     for _ in range(int(settle_s / world.settings.control_dt)):
         world.step()
     return bodies
+
+
+@dataclass(frozen=True)
+class Situation:
+    """How a settled part lies, from the simulated contacts (for splitting scores only)."""
+
+    tilt: float  #: rad, of the part's axis from the floor plane
+    touching: bool  #: in contact with another part
+    wall: bool  #: in contact with the bin's walls
+    in_bin: bool  #: its centre over the bin's inside
+    raised: float  #: m, its lowest point above the bin floor (0 lying on the floor)
+
+    @property
+    def standing(self) -> bool:
+        """On an end: not a lying part (nothing in the pick works on it)."""
+        return self.tilt > math.radians(45.0)
+
+    @property
+    def leaning(self) -> bool:
+        """Lying, but an end raised (on a neighbour, a wall, or one part's rim on another)."""
+        return math.radians(4.0) < self.tilt <= math.radians(45.0)
+
+    def label(self) -> str:
+        """One word: standing, leaning, on_top (level, on other parts), touching, wall (alone
+        against a wall) or free."""
+        if not self.in_bin:
+            return "outside"
+        if self.standing:
+            return "standing"
+        if self.leaning:
+            return "leaning"
+        if self.raised > 0.003:
+            return "on_top"  # lying level on other parts
+        if self.touching:
+            return "touching"
+        return "wall" if self.wall else "free"
+
+
+def situation(
+    world: SimWorld,
+    body: PartBody,
+    others: Sequence[PartBody],
+    wall_body: int,
+    layout: CellLayout,
+    reach: float = 0.001,
+) -> Situation:
+    """Where ``body`` lies: its axis' tilt, and whether it touches another part or the walls
+    (closest points within ``reach``, m)."""
+    p = world.p
+    axis = body.axis()
+    tilt = math.asin(min(1.0, abs(float(axis[2])) / max(float(np.linalg.norm(axis)), 1e-12)))
+    touching = any(
+        p.getClosestPoints(body.body_id, o.body_id, reach) for o in others if o is not body
+    )
+    wall = bool(p.getClosestPoints(body.body_id, wall_body, reach))
+    x0, x1, y0, y1 = layout.bin_interior()
+    c = body.pose().position
+    lo, _ = p.getAABB(body.body_id)
+    return Situation(
+        tilt,
+        touching,
+        wall,
+        bool(x0 < c[0] < x1 and y0 < c[1] < y1),
+        max(0.0, float(lo[2]) - layout.bin_floor_z),
+    )

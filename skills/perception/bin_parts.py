@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from drivers.camera import Frame, Intrinsics
 from drivers.parts import Part
 from drivers.pose import Pose
-from skills.perception.heightmap import HeightMap, dot_last, height_map
+from skills.perception.heightmap import HeightMap, PerceptionInputError, dot_last, height_map
 
 
 @dataclass(frozen=True)
@@ -153,8 +153,45 @@ def _drop_climbed(
         if seed is None or len(seed) == 0:
             continue
         top = float(np.median(hflat[seed]))
-        high = idx[hflat[idx] > top + max(0.003, 0.1 * top)]
+        limit = top + max(0.003, 0.1 * top)
+        rise = _seed_slope(seed, hflat[seed], hs.shape[1])
+        if rise is not None:
+            # A part leaning on a neighbour or a wall: its top rises along it, and so does
+            # the seed; the limit follows the seed's plane (its high end is its own).
+            a, b, c = rise
+            v, u = np.divmod(idx, hs.shape[1])
+            plane = a + b * u + c * v
+            keep = np.zeros(len(idx), bool)
+            keep[np.isin(idx, seed)] = True
+            high = idx[(hflat[idx] > plane + max(0.003, 0.1 * top)) & ~keep]
+        else:
+            high = idx[hflat[idx] > limit]
         flat[high] = 0
+
+
+def _seed_slope(
+    seed: NDArray[np.int64], h: NDArray[np.float32], cols: int
+) -> tuple[float, float, float] | None:
+    """The plane ``h = a + b u + c v`` (pixels) through a seed's heights when they rise by
+    more than 10 mm across it (a leaning part's top), else None (a level part: its median)."""
+    if len(seed) < 30:
+        return None
+    v, u = np.divmod(seed, cols)
+    u = u.astype(np.float64)
+    v = v.astype(np.float64)
+    hh = h.astype(np.float64)
+    um, vm, hm_ = u.mean(), v.mean(), hh.mean()
+    du, dv, dh = u - um, v - vm, hh - hm_
+    m = np.array([[np.sum(du * du), np.sum(du * dv)], [np.sum(du * dv), np.sum(dv * dv)]])
+    r = np.array([np.sum(du * dh), np.sum(dv * dh)])
+    if abs(float(np.linalg.det(m))) < 1e-9:
+        return None
+    b, c = np.linalg.solve(m, r)
+    fit = dh - (b * du + c * dv)
+    span = float(np.percentile(b * du + c * dv, 98) - np.percentile(b * du + c * dv, 2))
+    if span < 0.010 or float(np.std(fit)) > 0.25 * span:
+        return None
+    return float(hm_ - b * um - c * vm), float(b), float(c)
 
 
 def _principal(xy: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -375,6 +412,7 @@ class _Placement:
     across: NDArray[np.float64]
     center_uv: NDArray[np.float64]
     length: float
+    tilted: bool = False  #: not level on the floor (:func:`_raised`): its ends are not judged
 
 
 def _fit_one(idx: NDArray[np.int64], inputs: _FitInputs, split: bool = True) -> list[Detection]:
@@ -554,13 +592,47 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     if part is not None:
         return _Placement(part, err, False, axis, across, center_uv, length)
     if seg.thin is None:
-        return None
+        return _raised(seg, inputs)
     # A thin part partly hidden under a taller one: see _hidden_thin_part.
     hidden = _hidden_under_neighbour(seg, inputs, seg.thin, axis, s_lo, s_hi, c_mid)
     if hidden is None:
         return None
     part, axis, across, center_uv = hidden
     return _Placement(part, settings.match_tolerance, True, axis, across, center_uv, length)
+
+
+def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
+    """A part leaning (one end on a neighbour or a wall): its height above the floor is then
+    no measure of its size, nor is its upper half all of it; seen from above, its width still
+    is its outer size, and its length is the extent along it stretched by the slope of its
+    crest (over 4 deg). None when the segment is level or this matches no part either."""
+    settings = inputs.settings
+    uv = inputs.uv[seg.idx].astype(np.float64)
+    h = inputs.smooth[seg.idx].astype(np.float64)
+    mean, axis = _principal(uv)
+    across = np.array([-axis[1], axis[0]])
+    s = dot_last(uv - mean, axis)
+    c = dot_last(uv - mean, across)
+    c_lo, c_hi = float(np.percentile(c, 2)), float(np.percentile(c, 98))
+    outer = c_hi - c_lo
+    c_mid = 0.5 * (c_lo + c_hi)
+    band = np.abs(c - c_mid) < 0.2 * outer  # the crest's strip along the axis
+    if np.count_nonzero(band) < 30:
+        return None
+    sb, hb = s[band], h[band]
+    ds = sb - sb.mean()
+    slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), 1e-12))
+    if abs(slope) < 0.07:
+        # Level: on the floor the height fit said what it shows; level on other parts looks
+        # like a strip cut off a taller part (a duct's half as a bushing), so it is not taken.
+        return None
+    s_lo, s_hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
+    length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
+    part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
+    if part is None or part.outer < settings.thin_part:
+        return None
+    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across
+    return _Placement(part, err, False, axis, across, center_uv, length, tilted=True)
 
 
 def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -627,7 +699,18 @@ def _hidden_under_neighbour(
     for ax, lo, hi, mid, wide in axes:
         ac = np.array([-ax[1], ax[0]])
         found = _hidden_thin_part(
-            uv, hgt, seg.mean, ax, ac, lo, hi, mid, seg.outer, wide, relief, inputs.catalogue,
+            uv,
+            hgt,
+            seg.mean,
+            ax,
+            ac,
+            lo,
+            hi,
+            mid,
+            seg.outer,
+            wide,
+            relief,
+            inputs.catalogue,
             settings,
         )
         if found is not None:
@@ -651,13 +734,17 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
     """The placed part in the base frame, with the end for the hole finger."""
     hm, e1, e2, part = inputs.hm, inputs.e1, inputs.e2, placed.part
     center_uv, axis = placed.center_uv, placed.axis
-    center = center_uv[0] * e1 + center_uv[1] * e2 + (hm.plane.offset + 0.5 * seg.outer) * (
-        hm.plane.normal
+    center = (
+        center_uv[0] * e1
+        + center_uv[1] * e2
+        + (hm.plane.offset + 0.5 * seg.outer) * (hm.plane.normal)
     )
     direction = axis[0] * e1 + axis[1] * e2
     half = 0.5 * part.length
     ends = [center + half * direction, center - half * direction]
-    if part.open_ends == 1:
+    if part.open_ends == 1 and placed.tilted:
+        choice, seen = 0, False  # the end tests assume a part level on the floor
+    elif part.open_ends == 1:
         choice, seen = _open_end_in_view(seg, placed, inputs)
     else:  # a tube: the end farther from the robot
         d = [math.hypot(e[0] - inputs.robot_xy[0], e[1] - inputs.robot_xy[1]) for e in ends]
@@ -692,22 +779,143 @@ def _open_end_in_view(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> 
     cam, e1, e2, hm, settings = inputs.cam, inputs.e1, inputs.e2, inputs.hm, inputs.settings
     part, center_uv, axis, across = placed.part, placed.center_uv, placed.axis, placed.across
     cam_uv = np.array([cam @ e1, cam @ e2])
-    facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
-    sign = 1.0 if facing == 0 else -1.0
     # Only the pixels around this part matter: one pass picks them.
     near = _window(seg.idx, hm, 0.25 * part.length + part.outer)
-    near = near[
-        np.abs(inputs.uv[near] - center_uv).max(axis=1) < 0.5 * part.length + part.outer
-    ]
+    near = near[np.abs(inputs.uv[near] - center_uv).max(axis=1) < 0.5 * part.length + part.outer]
     uv, hgt = inputs.uv[near], inputs.hgt[near]
+    height = float(cam @ hm.plane.normal - hm.plane.offset)
+    return _end_evidence(uv, hgt, center_uv, axis, across, part, cam_uv, height, settings)
+
+
+def _end_evidence(
+    uv: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    center_uv: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    part: Part,
+    cam_uv: NDArray[np.float64],
+    cam_height: float,
+    settings: DetectorSettings,
+) -> tuple[int, bool]:
+    """What the end turned towards the camera shows (points ``uv``, heights ``hgt`` around a
+    part placed at ``center_uv`` along ``axis``): 0 the ``+axis`` end open, 1 the other, and
+    whether the view decided it."""
+    facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
+    sign = 1.0 if facing == 0 else -1.0
+    center_uv = _end_on_crest(uv, hgt, center_uv, sign * axis, across, part)
     inside = _inside_seen(uv, hgt, center_uv, sign * axis, across, part)
     lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
-    height = float(cam @ hm.plane.normal - hm.plane.offset)
     face = _face_seen(uv, hgt, center_uv, sign * axis, across, part)
     is_open = inside >= settings.min_inside
     is_closed = inside <= settings.max_closed and face >= settings.min_face
-    seen = lateral / max(height, 1e-6) > settings.min_end_view and (is_open or is_closed)
+    seen = lateral / max(cam_height, 1e-6) > settings.min_end_view and (is_open or is_closed)
     return (facing if is_open else 1 - facing), seen
+
+
+def _end_on_crest(
+    uv: NDArray[np.float64],
+    hgt: NDArray[np.float64],
+    center_uv: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    part: Part,
+) -> NDArray[np.float64]:
+    """The part's centre moved so that its ``+axis`` end is where its crest ends.
+
+    The inside is looked for just within the end: a centre a few millimetres off along the
+    axis (a part touching another, or seen in an earlier view) puts bare floor beyond a closed
+    end into that band, which then reads as a view inside. The crest (the top line, at the
+    part's height) runs to the end's rim whether the end is open or closed, so its end is the
+    end's place; it also gives the axis' place across. Unchanged when no crest is seen there
+    (a leaning part, or the top hidden)."""
+    rel = uv - center_uv
+    s = dot_last(rel, axis)
+    c = dot_last(rel, across)
+    half = 0.5 * part.length
+    crest = (
+        (np.abs(c) < 0.35 * part.outer)
+        & (hgt > 0.75 * part.outer)
+        & (hgt < 1.2 * part.outer)
+        & (s > 0.0)
+        & (s < half + 0.02)
+    )
+    if np.count_nonzero(crest) < 10:
+        return center_uv
+    s_end = float(np.percentile(s[crest], 98))
+    if abs(s_end - half) > 0.015:
+        return center_uv  # not this part's end: something else on its line
+    return center_uv + (s_end - half) * axis + float(np.median(c[crest])) * across
+
+
+def open_end_from_view(
+    det: Detection,
+    part: Part,
+    frame: Frame,
+    intr: Intrinsics,
+    world_T_camera: Pose,
+    roi: tuple[float, float, float, float] | None = None,
+    settings: DetectorSettings = DetectorSettings(),
+) -> Detection:
+    """``det`` (a cup or bottle found in an earlier view) with its open end judged from a view
+    taken beyond one of its ends: that end's inside seen through the opening makes it the open
+    one, its closed face the other. The part is not looked for again (a close view may hold
+    only part of it): its place from ``det`` is where the end is looked at. Unchanged when this
+    view does not decide either."""
+    try:
+        hm = height_map(frame, intr, world_T_camera, roi)
+    except PerceptionInputError:  # a view mostly outside the bin: it shows nothing of the end
+        return det
+    e1, e2 = _plane_basis(hm.plane.normal)
+    direction = np.array([math.cos(det.yaw), math.sin(det.yaw), 0.0])
+    axis = np.array([float(direction @ e1), float(direction @ e2)])
+    axis /= max(float(np.linalg.norm(axis)), 1e-12)
+    across = np.array([-axis[1], axis[0]])
+    center_uv = np.array([float(det.center @ e1), float(det.center @ e2)])
+    pts = hm.points
+    ok = np.isfinite(pts[..., 0])
+    # Only the pixels around the part: a box in the base frame first (cheap), then the plane.
+    c = det.center
+    reach = 0.5 * part.length + part.outer
+    near = ok & (np.abs(np.nan_to_num(pts[..., 0]) - c[0]) < reach)
+    near &= np.abs(np.nan_to_num(pts[..., 1]) - c[1]) < reach
+    p = pts[near].astype(np.float64)
+    uv = np.column_stack([dot_last(p, e1), dot_last(p, e2)])
+    hgt = np.nan_to_num(hm.height[near], nan=-1.0).astype(np.float64)
+    cam = np.asarray(world_T_camera.position, float)
+    cam_uv = np.array([float(cam @ e1), float(cam @ e2)])
+    height = float(cam @ hm.plane.normal - hm.plane.offset)
+    choice, seen = _end_evidence(uv, hgt, center_uv, axis, across, part, cam_uv, height, settings)
+    if not seen:
+        return det
+    half = 0.5 * part.length * direction
+    end = det.center + (half if choice == 0 else -half)
+    toward = end - det.center
+    return replace(
+        det,
+        yaw=math.atan2(toward[1], toward[0]),
+        open_end=end,
+        open_end_seen=True,
+        confidence=min(1.0, 2.0 * det.confidence),
+    )
+
+
+def combine_end_views(det: Detection, judged: list[Detection]) -> Detection:
+    """``det`` (undecided) with the open end the views beyond its ends agree on (each
+    :func:`open_end_from_view` on ``det``): decided when those that decided agree, undecided
+    when they disagree (a neighbour's surface in the band inside an end reads as a view inside;
+    a wrong end is worse than none, the planner passes an undecided part over)."""
+    decided = [j for j in judged if j.open_end_seen]
+    if not decided:
+        return det
+    first = decided[0]
+    if all(abs(_wrap(j.yaw - first.yaw)) < 0.5 * math.pi for j in decided):
+        return first
+    return det
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _thin_match(outer: float, catalogue: list[Part], settings: DetectorSettings) -> Part | None:

@@ -1,10 +1,11 @@
 """The Look skill: bring the wrist camera over the bin, find the parts, and, for a cup or bottle
-whose open end the first view could not tell, look again from beyond one of its ends."""
+whose open end the first view could not tell, look again from beyond its ends."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -13,7 +14,12 @@ from drivers.parts import Part
 from drivers.pose import Pose
 from skills.motion import Guard, GuardedMotion, Sequence
 from skills.params import si
-from skills.perception.bin_parts import Detection, detect_parts
+from skills.perception.bin_parts import (
+    Detection,
+    combine_end_views,
+    detect_parts,
+    open_end_from_view,
+)
 from skills.status import Failure, Status, StepResult
 
 DOWN = np.diag([1.0, -1.0, -1.0])
@@ -40,11 +46,39 @@ class LookParams:
     guard: Guard = field(default_factory=Guard)
 
 
+def end_views(
+    d: Detection,
+    offset: float,
+    roi: tuple[float, float, float, float] | None = None,
+    others: list[Detection] | tuple[Detection, ...] = (),
+) -> list[tuple[float, float]]:
+    """Where the camera looks from to see each end face of ``d``: ``offset`` beyond the end on
+    its axis, the better place first. From there that end's face (and, through an open end, the
+    inside) is in sight, unless the end is against a wall (the place is then over the wall or
+    outside the bin) or a neighbour stands in front of it: the place deeper inside the bin
+    ``roi`` and farther from the other parts comes first."""
+    u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+    places = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
+
+    def room(xy: np.ndarray) -> float:
+        inside = math.inf
+        if roi is not None:
+            x0, x1, y0, y1 = roi
+            inside = min(xy[0] - x0, x1 - xy[0], xy[1] - y0, y1 - xy[1])
+        near = [math.dist(xy, o.center[:2]) - 0.5 * o.outer for o in others if o is not d]
+        return min([inside, *near, 1.0])
+
+    places.sort(key=room, reverse=True)
+    return [(float(xy[0]), float(xy[1])) for xy in places]
+
+
 class Look:
     """``result``: the detection to pick (nearest ``near_xy``), or a failure.
 
-    Steps: camera over the bin, find the parts; camera beyond the chosen part's end, look at
-    its end (for a part whose open end is decided, the second look is from the first view)."""
+    Steps: camera over the bin, find the parts; for a cup or bottle whose open end that view
+    did not decide, the camera beyond the end with more room in front of it, its open end
+    judged from there, and, still undecided, the same from beyond its other end (for a part
+    decided, one closer look from above instead)."""
 
     def __init__(
         self,
@@ -60,23 +94,35 @@ class Look:
         self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
         self.detections: list[Detection] = []
+        self._undecided: Detection | None = None  #: the part the end views are for
+        self._judged: list[Detection] = []  #: what each end view said of it
+        self._looked_again = False  #: the closer look from above taken (a part decided)
         g = self.params.guard
         self.sequence = Sequence(
             "look",
             [
                 dev.move("camera over the bin", g, self._over_bin),
                 self._detect_step("find the parts"),
-                dev.move("camera beyond its end", g, self._beyond_end),
-                self._detect_step("look at its end"),
+                dev.move("camera beyond its end", g, lambda: self._beyond_end(0)),
+                self._detect_step("look at its end", self._judge_end),
+                dev.move("camera beyond its other end", g, lambda: self._beyond_end(1)),
+                self._detect_step("look at its other end", self._judge_end),
             ],
         )
 
-    def _detect_step(self, name: str) -> GuardedMotion:
+    def _detect_step(self, name: str, command: Any = None) -> GuardedMotion:
         """Take a frame and find the parts in it; fails NOTHING_FOUND while no part is chosen."""
         dev = self.dev
         return GuardedMotion(
-            name, self._detect, lambda: True, dev.arm, dev.ft, dev.clock, self.params.guard,
-            self._none_found, Failure.NOTHING_FOUND,
+            name,
+            command if command is not None else self._detect,
+            lambda: True,
+            dev.arm,
+            dev.ft,
+            dev.clock,
+            self.params.guard,
+            self._none_found,
+            Failure.NOTHING_FOUND,
         )
 
     # --- the steps' commands and checks ------------------------------------------------------
@@ -85,10 +131,19 @@ class Look:
         target = camera_over(self._view_xy, p.view_height, self.dev)
         self.dev.arm.move_to(target, p.speed, p.acceleration)
 
-    def _beyond_end(self) -> None:
-        p = self.params
-        target = camera_over(self._second_view_xy(), p.second_height, self.dev)
-        self.dev.arm.move_to(target, p.speed, p.acceleration)
+    def _beyond_end(self, which: int) -> None:
+        """The camera beyond the chosen part's ``which`` end (0: the better place); where the
+        open end is decided (or nothing is chosen) it stays where it is."""
+        if self._undecided is None and self.result is not None and not self.result.open_end_seen:
+            self._undecided = self.result
+        p, d = self.params, self._undecided
+        if d is None:
+            if which == 0:  # decided in the wide view: look again, closer, from above it
+                target = camera_over(self._view_xy, p.second_height, self.dev)
+                self.dev.arm.move_to(target, p.speed, p.acceleration)
+            return
+        xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
+        self.dev.arm.move_to(camera_over(xy, p.second_height, self.dev), p.speed, p.acceleration)
 
     def _detect(self) -> None:
         camera = self.dev.camera
@@ -98,6 +153,26 @@ class Look:
         dets = detect_parts(frame, camera.intrinsics(), pose, self.catalogue, self.roi)
         self._choose(dets)
         self._remember(dets)
+
+    def _judge_end(self) -> None:
+        """A view beyond an end of the chosen cup or bottle whose open end the wide view did
+        not decide: what that end shows (:func:`open_end_from_view`); after both, the end the
+        views agree on (:func:`combine_end_views`). Nothing to do for a part decided."""
+        d = self._undecided  # set by the move beyond the end
+        if d is None:
+            if not self._judged and self._looked_again is False:
+                self._looked_again = True
+                self._detect()  # the closer look from above: refines what it sees again
+            return
+        part = next((p for p in self.catalogue if p.name == d.part), None)
+        if part is None:
+            return
+        camera = self.dev.camera
+        assert camera is not None
+        frame = camera.capture()
+        pose = self.dev.arm.tool_pose() @ camera.tool_T_camera()
+        self._judged.append(open_end_from_view(d, part, frame, camera.intrinsics(), pose, self.roi))
+        self.result = combine_end_views(d, self._judged)
 
     def _choose(self, dets: list[Detection]) -> None:
         """The part nearest ``near_xy``; a later view replaces the choice only when it decided
@@ -118,18 +193,6 @@ class Look:
 
     def _none_found(self) -> str | None:
         return None if self.result is not None else "no part found in the bin"
-
-    def _second_view_xy(self) -> tuple[float, float]:
-        d = self.result
-        if d is None or d.open_end_seen:  # decided: look again from where it is
-            return float(self._view_xy[0]), float(self._view_xy[1])
-        u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-        # From beyond an end, that end's face is in sight; take the end nearer the robot,
-        # where the arm reaches.
-        offset = self.params.second_offset
-        ends = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
-        xy = min(ends, key=lambda e: float(np.hypot(e[0], e[1])))
-        return float(xy[0]), float(xy[1])
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()

@@ -52,3 +52,29 @@ def test_learned_weights_that_do_not_exist_exit_2(tmp_path: Path, capsys) -> Non
     code = main(["perceive", *argv, "--json", str(tmp_path / "p.json")])
     err = capsys.readouterr().err
     assert code == 2 and "nope.pt" in err, err
+
+
+def test_random_fill_splits_by_part_and_situation(tmp_path: Path, capsys) -> None:
+    """Parts tipped in: every scored part is in one kind's row and one situation's row, and the
+    one-ended parts found are counted for the open end."""
+    out = tmp_path / "r.json"
+    argv = ["perceive", "--scenes", "1", "--seed", "7001", "--fill", "random", "--parts", "6"]
+    assert main([*argv, "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["fill"] == "random" and data["second_view"] is True
+    left_out = sum(data["not_lying"].values())
+    assert data["parts"] + left_out == 6
+    for key in ("by_part", "by_situation"):
+        assert sum(r["parts"] for r in data[key].values()) == data["parts"]
+        assert sum(r["found"] for r in data[key].values()) == data["found"]
+    assert set(data["by_situation"]) <= {"free", "touching", "wall", "leaning", "on_top"}
+    assert data["open_end_decided_right"] <= data["open_end_decided"]
+    assert data["open_end_decided"] <= data["open_end_one_ended_parts"]
+    assert "by situation" in capsys.readouterr().out
+
+
+def test_unknown_part_exits_2(tmp_path: Path, capsys) -> None:
+    argv = ["perceive", "--scenes", "1", "--seed", "1", "--part", "teapot"]
+    code = main([*argv, "--json", str(tmp_path / "p.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "--part" in err and "teapot" in err, err

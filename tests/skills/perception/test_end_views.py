@@ -1,0 +1,85 @@
+"""The open end of a cup judged from views beyond its ends (rendered, noisy frames; the
+simulator's pose only sets the scene and scores)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cell.catalogue import load_catalogue
+from drivers.layout import CellLayout
+from sim.camera import SimCamera, default_tool_T_camera
+from sim.cell_layout import build_cell
+from sim.part_body import lying_pose, spawn_part
+from sim.scenes import look_down_pose
+from sim.world import SimWorld
+from skills.perception.bin_parts import combine_end_views, detect_parts, open_end_from_view
+from skills.perception.look import LookParams, end_views
+
+CATALOGUE = load_catalogue()
+PARTS = [p for p in CATALOGUE.parts.values() if p.rigid]
+LAYOUT = CellLayout()
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@pytest.mark.parametrize("name", ["plastic_cup", "cookie_can", "medicine_bottle"])
+def test_both_end_views_find_the_open_end_of_a_part_the_wide_view_leaves_undecided(
+    name: str,
+) -> None:
+    part = CATALOGUE.get(name)
+    yaw = 0.4  # the part's +x (open) end
+    x, y = LAYOUT.bin_center  # right under the wide view: neither end face in sight
+    mount = default_tool_T_camera()
+    params = LookParams()
+    with SimWorld(seed=3) as world:
+        build_cell(world, LAYOUT)
+        spawn_part(world, part, lying_pose(part, x, y, yaw))
+        for _ in range(100):
+            world.step()
+        view = [look_down_pose((x, y), params.view_height, mount)]
+        cam = SimCamera(world, lambda: view[0], tool_T_camera=mount)
+        roi = LAYOUT.bin_interior()
+        (det,) = detect_parts(cam.capture(), cam.intrinsics(), view[0] @ mount, PARTS, roi)
+        assert det.part == name and not det.open_end_seen
+        judged = []
+        for xy in end_views(det, params.second_offset, roi, [det]):
+            view[0] = look_down_pose(xy, params.second_height, mount)
+            judged.append(
+                open_end_from_view(det, part, cam.capture(), cam.intrinsics(), view[0] @ mount, roi)
+            )
+    assert all(j.open_end_seen for j in judged)  # each end shows what it is
+    for j in judged:
+        assert abs(_wrap(j.yaw - yaw)) < math.radians(5.0)
+    both = combine_end_views(det, judged)
+    assert both.open_end_seen and abs(_wrap(both.yaw - yaw)) < math.radians(5.0)
+
+
+def test_end_views_that_disagree_leave_the_end_undecided() -> None:
+    c = np.array([0.45, 0.0, 0.02])
+    det = _det(c, 0.0, seen=False)
+    one, other = _det(c, 0.0, seen=True), _det(c, math.pi, seen=True)
+    assert combine_end_views(det, [one, other]) is det
+    assert combine_end_views(det, [one, _det(c, 0.0, seen=False)]) is one
+    assert combine_end_views(det, []) is det
+
+
+def test_the_end_view_with_room_in_front_comes_first() -> None:
+    x0, x1, y0, y1 = LAYOUT.bin_interior()
+    # A part along x with its -x end 1 cm from the wall: its +x end is the one to look at.
+    det = _det(np.array([x0 + 0.01 + 0.08, 0.0, 0.03]), math.pi, seen=False, length=0.16)
+    first, second = end_views(det, 0.10, (x0, x1, y0, y1), [det])
+    assert first[0] > det.center[0] > second[0]
+
+
+def _det(center, yaw, seen, length=0.073):  # type: ignore[no-untyped-def]
+    from skills.perception.bin_parts import Detection
+
+    base = Detection(center, yaw, length, 0.048, "plastic_cup", center, seen, 0.9, 1000)
+    end = center + 0.5 * length * np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    return replace(base, open_end=end)
