@@ -51,6 +51,9 @@ class Detection:
     open_end_seen: bool  #: True when the end was decided (tube, or its inside was seen)
     confidence: float  #: 0..1, from the fit's agreement with the matched part
     pixels: int
+    #: not level on the floor (fitted as leaning): the end tests assume a part level on the
+    #: floor, so its open end is never judged (a wrong end is worse than none)
+    tilted: bool = False
 
     def pick(self) -> tuple[tuple[float, float], float]:
         """The grasp target the pivot planner needs: (open end x, y) and the axis yaw."""
@@ -765,6 +768,7 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
         open_end_seen=seen,
         confidence=conf * (1.0 if seen else 0.5),
         pixels=len(seg.idx),
+        tilted=placed.tilted,
     )
 
 
@@ -861,7 +865,11 @@ def open_end_from_view(
     taken beyond one of its ends: that end's inside seen through the opening makes it the open
     one, its closed face the other. The part is not looked for again (a close view may hold
     only part of it): its place from ``det`` is where the end is looked at. Unchanged when this
-    view does not decide either."""
+    view does not decide either, or when ``det`` was fitted as leaning (``tilted``): seen
+    from beside, a raised end's face and the floor under it read like an end looked into (on
+    the tuning scenes half the leaning parts' ends so judged were wrong)."""
+    if det.tilted:
+        return det
     try:
         hm = height_map(frame, intr, world_T_camera, roi)
     except PerceptionInputError:  # a view mostly outside the bin: it shows nothing of the end

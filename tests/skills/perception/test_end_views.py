@@ -46,13 +46,14 @@ def test_both_end_views_find_the_open_end_of_a_part_the_wide_view_leaves_undecid
         cam = SimCamera(world, lambda: view[0], tool_T_camera=mount)
         roi = LAYOUT.bin_interior()
         (det,) = detect_parts(cam.capture(), cam.intrinsics(), view[0] @ mount, PARTS, roi)
-        assert det.part == name and not det.open_end_seen
-        judged = []
+        assert det.part == name and not det.open_end_seen and not det.tilted
+        judged, leaning = [], replace(det, tilted=True)
         for xy in end_views(det, params.second_offset, roi, [det]):
             view[0] = look_down_pose(xy, params.second_height, mount)
-            judged.append(
-                open_end_from_view(det, part, cam.capture(), cam.intrinsics(), view[0] @ mount, roi)
-            )
+            frame, pose = cam.capture(), view[0] @ mount
+            judged.append(open_end_from_view(det, part, frame, cam.intrinsics(), pose, roi))
+            # The same view never judges the end of a part the fit found leaning.
+            assert open_end_from_view(leaning, part, frame, cam.intrinsics(), pose, roi) is leaning
     assert all(j.open_end_seen for j in judged)  # each end shows what it is
     for j in judged:
         assert abs(_wrap(j.yaw - yaw)) < math.radians(5.0)
