@@ -125,9 +125,7 @@ def test_a_closed_end_face_shows_about_what_a_whole_face_would() -> None:
     assert open_end_from_view(det, part, frame, cam.intrinsics(), pose, roi, strict) is det
 
 
-def _end_points(
-    part, inside: int, face: int, seed: int = 0
-):  # type: ignore[no-untyped-def]
+def _end_points(part, inside: int, face: int, seed: int = 0):  # type: ignore[no-untyped-def]
     """Points around the +x end of ``part`` centred at the origin along x: ``inside`` low ones
     in the band just within the end (what a view into an opening sees), ``face`` on the middle
     of the end face, and the part's crest (its top line) that places the end."""
