@@ -370,7 +370,7 @@ def _render(
             kinds = {p.name: p for p in parts}
             for k, d in enumerate(dets):
                 part = kinds.get(d.part or "")
-                if part is None or part.open_ends != 1 or d.open_end_seen:
+                if part is None or part.open_ends != 1 or d.open_end_seen or d.tilted:
                     continue
                 # The Look's views beyond both ends; decided where those that decide agree.
                 judged = []

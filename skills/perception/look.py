@@ -133,12 +133,13 @@ class Look:
 
     def _beyond_end(self, which: int) -> None:
         """The camera beyond the chosen part's ``which`` end (0: the better place); where the
-        open end is decided (or nothing is chosen) it stays where it is."""
-        if self._undecided is None and self.result is not None and not self.result.open_end_seen:
-            self._undecided = self.result
+        open end is decided, the part leans or nothing is chosen: one closer look from above."""
+        r = self.result
+        if self._undecided is None and r is not None and not r.open_end_seen and not r.tilted:
+            self._undecided = r  # a leaning part's end is never judged: no view of its ends
         p, d = self.params, self._undecided
         if d is None:
-            if which == 0:  # decided in the wide view: look again, closer, from above it
+            if which == 0:  # decided (or leaning): look again, closer, from above it
                 target = camera_over(self._view_xy, p.second_height, self.dev)
                 self.dev.arm.move_to(target, p.speed, p.acceleration)
             return

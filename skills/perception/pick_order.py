@@ -28,9 +28,7 @@ def clearance(
     each part taken as its axis thickened by half its outer size."""
     pts = _axis_points(d)
     x0, x1, y0, y1 = roi
-    walls = np.minimum.reduce(
-        [pts[:, 0] - x0, x1 - pts[:, 0], pts[:, 1] - y0, y1 - pts[:, 1]]
-    )
+    walls = np.minimum.reduce([pts[:, 0] - x0, x1 - pts[:, 0], pts[:, 1] - y0, y1 - pts[:, 1]])
     gap = float(walls.min()) - 0.5 * d.outer
     for o in others:
         if o is d:
