@@ -45,6 +45,7 @@ VALID: dict[str, list[str]] = {
     "schema": ["schema", "--out", "{J}"],
     "soak": ["soak", "--cycles", "1", "--json", "{J}"],
     "init": ["init", "{D}"],
+    "emulate": ["emulate", "--report", "{J}"],
 }
 SUFFIX = {"{J}": "x.json", "{G}": "x.gif", "{D}": "folder", "{Y}": "layout.yaml", "{W}": "w.pt"}
 

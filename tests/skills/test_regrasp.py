@@ -4,7 +4,6 @@ one trial in the twin that ends in the hole grasp, judged from the simulated sta
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -147,11 +146,8 @@ def test_regrasp_trial_in_the_twin_ends_in_the_hole_grasp() -> None:
     )
     setup, _, _ = build_setup(ns)
     probe = GripperProbe()
-    t0 = time.perf_counter()
     result = run_regrasp_trial(setup, 100, on_frame=probe, frame_every=1)
-    wall = time.perf_counter() - t0
     assert result.success, result.failure
     assert result.tilt_deg < 10.0 and result.height_m > 0.01
     assert probe.tact_time is not None and 10.0 < probe.tact_time < result.sim_time
     assert probe.sweep.volume_cm3 > 1000.0
-    assert wall < 30.0

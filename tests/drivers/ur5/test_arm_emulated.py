@@ -120,7 +120,10 @@ def test_a_path_does_not_block_the_tick_and_ends_done(connect) -> None:
     t0 = time.perf_counter()
     arm.move_path(waypoints, 0.1, 0.5)
     blocked = time.perf_counter() - t0
-    assert blocked < 0.5 * TICK, f"move_path blocked the tick for {blocked * 1e3:.1f} ms"
+    # The upload used to wait for the re-started script (about 200 ms against the emulator,
+    # unbounded if it never starts); now it returns at once. 100 ms leaves room for a loaded
+    # machine's scheduling without letting the old wait through.
+    assert blocked < 0.1, f"move_path blocked the tick for {blocked * 1e3:.1f} ms"
     state = run_until(arm, lambda: arm.status().state is not MotionState.MOVING, 8.0)
     assert state is MotionState.DONE, arm.status().message
     assert arm.tool_pose().distance(waypoints[-1])[0] < 0.002
