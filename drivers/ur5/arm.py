@@ -119,6 +119,10 @@ class UR5Settings:
     stop_deceleration: float = 10.0
     #: s: the longest wait for an uploaded control script to run (a path's upload, recover())
     script_start_timeout: float = 5.0
+    #: s: the controller's data packages (their ``timestamp``) may stop advancing this long
+    #: before the link counts as lost. A pulled cable rarely closes the socket (no FIN from a
+    #: dead peer), so ur_rtde may go on reporting "connected" over a silent link.
+    data_timeout: float = 0.5
     #: Force mode, non-compliant axes: allowed deviation from the programmed pose (m, m, m,
     #: rad, rad, rad).
     force_deviation: tuple[float, ...] = (0.01, 0.01, 0.01, 0.05, 0.05, 0.05)
@@ -145,6 +149,8 @@ class UR5Settings:
             raise ValueError("reconnect_attempts must be >= 1")
         if self.script_start_timeout <= 0:
             raise ValueError("script_start_timeout must be > 0 s")
+        if self.data_timeout <= 0:
+            raise ValueError("data_timeout must be > 0 s")
 
 
 def pose_to_vector(pose: Pose) -> list[float]:
@@ -344,6 +350,14 @@ class UR5Arm:
                 self._attempts = 0
                 self._next_attempt = self._clock.now()
 
+    def _data_stale(self) -> bool:
+        """True when the controller's timestamp has not moved for ``data_timeout`` s."""
+        stamp, now = float(self._rtde.timestamp()), self._clock.now()
+        if stamp != getattr(self, "_stamp", None):
+            self._stamp, self._stamp_seen = stamp, now
+            return False
+        return now - self._stamp_seen > self.settings.data_timeout
+
     def _health(self) -> tuple[str, bool] | None:
         """What stops the arm right now, ``(reason, protective_stop)``; None when healthy."""
         if self._link_lost:
@@ -353,6 +367,13 @@ class UR5Arm:
         try:
             if not self._rtde.is_connected():
                 self._lose_link("RTDE link down")
+                self._maybe_reconnect()
+                if self._link_lost:
+                    return self._link_message(), False
+            if self._data_stale():
+                self._lose_link(
+                    f"RTDE data stale: no new package for {self.settings.data_timeout:g} s"
+                )
                 self._maybe_reconnect()
                 if self._link_lost:
                     return self._link_message(), False

@@ -122,6 +122,10 @@ class RTDEAdapter(Protocol):
         """``getRobotMode()``; names in :data:`drivers.ur5.arm.ROBOT_MODES`."""
         ...
 
+    def timestamp(self) -> float:
+        """``getTimestamp()``: the controller's time (s) of the newest data package."""
+        ...
+
 
 #: What the receive side subscribes to: only what the driver reads, so the recipe also works on
 #: controllers whose software lacks some of ur_rtde's default outputs (its default list asks for
@@ -283,3 +287,6 @@ class URRTDEAdapter:
 
     def robot_mode(self) -> int:
         return int(self._receive.getRobotMode())
+
+    def timestamp(self) -> float:
+        return float(self._receive.getTimestamp())

@@ -147,6 +147,13 @@ class RecordingAdapter:
         self._rec("robot_mode")
         return self.mode
 
+    def timestamp(self) -> float:
+        """The controller's clock: a new package at every read unless ``data_frozen`` (a
+        silent link that still looks connected)."""
+        if not getattr(self, "data_frozen", False):
+            self._stamp = getattr(self, "_stamp", 0.0) + 0.008
+        return getattr(self, "_stamp", 0.0)
+
 
 class FakeClock:
     """Time that moves only when a test says so."""

@@ -511,3 +511,20 @@ def test_a_path_whose_script_never_starts_faults_after_the_timeout() -> None:
     st = arm.status()
     assert st.state is MotionState.FAULT and "did not start within 2 s" in st.message
     assert stuck[-1] == rtde.drop_control  # the stuck interface is given up, off the tick
+
+
+def test_a_silent_link_that_still_looks_connected_is_lost_after_the_data_timeout() -> None:
+    """A pulled cable seldom closes the socket: ur_rtde says connected while no package comes.
+    The controller's timestamp standing still for data_timeout is the lost link."""
+    arm, rtde, clock = make(UR5Settings(data_timeout=0.5, reconnect_attempts=1))
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert arm.status().state is MotionState.MOVING
+    rtde.data_frozen = True
+    for _ in range(60):  # 0.48 s of ticks: not yet
+        clock.t += 0.008
+        assert arm.status().state is MotionState.MOVING
+    for _ in range(5):
+        clock.t += 0.008
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "RTDE data stale" in st.message

@@ -146,7 +146,9 @@ def test_recover_returns_with_the_script_running_and_the_watchdog_armed(
 
 def test_after_a_cable_pull_the_link_comes_back_at_the_configured_rate_with_the_watchdog(
         connect, emulator: URAloneProcess) -> None:
-    settings = UR5Settings(frequency=50.0, watchdog_hz=5.0, reconnect_first_delay=0.2)
+    # Attempts enough to outlast a loaded machine's slow script start after the plug.
+    settings = UR5Settings(frequency=50.0, watchdog_hz=5.0, reconnect_first_delay=0.2,
+                           reconnect_attempts=12, reconnect_max_delay=1.0)
     arm = connect(settings)
     before = len(emulator.requested_frequencies())
     emulator.pull_cable()
