@@ -18,7 +18,7 @@ Blackboard keys, each written by one behaviour only:
 from __future__ import annotations
 
 import math
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections.abc import Iterator
 from typing import Any, Protocol
 
 import numpy as np
@@ -204,10 +204,6 @@ def location_key(xy: Any) -> tuple[int, int]:
     return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
 
 
-#: One worker for the planning that must not run inside a tick (numpy releases the GIL).
-_PLANNER = ThreadPoolExecutor(max_workers=1, thread_name_prefix="plan-pick")
-
-
 class PlanPick(Behaviour):
     """Choose the part to pick from the detections and the pivot frame the skills use.
 
@@ -227,27 +223,26 @@ class PlanPick(Behaviour):
         self.bb.register_key(key="/part/target", access=common.Access.WRITE)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.WRITE)
         self.bb.set("/cell/bin_empty", False)
-        #: the clearance sweeps run off the tick (tens of milliseconds a part); the leaf stays
-        #: RUNNING until they are done, so no tick blocks on them
-        self._work: Future | None = None
+        #: the clearance sweeps (tens of milliseconds a part) are spread over ticks, one part
+        #: a tick, the leaf RUNNING meanwhile: no tick waits for the whole bin's
+        self._work: Iterator[None] | None = None
         self._pending: tuple | None = None
+        self._found: tuple[dict, dict] = ({}, {})
 
     def initialise(self) -> None:
         self._work, self._pending = None, None
 
     def terminate(self, new_status: Status) -> None:
-        if self._work is not None and new_status == Status.INVALID:
-            self._work.cancel()
         self._work = None
 
     def update(self) -> Status:
         if self._work is not None:
-            if not self._work.done():
+            if next(self._work, StopIteration) is not StopIteration:
                 self.feedback_message = "plan pick: checking where the pivot's gripper goes"
                 return Status.RUNNING
-            work, self._work = self._work, None
+            self._work = None
             assert self._pending is not None
-            return self._choose(*self._pending, *work.result())
+            return self._choose(*self._pending, *self._found)
         ctx = self.ctx
         dets: list[Detection] = (
             self.bb.get("/part/detections") if self.bb.exists("/part/detections") else []
@@ -279,7 +274,8 @@ class PlanPick(Behaviour):
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         self._pending = (usable, dets, left, skipped)
-        self._work = _PLANNER.submit(self._clearances, usable, dets, left)
+        self._found = ({}, {})
+        self._work = self._clearances(usable, dets, left, *self._found)
         self.feedback_message = "plan pick: checking where the pivot's gripper goes"
         return Status.RUNNING
 
@@ -319,11 +315,17 @@ class PlanPick(Behaviour):
         return Status.SUCCESS
 
     def _clearances(
-        self, usable: list[Detection], dets: list[Detection], left: list[dict[str, str]]
-    ) -> tuple[dict[int, PivotFrame], dict[int, RepositionPlan]]:
-        """Which usable parts a pivot clears as they lie (with the end to use), and which a drag
-        would free (keyed by ``id`` of the detection); the rest go to ``left`` with what is in
-        the way. Walls from the configured layout, neighbours from this look's detections."""
+        self,
+        usable: list[Detection],
+        dets: list[Detection],
+        left: list[dict[str, str]],
+        clear: dict[int, PivotFrame],
+        drags: dict[int, RepositionPlan],
+    ) -> Iterator[None]:
+        """Fill ``clear`` with the usable parts a pivot clears as they lie (with the end to use)
+        and ``drags`` with those a drag would free (keyed by ``id`` of the detection); the rest
+        go to ``left`` with what is in the way. One part per step of the iteration. Walls from
+        the configured layout, neighbours from this look's detections."""
         ctx = self.ctx
         g = ctx.geometry
         pivot = ctx.section("pivot")
@@ -331,9 +333,8 @@ class PlanPick(Behaviour):
         width = ctx.devices.gripper.finger_width
         walls = bin_walls(g.bin_roi, g.bin_floor_z, g.bin_wall_height, g.bin_wall_thickness)
         section = ctx.part.section(width)
-        clear: dict[int, PivotFrame] = {}
-        drags: dict[int, RepositionPlan] = {}
         for d in usable:
+            yield  # one part a tick
             neighbours = [
                 lying_part("a neighbour", o.center, o.yaw, o.length, o.outer, g.bin_floor_z)
                 for o in dets
@@ -361,7 +362,6 @@ class PlanPick(Behaviour):
                     "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
                 }
             )
-        return clear, drags
 
 
 def _target_frame(bb: Any) -> PivotFrame:

@@ -567,7 +567,7 @@ def lying(x: float, y: float, yaw: float) -> Detection:
 
 
 def settle(node) -> None:  # type: ignore[no-untyped-def]
-    """Tick a planning leaf until it is done (its sweeps run off the tick)."""
+    """Tick a planning leaf until it is done (its sweeps are spread over ticks)."""
     import time
 
     node.tick_once()
@@ -633,7 +633,7 @@ def test_plan_pick_names_a_part_nothing_frees_and_leaves_it(ctx) -> None:
     assert any(r.startswith("no pivot clears") and "no drag frees it" in r for r in reasons)
 
 
-def test_plan_pick_runs_its_sweeps_off_the_tick(ctx) -> None:
+def test_plan_pick_spreads_its_sweeps_over_ticks(ctx) -> None:
     bb = blackboard()
     bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
     node = lv.PlanPick("plan", ctx)
