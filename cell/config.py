@@ -114,7 +114,12 @@ class GripperDevice(_Section):
 
 
 class FTDevice(_Section):
-    port: str = Field("/dev/ttyUSB1", min_length=1, description="FT300 serial port")
+    port: str = Field(
+        "/dev/ttyUSB1",
+        min_length=1,
+        description="FT300 serial port, or socket://HOST:PORT for a serial device server's raw "
+        "TCP port",
+    )
     baudrate: int = Field(19200, ge=1200, le=1000000)
     slave_id: int = Field(9, ge=1, le=247, description="Modbus unit id (stream start)")
     stale_after_s: float = Field(

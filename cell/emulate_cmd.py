@@ -12,8 +12,9 @@ the UR controller on ``devices.arm.host`` (RTDE 30004, script 30003, dashboard 2
 gripper's URCap socket there too (``devices.gripper.urcap_port``), the 2F-85's Modbus RTU line and
 the FT300's stream on pseudo-terminals whose names the kernel picks, so a symbolic link at
 ``devices.gripper.port`` and ``devices.ft.port`` points at each (made on start, removed on exit;
-an existing file that is not a link is never replaced), the D435's frames on
-``devices.camera.stream``.
+an existing file that is not a link is never replaced) -- or, for a ``devices.ft.port`` of
+``socket://host:port``, the FT300's line on that TCP port as a serial device server serves it --
+and the D435's frames on ``devices.camera.stream``.
 
 One thread owns PyBullet (:class:`sim.emulate.realtime.RealTimeLoop`): each control period it
 runs the UR controller's cycle (which commands the twin's arm) and one twin step; the device
@@ -95,6 +96,17 @@ def _link(path: str, target: str, key: str) -> Path:
     except OSError as exc:
         raise UserError(f"{key}: cannot link {path} to {target}: {exc}") from None
     return link
+
+
+def _socket_url(port: str, key: str) -> tuple[str, int] | None:
+    """``socket://host:port`` (a serial device server's raw TCP port) as (host, port); None
+    for a device path (the emulator links a pseudo-terminal there)."""
+    if not port.startswith("socket://"):
+        return None
+    host, sep, number = port[len("socket://"):].rpartition(":")
+    if not (host and sep and number.isdigit() and 0 < int(number) < 65536):
+        raise UserError(f"{key}: {port} is not socket://HOST:PORT")
+    return host, int(number)
 
 
 class _Wires:
@@ -228,11 +240,16 @@ def cmd_emulate(args: argparse.Namespace) -> int:
             raise UserError(f"devices.gripper.urcap_port: cannot listen on "
                             f"{dev.arm.host}:{dev.gripper.urcap_port}: {exc}") from None
         opened.append(urcap.stop)
-        ft = FT300Emulator(TwinWrist(robot.ft), unit_id=dev.ft.slave_id,
-                           seed=config.sim.seed).start()
+        ft_listen = _socket_url(dev.ft.port, "devices.ft.port")
+        try:
+            ft = FT300Emulator(TwinWrist(robot.ft), unit_id=dev.ft.slave_id,
+                               seed=config.sim.seed, listen=ft_listen).start()
+        except OSError as exc:
+            raise UserError(f"devices.ft.port: cannot listen on {dev.ft.port}: {exc}") from None
         opened.append(ft.close)
         links.append(_link(dev.gripper.port, rtu.port, "devices.gripper.port"))
-        links.append(_link(dev.ft.port, ft.port, "devices.ft.port"))
+        if ft_listen is None:
+            links.append(_link(dev.ft.port, ft.port, "devices.ft.port"))
         wires = _Wires(servers, rtu, urcap, ft, camera)
         schedule = _Schedule(emu.faults)
         return _serve(args, backend, controller, servers, wires, schedule, lock, settings)

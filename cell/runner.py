@@ -310,17 +310,20 @@ class RunResult:
     wall_s: float
     signum: int | None = None
     #: paced runs (`cell run`): the wall-clock period between tick starts (ms): median, p99,
-    #: max, and the jitter |period - 1/control_hz| at the median, p99 and max
+    #: max, the jitter |period - 1/control_hz| at the median, p99 and max, and the periods
+    #: skipped after stalls (the loop resynchronises instead of bursting)
     tick_period_ms: dict[str, float] | None = None
 
 
-def _period_stats(starts: list[float], period: float) -> dict[str, float] | None:
+def _period_stats(starts: list[float], period: float, skipped: int = 0
+                  ) -> dict[str, float] | None:
     if len(starts) < 3:
         return None
     d = np.diff(np.asarray(starts)) * 1e3
     j = np.abs(d - period * 1e3)
     return {
         "ticks": len(starts),
+        "skipped_periods": skipped,
         "period_median_ms": round(float(np.median(d)), 3),
         "period_p99_ms": round(float(np.percentile(d, 99)), 3),
         "period_max_ms": round(float(d.max()), 3),
@@ -370,6 +373,7 @@ class TickLoop:
         tick = 0
         status = "out of time"
         starts: list[float] = []  # wall time of each tick's start (paced runs)
+        skipped = 0  # periods skipped after stalls (paced runs)
         try:
             self.root.setup_with_descendants()
             next_wall = time.monotonic()
@@ -413,9 +417,18 @@ class TickLoop:
                 self.backend.step()
                 if self.realtime:
                     next_wall += self.period
-                    delay = next_wall - time.monotonic()
+                    now = time.monotonic()
+                    delay = next_wall - now
                     if delay > 0:
                         time.sleep(delay)  # the loop paces; behaviours never wait
+                    elif delay <= -self.period:
+                        # A stall (the host, a slow call): the missed periods are skipped and
+                        # counted, and the loop restarts its grid from now. Catching up would
+                        # run the missed ticks back to back, each a control step of ~0 s, and
+                        # a motion's per-tick limits would mean nothing during the burst.
+                        missed = int(-delay // self.period)
+                        skipped += missed
+                        next_wall += missed * self.period
         finally:
             if self.root.status == common.Status.RUNNING:
                 # Out of time or interrupted: halt every running leaf, which stops the arm.
@@ -427,7 +440,7 @@ class TickLoop:
                 signal.signal(s, h)
         return RunResult(
             status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal,
-            _period_stats(starts, self.period) if self.realtime else None,
+            _period_stats(starts, self.period, skipped) if self.realtime else None,
         )
 
 

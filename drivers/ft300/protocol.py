@@ -117,6 +117,11 @@ class FrameParser:
         self._error_span_end = -1  #: stream offset where the last counted damaged frame ends
         self.stats = ParserStats()
 
+    def missing(self) -> int:
+        """Bytes still needed to complete the frame buffered so far (a whole frame when
+        nothing is): what a reader can block for without delaying a sample."""
+        return FRAME_LEN - len(self._buf) if len(self._buf) < FRAME_LEN else 1
+
     def feed(self, data: bytes) -> list[NDArray[np.float64]]:
         """Add bytes; return the samples of the valid frames they completed, oldest first."""
         self._buf += data

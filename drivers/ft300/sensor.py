@@ -144,8 +144,10 @@ class FT300:
         last: Exception | None = None
         for attempt in range(self.open_attempts):
             try:
-                return serial.Serial(self.port, self.baudrate, bytesize=8, parity="N",
-                                     stopbits=1, timeout=0.02, write_timeout=0.5)
+                # serial_for_url: a device path, or a serial device server's raw TCP port
+                # (``socket://host:port``, an RS-485/USB-to-Ethernet gateway) -- same bytes.
+                return serial.serial_for_url(self.port, self.baudrate, bytesize=8, parity="N",
+                                             stopbits=1, timeout=0.02, write_timeout=0.5)
             except (serial.SerialException, OSError, ValueError) as exc:
                 last = exc
                 if attempt < len(delays):
@@ -168,9 +170,10 @@ class FT300:
         try:
             while not self._stopping.is_set():
                 waiting = ser.in_waiting
-                # Block (up to the port timeout) for one byte, then take what is there: a frame is
-                # handled as soon as its last byte lands, without polling delays.
-                data = ser.read(waiting if waiting else 1)
+                # Take what is there, or block (up to the port timeout) for the bytes that end
+                # the frame under way: a frame is handled as soon as its last byte lands, with
+                # one wake-up per frame, not one per byte. (A TCP port's in_waiting is only 0/1.)
+                data = ser.read(waiting if waiting > 1 else self._parser.missing())
                 if not data:
                     continue
                 now = time.monotonic()

@@ -27,6 +27,15 @@ Backend interface (:class:`WrenchBackend`)::
 noiseless sample of the last control step; the twin's own noise and offset are not used, so they
 are not counted twice). It is read from the stream's thread; it touches no PyBullet state.
 
+The line: a pseudo-terminal (the default; point the driver at :attr:`FT300Emulator.port`), or,
+with ``listen=(host, port)``, the raw TCP port of a serial device server (an RS-485/USB-to-Ethernet
+gateway in TCP-server mode: the line's bytes both ways, one client at a time; with no client the
+sensor streams into the void). :attr:`FT300Emulator.port` is then ``socket://host:port``, which
+pyserial's ``serial_for_url`` opens. Why both: on a loaded host the kernel hands pty bytes to the
+reader through a work queue, and on this project's shared 2-core machine that hop alone held
+frames back 0.1-3 s while loopback TCP delivered them in under 2 ms at the 99th percentile
+(docs/emulator.md, "FT300 stale").
+
 Wire faults: :meth:`FT300Emulator.pull_cable` takes the sensor off the line (its cable carries
 power: nothing is sent, what arrives is lost); :meth:`FT300Emulator.restore` plugs it back, and
 it comes up as after power-up: a Modbus slave with a new offset, silent until a start request.
@@ -36,6 +45,7 @@ from __future__ import annotations
 
 import os
 import select
+import socket
 import struct
 import threading
 import time
@@ -120,6 +130,7 @@ class FT300Emulator:
         force_offset: float = 3.0,
         moment_offset: float = 0.1,
         seed: int = 0,
+        listen: tuple[str, int] | None = None,
     ) -> None:
         if rate_hz <= 0:
             raise ValueError("rate_hz must be > 0")
@@ -128,10 +139,20 @@ class FT300Emulator:
         self._offset_range = np.array([force_offset] * 3 + [moment_offset] * 3)
         self._rng = np.random.default_rng(seed)
         self.offset = self._power_up_offset()
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
-        self.port = os.ttyname(self._slave)
+        self._listener: socket.socket | None = None
+        self._client: socket.socket | None = None
+        if listen is None:
+            self._master, self._slave = os.openpty()
+            tty.setraw(self._slave)
+            os.set_blocking(self._master, False)
+            self.port = os.ttyname(self._slave)
+        else:
+            self._master = self._slave = -1
+            self._listener = socket.create_server(listen)
+            self._listener.setblocking(False)
+            host, port = self._listener.getsockname()[:2]
+            self.port = f"socket://{host}:{port}"
+        self.clients = 0  #: TCP clients accepted (the pty has none)
         self._stop = threading.Event()
         self._cut = threading.Event()
         self.streaming = threading.Event()
@@ -157,10 +178,14 @@ class FT300Emulator:
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
         for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        for sock in (self._client, self._listener):
+            if sock is not None:
+                sock.close()
 
     def __enter__(self) -> FT300Emulator:
         return self.start()
@@ -191,18 +216,49 @@ class FT300Emulator:
 
     # --- the line ---------------------------------------------------------------------------
 
+    def _line(self) -> int:
+        """The line's file descriptor now: the pty's master, the TCP client's socket, or -1
+        (a gateway with no client: what the sensor sends is lost)."""
+        if self._listener is None:
+            return self._master
+        return self._client.fileno() if self._client is not None else -1
+
+    def _accept(self) -> None:
+        """Take a waiting TCP client; it replaces the one before (a gateway serves one)."""
+        assert self._listener is not None
+        try:
+            conn, _ = self._listener.accept()
+        except (BlockingIOError, OSError):
+            return
+        conn.setblocking(False)
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        if self._client is not None:
+            self._client.close()
+        self._client = conn
+        self.clients += 1
+
+    def _hang_up(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
     def _write(self, data: bytes) -> bool:
+        fd = self._line()
+        if fd < 0:
+            return False  # no client on the gateway: the bytes go nowhere
         view = memoryview(data)
         deadline = time.monotonic() + 0.2
         while view:
             try:
-                n = os.write(self._master, view)
+                n = os.write(fd, view)
             except BlockingIOError:
                 if time.monotonic() > deadline:
                     return False  # nobody reads: the frame is lost, as on a real line
                 time.sleep(0.001)
                 continue
             except OSError:
+                if self._listener is not None:
+                    self._hang_up()
                 return False
             view = view[n:]
         return True
@@ -216,12 +272,20 @@ class FT300Emulator:
         while not self._stop.is_set():
             streaming = self.streaming.is_set()
             wait = max(0.0, next_t - time.monotonic()) if streaming else 0.01
-            ready, _, _ = select.select([self._master], [], [], wait)
-            if ready:
+            fd = self._line()
+            watch = [fd] if fd >= 0 else []
+            if self._listener is not None:
+                watch.append(self._listener.fileno())
+            ready, _, _ = select.select(watch, [], [], wait)
+            if self._listener is not None and self._listener.fileno() in ready:
+                self._accept()
+            if fd >= 0 and fd in ready and fd == self._line():  # (not a client just replaced)
                 try:
-                    data = os.read(self._master, 4096)
+                    data = os.read(fd, 4096)
                 except (BlockingIOError, OSError):
                     data = b""
+                if not data and self._listener is not None:
+                    self._hang_up()  # the client left (EOF); the sensor itself is unaffected
                 if self._cut.is_set():
                     data = b""
                 for byte in data:

@@ -25,7 +25,7 @@ def emulated_config(tmp_path: Path, extra: str = "") -> Path:
     for old, new in (
         ("host: 127.0.0.1", f"host: {host}"),
         ("port: /tmp/pivot-cell/gripper", f"port: {tmp_path}/dev/gripper"),
-        ("port: /tmp/pivot-cell/ft300", f"port: {tmp_path}/dev/ft300"),
+        ("port: socket://127.0.0.1:50300", f"port: socket://{host}:{free_port(host)}"),
         ("stream: 127.0.0.1:50435", f"stream: {host}:{free_port(host)}"),
         ("tick_log: out/cell_ticks.jsonl", f"tick_log: {tmp_path}/out/cell_ticks.jsonl"),
         ("state_file: out/cell_state.json", f"state_file: {tmp_path}/out/cell_state.json"),

@@ -240,6 +240,30 @@ def test_realtime_paces_the_ticks_at_the_control_rate(ctx) -> None:
     assert time.perf_counter() - t0 >= 9 * 0.01 * 0.9  # 9 waits between 10 ticks
 
 
+
+def test_after_a_stall_the_paced_loop_skips_the_missed_periods_instead_of_bursting(ctx) -> None:
+    """A tick that stalls 10 periods (a slow call, a starved host): the loop must not run the
+    missed ticks back to back; it skips them, counts them and ticks on a fresh grid."""
+    starts: list[float] = []
+
+    def on_update(n: int) -> None:
+        starts.append(time.monotonic())
+        if n == 3:
+            time.sleep(0.2)
+
+    root = Scripted("root", *[Status.RUNNING] * 15, Status.SUCCESS, on_update=on_update)
+    tl, _ = loop(root, ctx, realtime=True)
+    tl.period = 0.02
+    result = tl.run(max_time=10.0)
+    assert result.status == "success"
+    stall_end = starts[3]  # tick 4 starts right after the stall
+    burst = [t for t in starts[3:] if t - stall_end <= 3 * tl.period]
+    # resynchronised: tick 4 at once, then at most one tick per period (a burst would be ~10)
+    assert len(burst) <= 4, [round((t - stall_end) * 1e3, 1) for t in starts[3:]]
+    stats = result.tick_period_ms
+    assert stats is not None and stats["skipped_periods"] >= 5
+
+
 # ------------------------------------------------------------------------------ CellState
 def test_events_are_counted_recorded_with_tick_and_time_and_packing_fills_a_place() -> None:
     state = CellState()

@@ -156,3 +156,21 @@ def test_a_pulled_cable_is_a_lost_stream_for_the_driver_and_the_guard(twin) -> N
         ft.stop()
         emu.close()
         stepper.stop()
+
+
+def test_the_stream_through_a_serial_device_servers_tcp_port(load: FixedLoad) -> None:
+    """``listen=``: the line is a gateway's raw TCP port; the real driver opens it by its
+    ``socket://`` URL (pyserial's serial_for_url), starts the stream with the manual's request
+    and reads the load; a second client replaces the first, as a one-client gateway does."""
+    with FT300Emulator(load, seed=5, listen=("127.0.0.1", 0)) as emu:
+        assert emu.port.startswith("socket://127.0.0.1:")
+        with FT300(emu.port, stale_after=0.5, bias_samples=50) as ft:
+            assert wait_for(lambda: ft.stats()["frames"] >= 60, timeout=5.0)
+            near(ft.raw_mean(), load.load + emu.offset, 0.05, 0.005)
+            assert ft.stats()["crc_errors"] == 0
+            rate = ft.stats()["rate_hz"]
+            assert 80.0 <= rate <= 110.0, rate
+        assert wait_for(lambda: not emu.streaming.is_set(), timeout=2.0)  # the 0xFF run stopped it
+        with FT300(emu.port, stale_after=0.5) as ft:
+            assert wait_for(lambda: ft.stats()["frames"] >= 5, timeout=5.0)
+        assert emu.clients == 2
