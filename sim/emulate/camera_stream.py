@@ -178,10 +178,13 @@ class CameraStreamServer:
         its frame carries exactly that timestamp, as a camera's hardware clock does. A render
         that overruns its slot drops the slots it covered (the next frame takes the next slot
         not yet begun), so the stamps stay on the fps grid: librealsense's syncer expects
-        frames every 1000 / fps ms. Each client's clock starts with its stream (its connection),
-        as a camera's starts when the host starts it: stamped with this machine's monotonic
-        time (hours, in ms) the syncer paired 1 capture in 8 at 30 fps, and with stamps 12 s
-        into the stream it paired none for the first 9 s (librealsense 2.5x, measured)."""
+        frames every 1000 / fps ms. Each client's clock and frame counter start with its stream
+        (its connection), as a camera's start when the host starts it: stamped with this
+        machine's monotonic time (hours, in ms) the syncer paired 1 capture in 8 at 30 fps; with
+        stamps 12 s into the stream it paired none for the first 9 s; and with the stamps
+        restarted but the frame numbers carried on from an earlier client (the 223rd frame
+        first) it paired 1 in 5 s at 6 fps, against the first pair after one period when the
+        numbers start at 1 (librealsense 2.5x, measured)."""
         period = 1.0 / self.fps
         t0 = time.monotonic()
         k = 0
@@ -202,10 +205,12 @@ class CameraStreamServer:
             with self._lock:
                 clients = [(c, self._started.get(c, slot)) for c in self._clients]
             for c, started in clients:
-                # This client's stream clock: on the slot grid, from about one period at its start.
-                stamp_ms = (slot - started) * 1000.0 + period * 1000.0
+                # This client's stream clock: on the slot grid, from about one period at its start,
+                # and its frame counter with it (slot 1, 2, ...; dropped slots skip numbers).
+                n = max(1, round((slot - started) / period) + 1)
+                stamp_ms = n * period * 1000.0
                 try:
-                    c.sendall(encode_frame(self.frame_number, stamp_ms, z16, rgb))
+                    c.sendall(encode_frame(n, stamp_ms, z16, rgb))
                 except OSError:
                     with self._lock:
                         if c in self._clients:

@@ -160,3 +160,30 @@ def test_the_cell_opens_the_streamed_camera_named_in_its_configuration(
         np.testing.assert_allclose(cam.tool_T_camera().position, [0.0, -0.08, -0.05])
     finally:
         cam.stop()
+
+
+def test_a_client_joining_a_running_stream_gets_pairs_at_once(pattern: Pattern) -> None:
+    # A cell that reconnects (or a `cell run` after `cell check-hardware`) joins a stream that
+    # has sent frames for a while. Its camera's counter starts with its stream, as a D435's does
+    # when the host starts it: frame numbers carried on from the first client's stream kept
+    # librealsense's syncer from pairing depth with colour for seconds.
+    import socket
+
+    from drivers.realsense.stream import read_frame, read_info
+
+    with CameraStreamServer(pattern, fps=30, serial="EMU0435") as s:
+        first = RealSenseD435.from_stream(s.host, s.port, timeout_ms=1000)
+        try:
+            assert wait_for(lambda: s.frames_sent >= 150, 10.0)
+        finally:
+            first.stop()
+        with socket.create_connection((s.host, s.port), timeout=2.0) as raw:
+            info = read_info(raw)
+            numbers = [read_frame(raw, info)[0] for _ in range(3)]
+        assert 1 <= numbers[0] <= 3 and numbers == sorted(numbers)
+        second = RealSenseD435.from_stream(s.host, s.port, timeout_ms=500)
+        try:
+            for _ in range(3):
+                assert second.capture().rgb.shape == (H, W, 3)
+        finally:
+            second.stop()
