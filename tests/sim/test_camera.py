@@ -148,3 +148,39 @@ def test_intrinsics_helper_and_bad_range() -> None:
     assert k.fy == pytest.approx(240 / math.tan(math.radians(21.0)))
     with SimWorld() as world, pytest.raises(ValueError, match="near"):
         SimCamera(world, Pose, near=0.5, far=0.2)
+
+
+def test_links_crossing_the_near_plane_are_left_out_and_restored() -> None:
+    # The eye-in-hand camera at a low, tilted grasp pose (joint angles read from an emulated
+    # cell's Grasp): the finger boxes' bases lie in the camera's plane. TinyRenderer does not
+    # clip at the near plane, so such a face is left out of the frame (and drawn again after).
+    from sim.robot import SimRobot
+
+    with SimWorld(seed=1) as world:
+        robot = SimRobot(world)
+        p = world.p
+        for j, q in zip(range(1, 7), (2.9348, -1.3795, 1.9178, -1.8303, -1.6298, 1.3677)):
+            p.resetJointState(robot.body_id, j, q)
+        names = {p.getJointInfo(robot.body_id, j)[12].decode(): j
+                 for j in range(p.getNumJoints(robot.body_id))}
+        fingers = {names["finger_a"], names["finger_b"]}
+        for j in fingers:
+            p.resetJointState(robot.body_id, j, 0.04)
+        floor = _box(world, [0.4, 0.4, 0.025], [0.45, 0.0, -0.225], [0.5, 0.5, 0.5, 1.0])
+        cam = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()),
+                        intrinsics=d435_intrinsics(64, 48), noise=None)
+        rgba = {v[1]: v[7] for v in p.getVisualShapeData(robot.body_id)}
+        hidden = cam._hide_links_crossing_near(cam.world_T_camera())
+        try:
+            assert fingers <= {link for body, link in hidden if body == robot.body_id}
+            assert all(body == robot.body_id for body, _ in hidden)  # not the floor 0.2 m off
+            assert all(v[7][3] == 0.0 for v in p.getVisualShapeData(robot.body_id)
+                       if v[1] in fingers)
+        finally:
+            for body, link in hidden:
+                p.changeVisualShape(body, link, rgbaColor=cam._colours[(body, link)])
+        n = cam.links_hidden
+        _, depth = cam.render(cam.world_T_camera())
+        assert cam.links_hidden == 2 * n  # the same links, once more
+        assert {v[1]: v[7] for v in p.getVisualShapeData(robot.body_id)} == rgba  # drawn again
+        assert (depth > 0).mean() > 0.9 and floor >= 0  # the floor below is seen
