@@ -256,6 +256,19 @@ def open_hardware(prep: Any) -> HardwareBackend:
             "devices",
             "start-up checks failed, nothing moved: " + "; ".join(problems),
         )
+    # The wrist sensor reads the tool's weight and the puck's power-up offset until it is zeroed;
+    # the twin zeroes its sensor once when it is built, at rest, and the guards' limits and the
+    # pivot's compliance thresholds are set on readings zeroed so. Here the arm has not moved
+    # since it was found at rest by its check. Without it the emulated cell's Tilt started from
+    # an offset of 9-13 N and aborted on its force limit at every try.
+    try:
+        opened["ft"].bias()
+    except (DeviceError, RuntimeError) as exc:
+        for name, dev in opened.items():
+            _close(name, dev)
+        raise ConfigError(prep.doc.source, prep.doc.line_of(("devices",)), "devices",
+                          f"start-up checks failed, nothing moved: zeroing the wrist sensor: "
+                          f"{exc}") from None
     devices = Devices(opened["arm"], opened["gripper"], opened["ft"], clock, opened["camera"])
     machine = TimedMachine(clock, config.workflow.machining_time_s)
     return HardwareBackend(devices, machine, opened)

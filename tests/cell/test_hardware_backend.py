@@ -23,6 +23,9 @@ class _Dev:
     def stop(self) -> None:
         self.calls.append("stop")
 
+    def bias(self) -> None:
+        self.calls.append("bias")
+
     def close(self) -> None:
         self.calls.append("close")
 
@@ -67,6 +70,7 @@ def test_a_failed_check_refuses_the_run_and_closes_what_was_opened(monkeypatch) 
     assert made["arm"].calls[-2:] == ["stop", "close"]  # the arm stopped, then closed
     assert made["gripper"].calls[-1] == "disconnect"  # the gripper keeps its state
     assert made["ft"].calls[-1] == "stop"
+    assert "bias" not in made["ft"].calls  # nothing zeroed on a refused start
 
 
 def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
@@ -82,6 +86,8 @@ def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
     monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
     backend = hardware.open_hardware(_prep())
     assert backend.devices.arm is made["arm"] and backend.devices.camera is made["camera"]
+    # The wrist sensor is zeroed once, after every check passed, before the tree runs.
+    assert made["ft"].calls == [("check", False), "bias"]
     assert backend.judge("packed", {}) is None  # no ground truth on a real cell
     backend.close()
     assert made["arm"].calls[-2:] == ["stop", "close"]
