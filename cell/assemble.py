@@ -19,11 +19,11 @@ from py_trees.behaviour import Behaviour
 
 from cell.catalogue import load_catalogue
 from cell.config import CellConfig, skill_settings
+from cell.reach import ur5_reach
 from cell.runner import Backend, CellState
 from drivers.layout import CellLayout
 from drivers.parts import Gripper, Part
 from drivers.pose import Pose
-from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, solve_ik
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, plan_pivot
 from skills.motion import Guard
@@ -121,8 +121,7 @@ def _check_reach(config: CellConfig, doc: LinedDocument, geometry: CellGeometry)
                 )
             )
     for path, what, position in checks:
-        _, residual = solve_ik(Pose(position, DOWN), HOME_JOINTS, iterations=200)
-        if residual > REACH_TOLERANCE:
+        if ur5_reach([Pose(position, DOWN)]) is not None:
             p = position
             key = path if path[-1] in config.cell.layout or path[0] == "devices" else path[:2]
             raise doc.error(
@@ -172,6 +171,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         plan=plan,
         params=params,
         events=state,
+        reach=ur5_reach,
         limits=WorkflowLimits(
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,

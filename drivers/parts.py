@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from drivers.tool import FINGER_LENGTH
+
 HOLE_SHAPES = ("circle", "rectangle")
 
 
@@ -204,7 +206,7 @@ class Gripper:
     finger_width: float = 0.020
     stroke: float = 0.085
     clearance: float = 0.010
-    finger_length: float = 0.055
+    finger_length: float = FINGER_LENGTH  #: the tool's (drivers.tool)
     finger_thickness: float = 0.008  #: from a pad's face to the back of its finger
 
     def __post_init__(self) -> None:

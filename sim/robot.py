@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import ARM_JOINTS, FINGER_LENGTH, HOME_JOINTS, forward_kinematics
+from drivers.tool import FINGER_LENGTH
+from drivers.ur5.kinematics import ARM_JOINTS, HOME_JOINTS, forward_kinematics
 from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
 from sim.gripper import FINGER_NAMES, SimGripper

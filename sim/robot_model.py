@@ -1,8 +1,9 @@
 """The twin's robot: a UR5 with an FT300-like wrist sensor and a 2F-85-like parallel gripper.
 
-This module writes the URDF that PyBullet loads: the arm's chain, limits and tool stack come from
+This module writes the URDF that PyBullet loads: the arm's chain and limits come from
 :mod:`drivers.ur5.kinematics` (the same chain the arm's inverse kinematics and the cell's reach
-check run on, in plain numpy, so that they agree with PyBullet's links exactly); the masses,
+check run on, in plain numpy, so that they agree with PyBullet's links exactly), the tool stack's
+sizes from :mod:`drivers.tool` (the ones the skills' clearance sweeps use); the masses,
 inertias, collision shapes and the gripper's fingers are the twin's own and are set here.
 
 Frames (all SI: m, rad, kg), besides ``base``, ``tool0`` and ``tcp`` of
@@ -12,7 +13,7 @@ Frames (all SI: m, rad, kg), besides ``base``, ``tool0`` and ``tcp`` of
 * Tool axes (``tool0``, ``tcp``): z is the approach (out of the flange, towards the
   fingertips), x the closing axis with ``finger_a`` on +x and ``finger_b`` on -x.
 * ``finger_a`` / ``finger_b``: tool axes, origin at the centre of the pad's inner face where the
-  finger leaves the gripper body (tool z = :data:`drivers.ur5.kinematics.FINGER_BASE_Z`); the
+  finger leaves the gripper body (tool z = :data:`drivers.tool.FINGER_BASE_Z`); the
   pad runs :data:`FINGER_LENGTH` along +z to the tip and is :data:`FINGER_THICKNESS` thick
   outwards. With both fingers at ``q`` the origins are at tool x = +q and -q.
 
@@ -29,17 +30,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, TCP_Z
 from drivers.ur5.kinematics import (
     ARM_CHAIN,
     ARM_JOINTS,
     ARM_LIMIT,
     ARM_VELOCITY,
     BASE_FIXED,
-    FINGER_LENGTH,
-    FT_HEIGHT,
-    GRIPPER_BODY_HEIGHT,
     PI,
-    TCP_Z,
     TOOL0_FIXED,
     JointSpec,
 )
@@ -49,10 +47,8 @@ ARM_MASSES = (3.7, 8.393, 2.275, 1.219, 1.219, 0.1879)
 #: Joint torque limits (N*m), base to wrist 3 (UR5: 150 N*m on the large, 28 N*m on the wrist).
 ARM_EFFORT = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
 
-# Tool stack (its lengths along tool0's z are in drivers.ur5.kinematics).
-FT_RADIUS = 0.0375
+# Tool stack (its sizes are in drivers.tool).
 FT_MASS = 0.3
-GRIPPER_BODY_SIZE = (0.075, 0.035, GRIPPER_BODY_HEIGHT)  # x (closing axis), y, z (approach)
 GRIPPER_BODY_MASS = 0.9
 FINGER_THICKNESS = 0.008  # x
 FINGER_WIDTH = 0.020  # y: the pad width w of the paper's Eq. 2

@@ -28,7 +28,7 @@ from drivers.parts import Part
 from drivers.pose import Pose
 from skills.motion import Guard, Sequence, wait
 from skills.params import guard_field, si
-from skills.pivot.clearance import Obstacle, choose_end, tool_points
+from skills.pivot.clearance import Obstacle, Reach, choose_end, tool_points
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.slot import ContactMove, SequenceSkill, check
@@ -126,10 +126,12 @@ def plan_reposition(
     interior: Seq[float],
     finger_width: float,
     base_xy: Seq[float] = (0.0, 0.0),
+    *,
+    reach: Reach,
 ) -> RepositionPlan | None:
-    """The shortest drag (along the axis, then across it) after which a pivot clears, the
-    pinch clears both here and there, and the part lies inside the bin clear of its
-    neighbours; None when no drag up to ``max_shift`` does."""
+    """The shortest drag (along the axis, then across it) after which a pivot clears (within
+    the arm's ``reach``), the pinch clears both here and there, and the part lies inside the
+    bin clear of its neighbours; None when no drag up to ``max_shift`` does."""
     obstacles = [*walls, *neighbours]
     if not _pinch_clear(frame, part, params, obstacles, finger_width):
         return None
@@ -155,7 +157,7 @@ def plan_reposition(
             if not _pinch_clear(moved, part, params, obstacles, finger_width):
                 continue
             choice = choose_end(moved, pivot, obstacles, finger_width, part.open_ends,
-                                margin=params.plan_margin, base_xy=base_xy)
+                                margin=params.plan_margin, base_xy=base_xy, reach=reach)
             if choice.clearance.clear:
                 return RepositionPlan(frame, moved, shift)
     return None

@@ -346,12 +346,14 @@ class PlanPick(Behaviour):
                 d.yaw,
                 floor_z=g.bin_floor_z,
             )
-            choice = choose_end(frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends)
+            choice = choose_end(
+                frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends, reach=ctx.reach
+            )
             if choice.clearance.clear:
                 clear[id(d)] = choice.frame
                 continue
             move = plan_reposition(
-                frame, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width
+                frame, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width, reach=ctx.reach
             )
             if move is not None:
                 drags[id(d)] = move

@@ -23,6 +23,7 @@ from skills.motion import Guard
 from skills.packing import PackParams
 from skills.perception.look import LookParams
 from skills.pivot import PivotParams
+from skills.pivot.clearance import Reach
 from skills.reposition import RepositionParams
 from skills.slot import SlotParams
 from skills.status import Failure
@@ -111,6 +112,9 @@ class CellContext:
     plan: PivotPlan
     params: PivotParams
     events: Events
+    #: The arm's reach, for the plans that must stay inside it (the cell builds it from its
+    #: arm's kinematics: the tree knows no particular arm).
+    reach: Reach
     limits: WorkflowLimits = field(default_factory=WorkflowLimits)
     #: The safety section's abort force and torque, for leaves whose node gives none.
     default_guard: Guard = field(default_factory=Guard)

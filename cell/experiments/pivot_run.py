@@ -23,11 +23,11 @@ from typing import Any
 import numpy as np
 
 from cell.experiments.stats import wilson_interval
+from cell.reach import ur5_reach
 from drivers.devices import Devices
 from drivers.layout import CellLayout
 from drivers.parts import Part
 from drivers.pose import Pose
-from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, solve_ik
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.judge import PivotWatch, WatchSample, judge
@@ -105,8 +105,7 @@ class TrialSetup:
         z = grasp.rotation[:, 2]
         pre = Pose(grasp.position - params.approach_distance * z, grasp.rotation)
         for name, pose in (("grasp", grasp), ("approach", pre)):
-            _, residual = solve_ik(pose, HOME_JOINTS, iterations=200)
-            if residual > REACH_TOLERANCE:
+            if ur5_reach([pose]) is not None:
                 p = pose.position
                 return (
                     f"the {name} pose at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m is out of the "
@@ -381,7 +380,7 @@ def run_trial(
         width = dev.gripper.finger_width
 
         def choose(f: PivotFrame) -> EndChoice:
-            return choose_end(f, params, walls, width, setup.part.open_ends)
+            return choose_end(f, params, walls, width, setup.part.open_ends, reach=ur5_reach)
 
         choice = choose(frame)
         repositioned = False
@@ -389,7 +388,7 @@ def run_trial(
             # No end clears where the part lies: drag it to where one does, look again.
             move = plan_reposition(
                 frame, setup.part, params, RepositionParams(), walls, [],
-                setup.layout.bin_interior(), width,
+                setup.layout.bin_interior(), width, reach=ur5_reach,
             )
             if move is not None:
                 early, repositioned = "reposition", True

@@ -42,9 +42,9 @@ from cell.experiments.pivot_run import (
 )
 from drivers.arm import MotionState
 from drivers.pose import Pose
-from drivers.ur5.kinematics import FINGER_LENGTH, FT_HEIGHT
+from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
 from sim.robot import SimRobot
-from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH, FT_RADIUS, GRIPPER_BODY_SIZE
+from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH
 from sim.world import SimWorld
 from skills.pivot import PickFromAbove
 from skills.regrasp import Regrasp, RegraspOptions

@@ -17,7 +17,8 @@ Frames (m, rad):
 * ``base``: the robot base frame of :class:`drivers.arm.Arm` (UR ``Base``, z up).
 * ``tool0``: the flange, z out of the flange (the UR tool frame with a zero TCP offset).
 * ``tcp``: between the fingertips on the tool z axis, :data:`TCP_Z` beyond the flange; same axes
-  as ``tool0``. The tool stack along z is the FT300 puck, the 2F-85's body and its fingers.
+  as ``tool0``. The tool stack along z is the FT300 puck, the 2F-85's body and its fingers
+  (their lengths: :mod:`drivers.tool`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from drivers.pose import Pose
+from drivers.tool import TCP_Z
 
 PI = math.pi
 
@@ -47,14 +49,6 @@ ARM_VELOCITY = PI
 #: Joint position limit (rad), symmetric, every arm joint.
 ARM_LIMIT = 2.0 * PI
 
-# The tool stack along tool0's z (m): what puts the TCP where it is.
-FT_HEIGHT = 0.0375  #: the FT300 puck
-GRIPPER_BODY_HEIGHT = 0.090  #: the 2F-85's body, from the puck to where the fingers leave it
-FINGER_LENGTH = 0.055  #: the fingers, hanging below the gripper body
-FINGER_BASE_Z = FT_HEIGHT + GRIPPER_BODY_HEIGHT  #: where the fingers leave the body
-FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH
-#: TCP offset from the flange along tool z (m): 5 mm above the fingertips' end.
-TCP_Z = FINGER_TIP_Z - 0.005
 #: Pose of the TCP in the flange frame ``tool0``.
 TOOL0_T_TCP = Pose(np.array([0.0, 0.0, TCP_Z]), np.eye(3))
 

@@ -49,11 +49,12 @@ import socket
 import struct
 import threading
 import time
-import tty
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
+
+from sim.emulate.rtu import LineDevice, close_fds, crc_ok, open_pty, with_crc
 
 HEADER = b"\x20\x4e"
 DEFAULT_UNIT_ID = 9
@@ -86,20 +87,6 @@ class TwinWrist:
         return np.array(self._ft.sampled_true_load(), dtype=float)
 
 
-def crc16(data: bytes) -> int:
-    """CRC-16 of Modbus RTU (reflected polynomial 0xA001, initial 0xFFFF)."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return crc
-
-
-def _with_crc(body: bytes) -> bytes:
-    return body + crc16(body).to_bytes(2, "little")
-
-
 def counts(reading: NDArray[np.float64]) -> list[int]:
     """The six int16 values of a reading (N, N*m), rounded and saturated."""
     c = np.clip(np.rint(np.asarray(reading, float) * SCALE), -32768, 32767)
@@ -108,10 +95,10 @@ def counts(reading: NDArray[np.float64]) -> list[int]:
 
 def stream_frame(reading: NDArray[np.float64]) -> bytes:
     """One 16-byte stream frame for ``reading`` (N, N*m)."""
-    return _with_crc(HEADER + struct.pack("<6h", *counts(reading)))
+    return with_crc(HEADER + struct.pack("<6h", *counts(reading)))
 
 
-class FT300Emulator:
+class FT300Emulator(LineDevice):
     """The FT300 side of a pseudo-terminal (start it; point a driver at :attr:`port`).
 
     ``backend``: the load; ``unit_id``: its Modbus id; ``rate_hz``: stream frames a second;
@@ -134,6 +121,7 @@ class FT300Emulator:
     ) -> None:
         if rate_hz <= 0:
             raise ValueError("rate_hz must be > 0")
+        super().__init__("emu-ft300")
         self.backend, self.unit_id, self.rate_hz = backend, unit_id, rate_hz
         self._sigma = np.array([force_noise] * 3 + [moment_noise] * 3)
         self._offset_range = np.array([force_offset] * 3 + [moment_offset] * 3)
@@ -142,10 +130,7 @@ class FT300Emulator:
         self._listener: socket.socket | None = None
         self._client: socket.socket | None = None
         if listen is None:
-            self._master, self._slave = os.openpty()
-            tty.setraw(self._slave)
-            os.set_blocking(self._master, False)
-            self.port = os.ttyname(self._slave)
+            self._master, self._slave, self.port = open_pty()
         else:
             self._master = self._slave = -1
             self._listener = socket.create_server(listen)
@@ -153,10 +138,7 @@ class FT300Emulator:
             host, port = self._listener.getsockname()[:2]
             self.port = f"socket://{host}:{port}"
         self.clients = 0  #: TCP clients accepted (the pty has none)
-        self._stop = threading.Event()
-        self._cut = threading.Event()
         self.streaming = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="emu-ft300", daemon=True)
         self.frames_sent = 0
         self.max_gap = 0.0  #: s, the longest time between two frames sent in one stream
         self.late_frames = 0  #: frames sent more than two periods after the one before
@@ -168,34 +150,16 @@ class FT300Emulator:
 
     # --- control ----------------------------------------------------------------------------
 
-    def start(self) -> FT300Emulator:
-        self._thread.start()
-        return self
-
-    def close(self) -> None:
-        """Stop (joined) and close both ends of the pseudo-terminal."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
-        for fd in (self._master, self._slave):
-            if fd >= 0:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
+    def _close_line(self) -> None:
+        """Both ends of the pseudo-terminal, or the gateway's client and listening sockets."""
+        close_fds(self._master, self._slave)
         for sock in (self._client, self._listener):
             if sock is not None:
                 sock.close()
 
-    def __enter__(self) -> FT300Emulator:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def pull_cable(self) -> None:
         """Unplug the sensor: no power, nothing sent, everything arriving lost."""
-        self._cut.set()
+        super().pull_cable()
         self.streaming.clear()
 
     def restore(self) -> None:
@@ -203,11 +167,7 @@ class FT300Emulator:
         if self._cut.is_set():
             self.offset = self._power_up_offset()
             self.power_ups += 1
-        self._cut.clear()
-
-    @property
-    def cable_pulled(self) -> bool:
-        return self._cut.is_set()
+        super().restore()
 
     def reading(self) -> NDArray[np.float64]:
         """What the sensor measures now: the load, its offset and a draw of noise (N, N*m)."""
@@ -321,7 +281,7 @@ class FT300Emulator:
             if len(rx) < n:
                 return
             frame = bytes(rx[:n])
-            if crc16(frame[:-2]) != int.from_bytes(frame[-2:], "little"):
+            if not crc_ok(frame):
                 del rx[:1]
                 continue
             del rx[:n]
@@ -338,7 +298,7 @@ class FT300Emulator:
         unit, fc = frame[0], frame[1]
 
         def error(code: int) -> bytes:
-            return _with_crc(bytes([unit, fc | 0x80, code]))
+            return with_crc(bytes([unit, fc | 0x80, code]))
 
         addr, count = struct.unpack(">HH", frame[2:6])
         if fc in (3, 4):
@@ -346,12 +306,12 @@ class FT300Emulator:
                 return error(0x02), False
             values = counts(self.reading())[addr - FORCE_REGISTER:addr - FORCE_REGISTER + count]
             body = bytes([unit, fc, 2 * count]) + struct.pack(f">{count}h", *values)
-            return _with_crc(body), False
+            return with_crc(body), False
         if fc == 16:
             if addr != STREAM_REGISTER or count != 1:
                 return error(0x02), False
             value = int.from_bytes(frame[7:9], "big")
             if value != STREAM_START:
                 return error(0x03), False
-            return _with_crc(frame[:6]), True
+            return with_crc(frame[:6]), True
         return error(0x01), False

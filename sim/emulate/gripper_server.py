@@ -44,9 +44,10 @@ import socket
 import socketserver
 import threading
 import time
-import tty
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
+
+from sim.emulate.rtu import LineDevice, close_fds, crc_ok, open_pty, with_crc
 
 # --- the register map (manual, "Control") -------------------------------------------------
 ACTION_ADDRESS = 0x03E8  #: robot output (action request) bytes 0..5: three registers
@@ -347,20 +348,6 @@ class Gripper2F85:
 
 # --- Modbus RTU --------------------------------------------------------------------------------
 
-def crc16(data: bytes) -> int:
-    """CRC-16 of Modbus RTU (reflected polynomial 0xA001, initial 0xFFFF)."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-    return crc
-
-
-def _with_crc(body: bytes) -> bytes:
-    return body + crc16(body).to_bytes(2, "little")
-
-
 ILLEGAL_FUNCTION, ILLEGAL_ADDRESS, ILLEGAL_VALUE = 0x01, 0x02, 0x03
 #: how long a pause ends a frame here: RTU's 3.5 character times are 0.3 ms at 115200 bit/s, but
 #: a pseudo-terminal delivers a frame in one piece and scheduling jitter is larger than that
@@ -382,7 +369,7 @@ def _frame_length(buf: bytes | bytearray) -> int | None:
     return None
 
 
-class ModbusRtuServer:
+class ModbusRtuServer(LineDevice):
     """The 2F-85's Modbus RTU slave on a pseudo-terminal (start it; point a driver at
     :attr:`port`).
 
@@ -395,51 +382,18 @@ class ModbusRtuServer:
 
     def __init__(self, device: Gripper2F85, unit_id: int = DEFAULT_UNIT_ID,
                  baudrate: int = DEFAULT_BAUDRATE, turnaround: float = 0.001) -> None:
+        super().__init__("emu-2f85-rtu")
         self.device, self.unit_id = device, unit_id
         self.baudrate, self.turnaround = baudrate, turnaround
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # bytes pass unchanged: no echo, no newline translation
-        os.set_blocking(self._master, False)
-        self.port = os.ttyname(self._slave)
-        self._stop = threading.Event()
-        self._cut = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="emu-2f85-rtu", daemon=True)
+        self._master, self._slave, self.port = open_pty()
         self.requests = 0  #: valid frames for this unit (answered or broadcast)
         self.crc_errors = 0  #: frames dropped for a bad CRC
         self.other_units = 0  #: valid frames for another unit, left unanswered
         self.dropped_bytes = 0  #: bytes read and dropped while the cable was out
 
-    def start(self) -> ModbusRtuServer:
-        self._thread.start()
-        return self
-
-    def close(self) -> None:
-        """Stop (joined) and close both ends of the pseudo-terminal."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-
-    def __enter__(self) -> ModbusRtuServer:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def pull_cable(self) -> None:
-        """Nothing reaches the gripper and nothing comes back until :meth:`restore`."""
-        self._cut.set()
-
-    def restore(self) -> None:
-        self._cut.clear()
-
-    @property
-    def cable_pulled(self) -> bool:
-        return self._cut.is_set()
+    def _close_line(self) -> None:
+        """Both ends of the pseudo-terminal."""
+        close_fds(self._master, self._slave)
 
     # --- the line ----------------------------------------------------------------------------
 
@@ -471,7 +425,7 @@ class ModbusRtuServer:
             if n is None:
                 if len(buf) >= 2 and buf[1] not in (3, 4, 6, 16, 23) and len(buf) >= 4:
                     # Unknown function: the whole pending chunk is one frame if its CRC holds.
-                    if crc16(bytes(buf[:-2])) == int.from_bytes(buf[-2:], "little"):
+                    if crc_ok(buf):
                         frame = bytes(buf)
                         buf.clear()
                         self._handle(frame)
@@ -480,7 +434,7 @@ class ModbusRtuServer:
             if len(buf) < n:
                 return
             frame = bytes(buf[:n])
-            if crc16(frame[:-2]) != int.from_bytes(frame[-2:], "little"):
+            if not crc_ok(frame):
                 self.crc_errors += 1
                 del buf[:1]  # resynchronise on the next byte
                 continue
@@ -496,7 +450,7 @@ class ModbusRtuServer:
         reply = self._reply(fc, frame[2:-2])
         if unit == 0 or reply is None:
             return  # a broadcast is never answered
-        out = _with_crc(bytes([self.unit_id]) + reply)
+        out = with_crc(bytes([self.unit_id]) + reply)
         time.sleep(self.turnaround + len(out) * 10 / self.baudrate)
         if self._cut.is_set():
             return

@@ -825,10 +825,9 @@ def _end_evidence(
     facing = 0 if float((cam_uv - center_uv) @ axis) >= 0.0 else 1
     sign = 1.0 if facing == 0 else -1.0
     center_uv = _end_on_crest(uv, hgt, center_uv, sign * axis, across, part)
-    inside = _inside_seen(uv, hgt, center_uv, sign * axis, across, part)
+    inside, face = _end_view(uv, hgt, center_uv, sign * axis, across, part)
     lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
     ratio = lateral / max(cam_height, 1e-6)
-    face = _face_seen(uv, hgt, center_uv, sign * axis, across, part)
     whole = _face_expected(part, ratio, cam_height, pixel_size)
     cavity = max(settings.max_face_per_inside * inside, settings.max_open_face_share * whole)
     is_open = inside >= settings.min_inside and face <= cavity
@@ -842,7 +841,7 @@ def _end_evidence(
 
 
 def _face_expected(part: Part, ratio: float, cam_height: float, pixel_size: float) -> float:
-    """The scale of what :func:`_face_seen` finds on a whole (closed) end face seen at
+    """The scale of the face count :func:`_end_view` finds on a whole (closed) end face seen at
     ``ratio`` (tan of the angle off the vertical) from ``cam_height`` over the floor: the strip
     it counts (0.8 hole wide, 0.7 outer high) foreshortened by the view's slant, over a
     square pixel's footprint at that distance (``pixel_size`` is a pixel's width on the
@@ -873,9 +872,7 @@ def _end_on_crest(
     part's height) runs to the end's rim whether the end is open or closed, so its end is the
     end's place; it also gives the axis' place across. Unchanged when no crest is seen there
     (a leaning part, or the top hidden)."""
-    rel = uv - center_uv
-    s = dot_last(rel, axis)
-    c = dot_last(rel, across)
+    s, c = _along_across(uv, center_uv, axis, across)
     half = 0.5 * part.length
     crest = (
         (np.abs(c) < 0.35 * part.outer)
@@ -992,9 +989,8 @@ def _side_free(
     """Bare floor just beyond a segment's long side at ``edge`` (across, from ``mean``), on the
     ``sign`` side, along the segment's extent ``s_in``: False where something stands there or
     nothing is seen (hidden under a taller neighbour)."""
-    rel = uv_all - mean
-    s = dot_last(rel, axis)
-    c = (dot_last(rel, across) - edge) * sign
+    s, c = _along_across(uv_all, mean, axis, across)
+    c = (c - edge) * sign
     beside = (s > s_in[0]) & (s < s_in[1]) & (c > 0.0015) & (c < 0.006)
     h = hgt[beside]
     h = h[h > -0.5]  # invalid pixels read -1
@@ -1137,42 +1133,40 @@ def _hidden_thin_part(
     return None
 
 
-def _inside_seen(
+def _along_across(
+    uv: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Where points ``uv`` lie from ``origin``: along ``axis`` and across it (m)."""
+    rel = uv - origin
+    return dot_last(rel, axis), dot_last(rel, across)
+
+
+def _end_view(
     uv_all: NDArray[np.float64],
     hgt: NDArray[np.float64],
     center_uv: NDArray[np.float64],
     axis: NDArray[np.float64],
     across: NDArray[np.float64],
     part: Part,
-) -> int:
-    """Points seen through the opening at the ``+axis`` end: low, inside the part's footprint."""
-    rel = uv_all - center_uv
-    s = dot_last(rel, axis)
-    c = dot_last(rel, across)
+) -> tuple[int, int]:
+    """What a view shows of the ``+axis`` end, as two counts of points within the hole's width
+    of the axis: those seen through the opening (low, in the band just inside the end) and
+    those on the middle of the end face (a closed end shows a disc there, an open end only the
+    hole's inside, which lies further in)."""
+    s, c = _along_across(uv_all, center_uv, axis, across)
+    within = np.abs(c) < 0.4 * part.hole
     # Kept 6 mm inside the end: the lower part of a closed end's own face, blurred by the depth
     # noise and the centre's error, must not count as a view inside.
     near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.006)
-    within = np.abs(c) < 0.4 * part.hole
     low = (hgt > -0.002) & (hgt < 0.3 * part.outer)
-    return int(np.count_nonzero(near_end & within & low))
-
-
-def _face_seen(
-    uv_all: NDArray[np.float64],
-    hgt: NDArray[np.float64],
-    center_uv: NDArray[np.float64],
-    axis: NDArray[np.float64],
-    across: NDArray[np.float64],
-    part: Part,
-) -> int:
-    """Points on the middle of the ``+axis`` end face: a closed end shows a disc there, an open
-    end only the hole's inside (which lies further in)."""
-    rel = uv_all - center_uv
-    s = dot_last(rel, axis)
-    c = dot_last(rel, across)
     at_face = np.abs(s - 0.5 * part.length) < 0.004
-    middle = (np.abs(c) < 0.4 * part.hole) & (hgt > 0.15 * part.outer) & (hgt < 0.85 * part.outer)
-    return int(np.count_nonzero(at_face & middle))
+    middle = (hgt > 0.15 * part.outer) & (hgt < 0.85 * part.outer)
+    return int(np.count_nonzero(near_end & within & low)), int(
+        np.count_nonzero(at_face & within & middle)
+    )
 
 
 def timed_detect(*args, **kwargs) -> tuple[list[Detection], float]:  # type: ignore[no-untyped-def]

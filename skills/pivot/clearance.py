@@ -17,29 +17,28 @@ caller passes the part over (or moves it) and says what was in the way.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import (
-    FINGER_LENGTH,
-    FT_HEIGHT,
-    GRIPPER_BODY_HEIGHT,
-    HOME_JOINTS,
-    REACH_TOLERANCE,
-    solve_ik,
-)
+from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
+
+#: The arm's reach, as the cell's arm has it: given TCP poses in the order the arm passes them
+#: (each solved from the one before, starting at the arm's home), the index of the first it
+#: cannot reach, or None when it reaches them all. The cell builds it from its arm's kinematics;
+#: skills know no particular arm.
+Reach = Callable[[Sequence[Pose]], int | None]
 
 #: The tool above the fingers, as boxes in the TCP frame (x: closing axis, z: along the
 #: fingers, origin at the TCP, the fingertips ``tip_offset`` below it): (centre, half sizes).
 _FINGER_TOP = -FINGER_LENGTH  # relative to the fingertips
-_BODY = (0.075, 0.035, GRIPPER_BODY_HEIGHT)  #: the 2F-85's body, x along the closing axis
-_PUCK = (0.075, 0.075, FT_HEIGHT)  #: the FT300, its cylinder's bounding box
+_BODY = GRIPPER_BODY_SIZE  #: the 2F-85's body, x along the closing axis
+_PUCK = (2.0 * FT_RADIUS, 2.0 * FT_RADIUS, FT_HEIGHT)  #: the FT300, its cylinder's bounding box
 _WRIST = (0.09, 0.09, 0.10)  #: the UR5's wrist 3 and the end of wrist 2 above the flange
 
 
@@ -266,16 +265,17 @@ def pivot_clearance(
     return Clearance(d - margin, name, obstacles[o].what, phase)
 
 
-def reach_problem(frame: PivotFrame, params: PivotParams, finger_width: float) -> Clearance | None:
-    """Where the sweep leaves the UR5's reach (the twin's and the driver's kinematic model,
-    each pose solved from the one before, starting at home), or None when it stays inside."""
+def reach_problem(
+    frame: PivotFrame, params: PivotParams, finger_width: float, reach: Reach
+) -> Clearance | None:
+    """Where the sweep leaves the arm's ``reach`` (checked above the part, at the grasp and at
+    the arc's end), or None when it stays inside."""
     sweep = pivot_sweep(frame, params, finger_width)
-    q = HOME_JOINTS
-    for phase, pose, _ in (sweep[0], sweep[9], sweep[-1]):  # above, at the grasp, arc's end
-        q, miss = solve_ik(pose, q, iterations=200)
-        if miss > REACH_TOLERANCE:
-            return Clearance(-1.0, "the TCP", "the edge of the UR5's reach", phase)
-    return None
+    checked = (sweep[0], sweep[9], sweep[-1])  # above, at the grasp, arc's end
+    out = reach([pose for _, pose, _ in checked])
+    if out is None:
+        return None
+    return Clearance(-1.0, "the TCP", "the edge of the UR5's reach", checked[out][0])
 
 
 @dataclass(frozen=True)
@@ -296,18 +296,21 @@ def choose_end(
     open_ends: int,
     margin: float | None = None,
     base_xy: Sequence[float] = (0.0, 0.0),
+    *,
+    reach: Reach,
 ) -> EndChoice:
     """The end to pivot from: for a tube (``open_ends`` 2) either; otherwise the one open end.
 
     Among the ends whose sweep clears, the one whose open end points away from the robot's base
     (``base_xy``) -- the pose the pivot was tuned in, the wrist over the part's far side from
     the base -- else the one with the larger clearance; with none clear, the larger clearance
-    (``clearance.clear`` False: not pickable where it lies)."""
+    (``clearance.clear`` False: not pickable where it lies). An end whose sweep leaves the
+    arm's ``reach`` does not clear."""
     frames = [frame]
     if open_ends >= 2:
         frames.append(replace(frame, yaw=frame.yaw + math.pi))
     tried = [
-        reach_problem(f, params, finger_width)
+        reach_problem(f, params, finger_width, reach)
         or pivot_clearance(f, params, obstacles, finger_width, margin)
         for f in frames
     ]

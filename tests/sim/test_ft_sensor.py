@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import FINGER_BASE_Z, FINGER_LENGTH, FT_HEIGHT, HOME_TCP, TCP_Z
+from drivers.tool import FINGER_BASE_Z, FINGER_LENGTH, FT_HEIGHT, TCP_Z
+from drivers.ur5.kinematics import HOME_TCP
 from sim import ft_sensor as fts
 from sim import robot_model as rm
 from sim.robot import SimRobot

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
+from cell.reach import ur5_reach
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import plan_pivot
@@ -35,16 +36,16 @@ def test_a_part_with_an_end_near_a_wall_is_dragged_along_its_axis_away_from_it(b
     part, pivot = bushing
     # its end 29 mm from the -x wall, its axis along x: neither end's pivot clears
     f = PivotFrame(part.section(W), np.array([0.283, 0.069, 0.017]), math.radians(165), 0.0)
-    assert not choose_end(f, pivot, WALLS, W, 2).clearance.clear
-    move = plan_reposition(f, part, pivot, RepositionParams(), WALLS, [], ROI, W)
+    assert not choose_end(f, pivot, WALLS, W, 2, reach=ur5_reach).clearance.clear
+    move = plan_reposition(f, part, pivot, RepositionParams(), WALLS, [], ROI, W, reach=ur5_reach)
     assert move is not None
     assert move.shift @ np.array([1.0, 0.0]) > 0.0  # away from the -x wall
     assert 0.0 < move.distance <= 0.15
-    assert choose_end(move.target, pivot, WALLS, W, 2).clearance.clear
+    assert choose_end(move.target, pivot, WALLS, W, 2, reach=ur5_reach).clearance.clear
     # the shortest: one step less would not do
     shorter = RepositionParams(max_shift=move.distance - 0.01)
     if move.distance > 0.011:
-        again = plan_reposition(f, part, pivot, shorter, WALLS, [], ROI, W)
+        again = plan_reposition(f, part, pivot, shorter, WALLS, [], ROI, W, reach=ur5_reach)
         assert again is None or again.distance <= move.distance
 
 
@@ -56,7 +57,8 @@ def test_a_part_hemmed_in_by_neighbours_is_not_dragged(bushing) -> None:
         lying_part("a neighbour", (0.283, 0.069 + s * 0.036), math.radians(165), 0.068, 0.034, 0.0)
         for s in (-1.0, 1.0)
     ]
-    assert plan_reposition(f, part, pivot, RepositionParams(), WALLS, hem, ROI, W) is None
+    move = plan_reposition(f, part, pivot, RepositionParams(), WALLS, hem, ROI, W, reach=ur5_reach)
+    assert move is None
 
 
 def test_cell_pivot_drags_a_part_against_the_wall_then_pivots_it(tmp_path) -> None:

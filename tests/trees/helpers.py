@@ -10,6 +10,7 @@ from py_trees.behaviour import Behaviour
 from py_trees.common import Status
 
 from cell.catalogue import load_catalogue
+from cell.reach import ur5_reach
 from drivers.devices import Devices
 from drivers.events import StopKind
 from drivers.machine import TimedMachine
@@ -85,6 +86,7 @@ def make_ctx() -> CellContext:
         plan=plan,
         params=PivotParams(l_a=plan.l_a, alpha=plan.alpha),
         events=Recorder(),
+        reach=ur5_reach,
     )
 
 

@@ -108,3 +108,13 @@ class LinearFingers:
 
     def moving_unlocked(self) -> bool:
         return self._at(self.clock()) != self._stop_at
+
+
+def crc16(data: bytes) -> int:
+    """The Modbus RTU CRC of ``data`` (its low byte is sent first), as pymodbus's RTU framer
+    computes it: an implementation apart from the emulators' own, so a wrong CRC there fails
+    here instead of agreeing with itself."""
+    from pymodbus.framer import FramerRTU
+
+    return int.from_bytes(FramerRTU.compute_CRC(data).to_bytes(2, "big"), "little")
+

@@ -14,13 +14,14 @@ from drivers.ft300 import FT300
 from drivers.health import DeviceError
 from drivers.pose import Pose
 from drivers.ur5.kinematics import HOME_TCP
-from sim.emulate.ft300_stream import SCALE, FT300Emulator, TwinWrist, WrenchBackend, crc16
+from sim.emulate.ft300_stream import SCALE, FT300Emulator, TwinWrist, WrenchBackend
 from skills.motion import Guard, arm_motion
 from skills.status import Failure, Status
 
-from .conftest import RealTimeStepper, wait_for
+from .conftest import RealTimeStepper, crc16, wait_for
 
 serial = pytest.importorskip("serial")
+pytest.importorskip("pymodbus")  # the reference CRC
 
 LOAD = np.array([1.5, -2.0, -20.0, 0.10, -0.05, 0.02])
 
@@ -69,6 +70,12 @@ def test_modbus_read_of_registers_180_to_185_the_manuals_example(
                .to_bytes(2, "little"))
     assert line.read(5) == b""  # another unit: silent
     assert not emu.streaming.is_set()
+
+
+def test_the_tests_reference_crc_is_the_modbus_one() -> None:
+    assert crc16(b"123456789") == 0x4B37  # the CRC-16/MODBUS check value
+    frame = bytes.fromhex("09 03 00 B4 00 06 84 A6")  # the FT300 manual's read request
+    assert crc16(frame[:-2]).to_bytes(2, "little") == frame[-2:]
 
 
 def test_the_stream_frames_rate_and_noise(line: serial.Serial, emu: FT300Emulator) -> None:

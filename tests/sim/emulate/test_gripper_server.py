@@ -23,13 +23,13 @@ from sim.emulate.gripper_server import (
     ModbusRtuServer,
     TwinFingers,
     UrcapServer,
-    crc16,
 )
 
 from ..conftest import add_box, add_floor, run_motion
-from .conftest import LinearFingers, RealTimeStepper, wait_for
+from .conftest import LinearFingers, RealTimeStepper, crc16, wait_for
 
 serial = pytest.importorskip("serial")
+pytest.importorskip("pymodbus")  # the reference CRC
 
 
 @pytest.fixture

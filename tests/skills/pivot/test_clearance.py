@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
+from cell.reach import ur5_reach
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import plan_pivot
@@ -60,11 +61,11 @@ def test_a_tube_whose_tilt_would_swing_into_a_near_wall_is_pivoted_from_its_othe
     away = pivot_clearance(f, params, WALLS, W)
     assert not away.clear and away.obstacle == "the bin's +y wall", away.reason()
     assert away.phase == "on the Tilt's arc"
-    choice = choose_end(f, params, WALLS, W, open_ends=2)
+    choice = choose_end(f, params, WALLS, W, open_ends=2, reach=ur5_reach)
     assert choice.clearance.clear
     assert choice.frame.u[1] == pytest.approx(1.0)  # the open end used now points to +y
     # a part with one open end has no other end: left blocked, saying by what
-    one = choose_end(f, params, WALLS, W, open_ends=1)
+    one = choose_end(f, params, WALLS, W, open_ends=1, reach=ur5_reach)
     assert not one.clearance.clear and one.frame is f
     assert "the bin's +y wall" in one.clearance.reason()
 
@@ -72,7 +73,7 @@ def test_a_tube_whose_tilt_would_swing_into_a_near_wall_is_pivoted_from_its_othe
 def test_between_two_ends_that_clear_the_one_pointing_away_from_the_base_is_kept(bushing) -> None:
     part, params = bushing
     toward_base = frame(part, 0.47, 0.0, math.pi)
-    choice = choose_end(toward_base, params, WALLS, W, open_ends=2)
+    choice = choose_end(toward_base, params, WALLS, W, open_ends=2, reach=ur5_reach)
     assert choice.clearance.clear and choice.frame.u[0] == pytest.approx(1.0)
 
 
@@ -91,3 +92,28 @@ def test_the_margin_is_the_configured_one(bushing) -> None:
     loose = pivot_clearance(f, dataclasses.replace(params, clearance_margin=0.0), WALLS, W)
     tight = pivot_clearance(f, dataclasses.replace(params, clearance_margin=0.01), WALLS, W)
     assert loose.distance - tight.distance == pytest.approx(0.01)
+
+
+def test_an_end_whose_sweep_leaves_the_arms_reach_does_not_clear(bushing) -> None:
+    part, params = bushing
+    f = frame(part, 0.47, 0.0, 0.0)  # clears the walls (above)
+    asked: list[int] = []
+
+    def to_the_grasp_only(poses) -> int | None:  # type: ignore[no-untyped-def]
+        asked.append(len(poses))
+        return 1  # reaches the pose above the part, not the grasp
+
+    choice = choose_end(f, params, WALLS, W, open_ends=2, reach=to_the_grasp_only)
+    assert asked == [3, 3]  # both ends: above, at the grasp, the arc's end
+    assert not choice.clearance.clear
+    assert choice.clearance.phase == "on the approach at alpha"
+    assert "reach" in choice.clearance.reason()
+
+
+def test_the_ur5_reach_passes_the_middle_of_the_bin_and_stops_a_part_beyond_it(bushing) -> None:
+    part, params = bushing
+    near = choose_end(frame(part, 0.47, 0.0, 0.0), params, [], W, 2, reach=ur5_reach)
+    assert near.clearance.clear
+    far = choose_end(frame(part, 1.2, 0.0, 0.0), params, [], W, 2, reach=ur5_reach)
+    assert not far.clearance.clear and far.clearance.tool_part == "the TCP"
+    assert far.clearance.phase == "coming down over the open end"  # the first pose already

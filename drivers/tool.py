@@ -1,0 +1,35 @@
+"""The tool on the arm's flange as the cell models it: the FT300 puck, the 2F-85's body and its
+fingers, stacked along the flange's z axis (m).
+
+Why a module of its own, beside the drivers: the arm's kinematics put the TCP at the end of this
+stack, the twin builds its tool's links from it, and the skills sweep a model of the same tool
+past the bin's walls -- and skills see no real driver. One set of numbers here keeps the TCP,
+the twin and the planned sweeps in agreement; the planner's gripper model
+(:class:`drivers.parts.Gripper`) takes its finger length from here too.
+
+Tool axes: z out of the flange towards the fingertips, x the closing axis.
+"""
+
+from __future__ import annotations
+
+FT_HEIGHT = 0.0375  #: the FT300 puck
+FT_RADIUS = 0.0375  #: the FT300 puck's cylinder
+GRIPPER_BODY_HEIGHT = 0.090  #: the 2F-85's body, from the puck to where the fingers leave it
+#: the 2F-85's body as a box: x (closing axis), y, z (approach)
+GRIPPER_BODY_SIZE = (0.075, 0.035, GRIPPER_BODY_HEIGHT)
+FINGER_LENGTH = 0.055  #: the fingers, hanging below the gripper body
+FINGER_BASE_Z = FT_HEIGHT + GRIPPER_BODY_HEIGHT  #: where the fingers leave the body
+FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH
+#: TCP offset from the flange along tool z (m): 5 mm above the fingertips' end.
+TCP_Z = FINGER_TIP_Z - 0.005
+
+__all__ = [
+    "FINGER_BASE_Z",
+    "FINGER_LENGTH",
+    "FINGER_TIP_Z",
+    "FT_HEIGHT",
+    "FT_RADIUS",
+    "GRIPPER_BODY_HEIGHT",
+    "GRIPPER_BODY_SIZE",
+    "TCP_Z",
+]
