@@ -48,7 +48,7 @@ def main() -> None:
         cam = SimCamera(world, lambda: robot.world_pose(robot.arm.tool_pose()),
                         intrinsics=d435_intrinsics(args.width, args.height), noise=None)
         home = _time(cam, args.repeats)
-        for j, q in zip(range(1, 7), GRASP):
+        for j, q in zip(range(1, 7), GRASP, strict=True):
             p.resetJointState(robot.body_id, j, q)
         names = {p.getJointInfo(robot.body_id, j)[12].decode(): j
                  for j in range(p.getNumJoints(robot.body_id))}

@@ -159,7 +159,8 @@ def test_links_crossing_the_near_plane_are_left_out_and_restored() -> None:
     with SimWorld(seed=1) as world:
         robot = SimRobot(world)
         p = world.p
-        for j, q in zip(range(1, 7), (2.9348, -1.3795, 1.9178, -1.8303, -1.6298, 1.3677)):
+        grasp = (2.9348, -1.3795, 1.9178, -1.8303, -1.6298, 1.3677)
+        for j, q in zip(range(1, 7), grasp, strict=True):
             p.resetJointState(robot.body_id, j, q)
         names = {p.getJointInfo(robot.body_id, j)[12].decode(): j
                  for j in range(p.getNumJoints(robot.body_id))}
