@@ -51,10 +51,19 @@ def _rs() -> Any:
     return rs
 
 
+def _polled(queue: Any) -> tuple[bool, Any]:
+    """A frameset already waiting in a pipeline or syncer, without waiting (``poll_for_frames``
+    answers a frameset that is empty when none is queued)."""
+    frames = queue.poll_for_frames()
+    return (bool(frames) and frames.size() > 0), frames
+
+
 class _Source(Protocol):
     """Where framesets come from: a pipeline (hardware) or a syncer over opened sensors."""
 
     def try_wait(self, timeout_ms: int) -> tuple[bool, Any]: ...
+
+    def poll(self) -> tuple[bool, Any]: ...
 
     def stop(self) -> None: ...
 
@@ -66,6 +75,9 @@ class _PipelineSource:
     def try_wait(self, timeout_ms: int) -> tuple[bool, Any]:
         return self._pipe.try_wait_for_frames(timeout_ms)
 
+    def poll(self) -> tuple[bool, Any]:
+        return _polled(self._pipe)
+
     def stop(self) -> None:
         self._pipe.stop()
 
@@ -76,6 +88,9 @@ class _SyncerSource:
 
     def try_wait(self, timeout_ms: int) -> tuple[bool, Any]:
         return self._syncer.try_wait_for_frames(timeout_ms)
+
+    def poll(self) -> tuple[bool, Any]:
+        return _polled(self._syncer)
 
     def stop(self) -> None:
         for s in self._sensors:
@@ -418,14 +433,30 @@ class RealSenseD435:
         return self._depth_scale
 
     def capture(self) -> Frame:
-        """Newest depth + colour pair, depth aligned to colour, in metres (0 = invalid).
+        """A depth + colour pair exposed after this call, depth aligned to colour, in metres
+        (0 = invalid).
 
-        Raises ``TimeoutError`` when no complete pair arrives within ``timeout_ms``, and
+        Why not simply the newest pair: librealsense hands out the frameset it already holds,
+        which was exposed up to a frame period (plus the transfer) before the call. A skill
+        captures as soon as the arm reports it has arrived, so that frame showed the scene from
+        the end of the move while it was paired with the pose at rest: against the emulated
+        D435 at 6 fps the rim of a part in the slot came out millimetres off and the descent
+        onto it struck the rim. So the pairs queued at the call are dropped, the first pair to
+        arrive is dropped too (its exposure may have begun before the call), and the next one
+        is returned: one to two frame periods (33-66 ms at 30 fps).
+
+        Raises ``TimeoutError`` when no such pair arrives within ``timeout_ms``, and
         :class:`DeviceError` when not started or the camera fails otherwise.
         """
         if self._source is None:
             raise DeviceError(DEVICE, self.address, "not started")
         deadline = time.monotonic() + self.timeout_ms / 1000.0
+        try:
+            while self._source.poll()[0]:
+                pass  # exposed before the call
+        except RuntimeError as exc:
+            raise DeviceError(DEVICE, self.address, f"frame wait failed: {exc}") from exc
+        skip = 1  # the first pair to arrive may have been exposed (in part) before the call
         while True:
             remaining = int((deadline - time.monotonic()) * 1000.0)
             if remaining <= 0:
@@ -439,6 +470,9 @@ class RealSenseD435:
             stamp = self._clock.now()
             if not (frames.get_depth_frame() and frames.get_color_frame()):
                 continue  # a lone stream (the other one dropped): wait for a full pair
+            if skip:
+                skip -= 1
+                continue
             aligned = frames if self._align is None else self._align.process(frames)
             depth, colour = aligned.get_depth_frame(), aligned.get_color_frame()
             if not (depth and colour):

@@ -2,8 +2,10 @@
 
 A ``rs.software_device`` with a depth sensor (Z16, depth units 1 mm) and a colour sensor (RGB8)
 with known, different intrinsics and a known depth-to-colour extrinsic; the tests inject
-synthetic frames and check what ``capture()`` returns. Not exercised here (no camera): the
-``rs.pipeline`` start on a real device (only its "nothing connected" branch runs), USB
+synthetic frames and check what ``capture()`` returns. The device streams what the test shows it at
+``FPS`` from a thread, as a camera streams continuously (a capture returns a pair exposed after it
+was asked for, so pushing one pair and then capturing would wait forever). Not exercised here (no
+camera): the ``rs.pipeline`` start on a real device (only its "nothing connected" branch runs), USB
 behaviour, and frame drops of a real stream.
 """
 
@@ -11,6 +13,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -59,7 +63,19 @@ class SoftD435:
     depth_profile: Any
     colour_profile: Any
     n: int = 0
-    keep: list[np.ndarray] = field(default_factory=list)
+    keep: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=256))
+    scene: tuple[np.ndarray | None, np.ndarray | None] | None = None  #: what it streams
+    stopped: threading.Event = field(default_factory=threading.Event)
+
+    def show(self, depth_mm: np.ndarray | None, rgb: np.ndarray | None) -> None:
+        """From now on the stream carries this depth (mm) and colour (None: that stream drops)."""
+        self.scene = (depth_mm, rgb)
+
+    def stream(self) -> None:
+        """Push the scene shown at ``FPS`` until :attr:`stopped` is set (run on a thread)."""
+        while not self.stopped.wait(1.0 / FPS):
+            if self.scene is not None:
+                self.push(*self.scene)
 
     def push(self, depth_mm: np.ndarray | None, rgb: np.ndarray | None) -> None:
         self.n += 1
@@ -103,35 +119,19 @@ def make_soft_d435() -> SoftD435:
 
 
 @pytest.fixture
-def soft() -> SoftD435:
-    return make_soft_d435()
-
-
-def prime(soft: SoftD435, cam: RealSenseD435) -> None:
-    """Get the syncer past its first frameset, which holds only the stream it saw first.
-
-    A real camera streams continuously and the driver skips lone-stream framesets; a test that
-    pushes one pair at a time must push until a full pair comes out once.
-    """
-    timeout, cam.timeout_ms = cam.timeout_ms, 100
-    try:
-        for _ in range(5):
-            soft.push(np.full((H, W), 123, np.uint16), colour_pattern())
-            try:
-                cam.capture()
-                return
-            except TimeoutError:
-                continue
-        raise AssertionError("the software device never delivered a depth+colour pair")
-    finally:
-        cam.timeout_ms = timeout
+def soft() -> Iterator[SoftD435]:
+    d = make_soft_d435()
+    thread = threading.Thread(target=d.stream, daemon=True)
+    thread.start()
+    yield d
+    d.stopped.set()
+    thread.join(timeout=2.0)
 
 
 @pytest.fixture
 def cam(soft: SoftD435) -> Iterator[RealSenseD435]:
     c = RealSenseD435.from_device(soft.dev, W, H, FPS, timeout_ms=1000,
                                   tool_T_camera=Pose(np.array([0.0, -0.08, -0.05])))
-    prime(soft, c)
     yield c
     c.stop()
 
@@ -146,7 +146,7 @@ def colour_pattern() -> np.ndarray:
 
 def test_capture_returns_metres_and_the_colour_image(soft: SoftD435, cam: RealSenseD435) -> None:
     assert isinstance(cam, Camera)
-    soft.push(np.full((H, W), 500, np.uint16), colour_pattern())
+    soft.show(np.full((H, W), 500, np.uint16), colour_pattern())
     frame = cam.capture()
     assert frame.depth.dtype == np.float32 and frame.depth.shape == (H, W)
     assert frame.rgb.dtype == np.uint8 and frame.rgb.shape == (H, W, 3)
@@ -167,7 +167,7 @@ def test_intrinsics_are_the_colour_stream_s(cam: RealSenseD435) -> None:
 def test_invalid_depth_stays_zero_where_it_lands(soft: SoftD435, cam: RealSenseD435) -> None:
     depth = np.full((H, W), 500, np.uint16)
     depth[20:28, 26:34] = 0  # a hole (no stereo match) around the depth image's centre
-    soft.push(depth, colour_pattern())
+    soft.show(depth, colour_pattern())
     d = cam.capture().depth
     # The hole's centre (u, v) = (29.5, 23.5) in the depth image, at 0.5 m:
     # x = (29.5 - 31.5) / 50 * 0.5 = -0.02 m; in the colour frame x + 0.015 = -0.005 m
@@ -182,7 +182,7 @@ def test_alignment_moves_a_depth_edge_by_the_baseline_parallax(
 ) -> None:
     depth = np.full((H, W), 500, np.uint16)
     depth[:, 40:] = 1000  # a step: 0.5 m left of depth column 39.5, 1.0 m right of it
-    soft.push(depth, colour_pattern())
+    soft.show(depth, colour_pattern())
     d = cam.capture().depth
     row = d[24]
     first_far = int(np.argmax(row > 0.75))
@@ -198,8 +198,9 @@ def test_no_frame_is_a_timeout_error(soft: SoftD435) -> None:
         with pytest.raises(TimeoutError, match="SW0435") as err:
             cam.capture()
         assert not isinstance(err.value, RuntimeError)
-        prime(soft, cam)
-        soft.push(np.full((H, W), 500, np.uint16), None)  # depth without colour is not a frame
+        soft.show(np.full((H, W), 500, np.uint16), colour_pattern())
+        assert cam.capture().rgb.shape == (H, W, 3)
+        soft.show(np.full((H, W), 500, np.uint16), None)  # depth without colour is not a frame
         with pytest.raises(TimeoutError):
             cam.capture()
     finally:
@@ -209,7 +210,7 @@ def test_no_frame_is_a_timeout_error(soft: SoftD435) -> None:
 def test_check_reports_identity_and_valid_fraction(soft: SoftD435, cam: RealSenseD435) -> None:
     depth = np.full((H, W), 800, np.uint16)
     depth[:, :10] = 0
-    soft.push(depth, colour_pattern())
+    soft.show(depth, colour_pattern())
     result = cam.check()
     assert result.ok, result.error
     assert result.address == "SW0435"
@@ -220,7 +221,7 @@ def test_check_reports_identity_and_valid_fraction(soft: SoftD435, cam: RealSens
 
 
 def test_check_fails_on_a_blind_camera(soft: SoftD435, cam: RealSenseD435) -> None:
-    soft.push(np.zeros((H, W), np.uint16), colour_pattern())
+    soft.show(np.zeros((H, W), np.uint16), colour_pattern())
     result = cam.check()
     assert not result.ok and "valid" in (result.error or "")
     cam.stop()

@@ -187,3 +187,29 @@ def test_a_client_joining_a_running_stream_gets_pairs_at_once(pattern: Pattern) 
                 assert second.capture().rgb.shape == (H, W, 3)
         finally:
             second.stop()
+
+
+def test_a_capture_returns_a_frame_rendered_after_it_was_asked_for() -> None:
+    # The arm reports it has arrived and the skill captures at once: a frame the camera held
+    # already was exposed during the end of the move (up to a period and a transfer earlier).
+    class Stamped(Pattern):
+        def __init__(self) -> None:
+            super().__init__()
+            self.started: list[float] = []  # when each render began (its "exposure")
+
+        def frame(self) -> tuple[np.ndarray, np.ndarray]:
+            self.started.append(time.monotonic())
+            return super().frame()
+
+    src = Stamped()
+    with CameraStreamServer(src, fps=10, serial="EMU0435") as s:
+        cam = RealSenseD435.from_stream(s.host, s.port, timeout_ms=1000)
+        try:
+            for _ in range(3):
+                time.sleep(0.45)  # frames pile up while nobody captures
+                asked = time.monotonic()
+                frame = cam.capture()
+                n = int(frame.rgb[0, 0, 2])  # the render's number (mod 256), see Pattern
+                assert src.started[n - 1] >= asked, (n, src.started[n - 1] - asked)
+        finally:
+            cam.stop()
