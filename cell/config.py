@@ -16,7 +16,15 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from skills.params import apply_config, config_keys
@@ -111,6 +119,22 @@ class GripperDevice(_Section):
     slave_id: int = Field(9, ge=1, le=247, description="Modbus unit id")
     urcap_port: int = Field(63352, ge=1, le=65535, description="URCap socket port")
     timeout_s: float = Field(0.5, gt=0.0, le=10.0, description="per request")
+    open_count: int | None = Field(
+        None, ge=0, le=255,
+        description="this unit's position count (gPO) fully open; with closed_count the "
+        "width calibration; null: measured at start-up (the fingers close and open)",
+    )
+    closed_count: int | None = Field(
+        None, ge=0, le=255, description="this unit's position count (gPO) fully closed",
+    )
+
+    @model_validator(mode="after")
+    def _both_counts(self) -> GripperDevice:
+        if (self.open_count is None) != (self.closed_count is None):
+            raise ValueError("open_count and closed_count go together (both, or neither)")
+        if self.open_count is not None and not self.open_count < self.closed_count:  # type: ignore[operator]
+            raise ValueError("open_count must be below closed_count")
+        return self
 
 
 class FTDevice(_Section):

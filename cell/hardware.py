@@ -62,6 +62,8 @@ def _open_gripper(cfg: Any, layout: Any, clock: Any) -> Any:
         host=cfg.arm.host,
         urcap_port=g.urcap_port,
         timeout=g.timeout_s,
+        **({} if g.open_count is None else
+           {"open_count": g.open_count, "closed_count": g.closed_count}),
     )
     return gripper.start()
 
@@ -256,6 +258,23 @@ def open_hardware(prep: Any) -> HardwareBackend:
             "devices",
             "start-up checks failed, nothing moved: " + "; ".join(problems),
         )
+    # Every width the skills command or read goes through the gripper's calibration: the counts
+    # where this unit's fingers stop. Nominal counts (0 and 255) put a 2F-85 that stops at 3 and
+    # 228 up to 10 mm off (the emulated cell opened 7 mm where it asked for 13 and struck the
+    # rim of the part in the slot). Measured here when the configuration has none; the check
+    # just ran the activation, which drops anything held, so the fingers are empty.
+    if config.devices.gripper.open_count is None:
+        try:
+            cal = opened["gripper"].calibrate()
+            opened["gripper"].open()
+        except (DeviceError, RuntimeError) as exc:
+            for name, dev in opened.items():
+                _close(name, dev)
+            raise ConfigError(prep.doc.source, prep.doc.line_of(("devices",)), "devices",
+                              f"start-up checks failed, nothing moved: the 2F-85's calibration: "
+                              f"{exc}") from None
+        print(f"2F-85 calibrated: open_count {cal.open_count}, closed_count {cal.closed_count} "
+              "(put them under devices.gripper to skip this)", file=sys.stderr)
     # The wrist sensor reads the tool's weight and the puck's power-up offset until it is zeroed;
     # the twin zeroes its sensor once when it is built, at rest, and the guards' limits and the
     # pivot's compliance thresholds are set on readings zeroed so. Here the arm has not moved

@@ -26,6 +26,17 @@ class _Dev:
     def bias(self) -> None:
         self.calls.append("bias")
 
+    def calibrate(self) -> object:
+        self.calls.append("calibrate")
+
+        class Cal:
+            open_count, closed_count = 3, 228
+
+        return Cal()
+
+    def open(self) -> None:
+        self.calls.append("open")
+
     def close(self) -> None:
         self.calls.append("close")
 
@@ -71,6 +82,7 @@ def test_a_failed_check_refuses_the_run_and_closes_what_was_opened(monkeypatch) 
     assert made["gripper"].calls[-1] == "disconnect"  # the gripper keeps its state
     assert made["ft"].calls[-1] == "stop"
     assert "bias" not in made["ft"].calls  # nothing zeroed on a refused start
+    assert "calibrate" not in made["gripper"].calls
 
 
 def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
@@ -86,8 +98,32 @@ def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
     monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
     backend = hardware.open_hardware(_prep())
     assert backend.devices.arm is made["arm"] and backend.devices.camera is made["camera"]
-    # The wrist sensor is zeroed once, after every check passed, before the tree runs.
+    # The wrist sensor is zeroed once, after every check passed, before the tree runs; the
+    # gripper's width calibration is measured there (none configured), the fingers left open.
     assert made["ft"].calls == [("check", False), "bias"]
+    assert made["gripper"].calls == [("check", True), "calibrate", "open"]
     assert backend.judge("packed", {}) is None  # no ground truth on a real cell
     backend.close()
     assert made["arm"].calls[-2:] == ["stop", "close"]
+
+
+def test_configured_gripper_counts_skip_the_start_up_calibration(monkeypatch) -> None:
+    made: dict[str, _Dev] = {}
+    seen: dict[str, object] = {}
+
+    def opener(name: str):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            seen[name] = cfg.gripper
+            made[name] = _Dev(name)
+            return made[name]
+
+        return make
+
+    monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
+    config, doc = config_from_text(
+        "cell:\n  backend: hw\ndevices:\n  gripper:\n    open_count: 3\n    closed_count: 228\n",
+        "hw.yaml")
+    backend = hardware.open_hardware(prepare(config, doc))
+    assert "calibrate" not in made["gripper"].calls
+    assert (seen["gripper"].open_count, seen["gripper"].closed_count) == (3, 228)  # type: ignore[attr-defined]
+    backend.close()
