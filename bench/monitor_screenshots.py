@@ -1,5 +1,6 @@
 """The pictures of docs/monitor.md: the live page during a `cell sim` of the shipped cell, and the
-replay page over the log that run left, at its first failure.
+replay page over the log that run left, at its first abort (two thirds of the way through a run
+without one). The window is tall enough for the whole shipped tree.
 
     python bench/monitor_screenshots.py [--out docs]
 
@@ -35,7 +36,7 @@ def main() -> None:
         cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )
     url = wait_url(sim, r"monitor on (http://127\.0\.0\.1:\d+/)")
-    with Browser(1400, 950) as b:
+    with Browser(1400, 1120) as b:
         b.open(url)
         b.wait_for(f"document.getElementById('tip').textContent === {args.tip!r}", timeout=300)
         time.sleep(2.0)
@@ -50,7 +51,7 @@ def main() -> None:
     replay.stderr = replay.stdout
     url = wait_url(replay, r"serving (http://127\.0\.0\.1:\d+/)")
     tl = get(url + "api/timeline")
-    with Browser(1400, 950) as b:
+    with Browser(1400, 1120) as b:
         b.open(url)
         b.wait_for("document.body.dataset.tick !== undefined")
         if tl["marks"]["first_abort"] is not None:

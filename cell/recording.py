@@ -3,9 +3,13 @@
 Why not the plain overview: at 320 x 240 the whole cell fits, but the gripper -- where the pivot
 happens -- is a few pixels wide, and nothing says which step is running or how hard the arm
 pushes. So each frame here is the overview at 640 x 480 with a close-up of the gripper (a
-second camera aimed at the tool, from the side and a little above) in its corner, and a caption
+second camera aimed at the tool, from the side and above) in its corner, and a caption
 strip: simulated time, the tree's running step and the force magnitude at the wrist, with the
 abort limit it is held to.
+
+The close-up looks down at about 50 deg from the side (:data:`CLOSE_UP_EYE`): from lower, the
+bin's 80 mm walls filled the whole inset during the Grasp and the Tilt, and the machine's side
+hid the part going into the slot -- the close-up showed a wall exactly when it mattered.
 """
 
 from __future__ import annotations
@@ -18,6 +22,9 @@ import numpy as np
 OVERVIEW = (640, 480)
 CLOSE_UP = (240, 180)
 STRIP = 26  #: caption strip height, px
+#: The close-up camera's eye from the point it looks at (m, world): to the side and above, so it
+#: looks over the bin's walls into the bin and down into the machine's slot and the box.
+CLOSE_UP_EYE = (0.0, -0.22, 0.26)
 
 
 def _render(world: Any, eye: np.ndarray, target: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -57,7 +64,7 @@ class CellRecorder:
         overview = _render(self.world, self.eye, self.target, OVERVIEW)
         tool = np.asarray(self.tool_position(), float)
         look = tool + np.array([0.0, 0.0, -0.09])  # the fingertips and the part, below the flange
-        close = _render(self.world, look + np.array([0.0, -0.32, 0.12]), look, CLOSE_UP)
+        close = _render(self.world, look + np.array(CLOSE_UP_EYE), look, CLOSE_UP)
         w, h = OVERVIEW
         frame = Image.new("RGB", (w, h + STRIP), (245, 245, 245))
         frame.paste(Image.fromarray(overview), (0, 0))
@@ -84,6 +91,19 @@ class CellRecorder:
         return path
 
 
+def force_limit(node: Any, default: float) -> float:
+    """The abort force the running step is held to: that of the innermost FT guard above
+    ``node`` (a motion leaf's own, e.g. the Tilt's 90 N), else ``default`` (the safety
+    section's, as between motions) -- the limit the monitor's wrench plot draws too."""
+    from trees.decorators import FTGuard
+
+    while node is not None:
+        if isinstance(node, FTGuard):
+            return float(node.max_force)
+        node = node.parent
+    return float(default)
+
+
 def caption_for(prep: Any) -> Any:
     """The caption of the current tick: time, running step, |F| against its limit."""
 
@@ -92,7 +112,8 @@ def caption_for(prep: Any) -> Any:
         tip = prep.root.tip()
         try:
             force = float(np.linalg.norm(np.asarray(prep.ctx.devices.ft.wrench())[:3]))
-            f_text = f"|F| {force:5.1f} N (abort {prep.ctx.default_guard.max_force:g} N)"
+            limit = force_limit(tip, prep.ctx.default_guard.max_force)
+            f_text = f"|F| {force:5.1f} N (abort {limit:g} N)"
         except Exception:  # noqa: BLE001 -- a lost stream shows as such, never stops a recording
             f_text = "|F| --"
         packed = state.counts.get("packed", 0)
@@ -102,4 +123,4 @@ def caption_for(prep: Any) -> Any:
     return text
 
 
-__all__ = ["CLOSE_UP", "OVERVIEW", "CellRecorder", "caption_for"]
+__all__ = ["CLOSE_UP", "CLOSE_UP_EYE", "OVERVIEW", "CellRecorder", "caption_for", "force_limit"]

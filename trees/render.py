@@ -43,11 +43,22 @@ def _kind(node: Behaviour) -> str:
         from trees.decorators import FTGuard, Timeout
 
         return "Guard" if isinstance(node, FTGuard | Timeout) else "Decorator"
-    from trees.behaviours import HoldingPart, SlotHolds
-
-    if isinstance(node, SlotHolds | HoldingPart):
+    if isinstance(node, _condition_leaves()):
         return "Condition"
     return "Leaf"
+
+
+def _condition_leaves() -> tuple[type[Behaviour], ...]:
+    """The leaf classes whose node type BehaviorTree.CPP's model declares a Condition: one list
+    for the picture and the Groot2 export, so a new check is drawn as one without a second edit."""
+    from trees.btcpp import BTCPP_IDS
+    from trees.registry import REGISTRY
+
+    return tuple(
+        leaf
+        for kind, (_, category) in BTCPP_IDS.items()
+        if category == "Condition" and (leaf := REGISTRY[kind].leaf) is not None
+    )
 
 
 def _label(node: Behaviour) -> str:

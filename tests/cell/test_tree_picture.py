@@ -24,5 +24,9 @@ def test_labels_carry_the_parameters_and_kinds_tell_conditions_apart(tmp_path: P
     assert f"{timeout.seconds:g} s" in _label(timeout)
     kinds = {n.name: _kind(n) for n in nodes}
     assert kinds["slot holds part"] == "Condition" and kinds["perceive"] == "Leaf"
+    assert kinds["pivot clears"] == "Condition" and kinds["slot machined"] == "Condition"
+    assert kinds["reposition"] == "Leaf" and kinds["plan pick"] == "Leaf"
+    reposition_guard = next(n for n in nodes if n.name == "reposition ft guard")
+    assert "60 N" in _label(reposition_guard)
     dot, png = write_pictures(prep.root, tmp_path)
     assert png.read_bytes().startswith(b"\x89PNG") and dot.stat().st_size > 0
