@@ -31,6 +31,8 @@ class ArmStatus:
     state: MotionState
     message: str = ""
     protective_stop: bool = False
+    #: the link to the controller is down (the arm's own controller stops it: its watchdog)
+    link_lost: bool = False
 
 
 @runtime_checkable

@@ -38,6 +38,7 @@ class StopKind(StrEnum):
     PERSON_NEEDED = "person_needed"  #: a failure a stop_on_failure node says needs a person
     FAILED_CYCLES = "failed_cycles"  #: too many cycles in a row without a pick
     FT_LINK_LOST = "ft_link_lost"  #: the force-torque stream stayed lost past its grace
+    ARM_LINK_LOST = "arm_link_lost"  #: the arm's controller stopped answering
     INTERRUPTED = "interrupted"  #: Ctrl-C or SIGTERM: the run was stopped from outside
 
 

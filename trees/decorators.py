@@ -408,7 +408,12 @@ class FTSampler(Behaviour):
     A lost stream (a dead or stale sensor) writes ``None``: every guard then fails its motion at
     once (the arm stops), so nothing moves unwatched. A link that comes back within
     ``ctx.limits.ft_link_grace`` seconds is a transient -- the retries above carry on; one lost
-    longer stops the cell (the parallel above fails, halting every running leaf)."""
+    longer stops the cell (the parallel above fails, halting every running leaf).
+
+    It watches the arm's link as well: a controller that stopped answering (a pulled cable, a
+    crashed control box) stops the cell at once. The retries above would only stack up one
+    failed cycle after another against a dead link; the controller's watchdog has stopped the
+    arm already, and the state file says why so that `cell run --resume` picks up after it."""
 
     def __init__(self, name: str, ctx: CellContext) -> None:
         super().__init__(name=name)
@@ -455,6 +460,14 @@ class FTSampler(Behaviour):
             self._lost_since = None
             self.feedback_message = f"sampling the wrench into {WRENCH_KEY} (link back)"
         self._wrench.set(wrench)
+        arm = self.ctx.devices.arm.status()
+        if arm.link_lost:
+            why = f"arm link lost: {arm.message}"
+            self.ctx.devices.arm.stop()
+            self.ctx.events.abort(f"{why}; arm stopped by its controller", Failure.DEVICE_LOST)
+            self.ctx.events.stop(why, StopKind.ARM_LINK_LOST)
+            self.feedback_message = why
+            return Status.FAILURE
         return Status.RUNNING
 
 

@@ -408,7 +408,7 @@ class UR5Arm:
         if problem is not None:
             message, protective = problem
             self._fault(message, protective)
-            return ArmStatus(MotionState.FAULT, message, protective)
+            return ArmStatus(MotionState.FAULT, message, protective, link_lost=self._link_lost)
         if self._job is not None:
             self._poll_job()
         elif self._state is MotionState.MOVING and self._mode in ("path", "joints"):

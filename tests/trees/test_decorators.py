@@ -375,6 +375,25 @@ def test_a_lost_stream_with_no_grace_stops_the_cell_and_the_arm_at_once(ctx) -> 
     assert len(ctx.events.aborts) == 1
 
 
+def test_a_lost_arm_link_stops_the_cell_at_once_with_its_own_code(ctx) -> None:
+    from drivers.arm import ArmStatus, MotionState
+    from drivers.events import StopKind
+    from skills.status import Failure
+
+    sampler = FTSampler("ft", ctx)
+    assert tick(sampler) == Status.RUNNING
+    lost = ArmStatus(MotionState.FAULT, "lost connection to the controller", link_lost=True)
+    ctx.devices.arm.status = lambda: lost  # type: ignore[method-assign]
+    assert tick(sampler) == Status.FAILURE
+    assert ctx.events.stop_code is StopKind.ARM_LINK_LOST
+    assert ctx.events.codes == [Failure.DEVICE_LOST] and ctx.devices.arm.stops == 1
+    # A fault that is not the link (a protective stop) is the motions' to handle, not a stop.
+    other = FTSampler("ft2", ctx)
+    ctx.devices.arm.status = lambda: ArmStatus(  # type: ignore[method-assign]
+        MotionState.FAULT, "protective stop", protective_stop=True)
+    assert tick(other) == Status.RUNNING
+
+
 def test_the_sampler_beside_a_guarded_motion_fails_it_within_one_tick_of_a_spike(ctx) -> None:
     leaf = lv.GoHome("home", ctx)
     guard = FTGuard("g", leaf, ctx, max_force=50.0, max_torque=5.0)

@@ -345,6 +345,7 @@ def test_an_exception_from_a_read_is_a_lost_link() -> None:
     rtde.raise_on["safety_status_bits"] = RuntimeError("RTDE receive: connection reset")
     st = arm.status()
     assert st.state is MotionState.FAULT and "connection reset" in st.message
+    assert st.link_lost
 
 
 def test_commands_during_a_lost_link_are_refused_without_traffic() -> None:
@@ -358,6 +359,7 @@ def test_commands_during_a_lost_link_are_refused_without_traffic() -> None:
     assert [c for c, _ in rtde.calls[n:]] == []
     st = arm.status()
     assert st.state is MotionState.FAULT and "lost connection" in st.message
+    assert st.link_lost and not st.protective_stop  # the cell decides on the flag, not the text
 
 
 # --- servo and force mode ------------------------------------------------------------------
