@@ -73,9 +73,15 @@ class _ShadowSource:
 
 def _child(backend: Any, tool_T_camera: Any, host: str, port: int, width: int, height: int,
            fps: int, control: Connection, snaps: Connection) -> None:
+    import signal
+
     from sim.camera import SimCamera, d435_intrinsics
     from sim.emulate.camera_stream import CameraStreamServer
 
+    # The fault signals are the emulator's (the parent's); `pkill -USR1 -f "cell emulate"`
+    # reaches this child too, whose default action would end it and unplug the camera for good.
+    for sig in (signal.SIGUSR1, signal.SIGUSR2):
+        signal.signal(sig, signal.SIG_IGN)
     robot = backend.robot
     camera = SimCamera(backend.world, lambda: robot.world_pose(robot.arm.tool_pose()),
                        tool_T_camera=tool_T_camera, intrinsics=d435_intrinsics(width, height))
