@@ -123,6 +123,11 @@ def _close(name: str, dev: Any) -> None:
 def _check(name: str, dev: Any) -> CheckResult:
     if name == "gripper":
         return dev.check(activate=True)
+    if name == "camera":
+        # Starting, the camera must stream; how much depth it sees depends on where the arm
+        # stands (after a stop mid-pivot it looks at the part from 8 cm, all closer than its
+        # minimum range). `cell check-hardware` judges the depth, from its check pose.
+        return dev.check(min_valid_fraction=0.0)
     return dev.check()
 
 
@@ -265,6 +270,11 @@ def open_hardware(prep: Any) -> HardwareBackend:
     # just ran the activation, which drops anything held, so the fingers are empty.
     if config.devices.gripper.open_count is None:
         try:
+            if opened["gripper"].object_detected():
+                raise DeviceError("2F-85", "start-up", "it holds something, and measuring its "
+                                  "calibration opens it: empty it, or put open_count and "
+                                  "closed_count (printed at an earlier start) under "
+                                  "devices.gripper")
             cal = opened["gripper"].calibrate()
             opened["gripper"].open()
         except (DeviceError, RuntimeError) as exc:

@@ -16,8 +16,9 @@ class _Dev:
     def __init__(self, name: str, ok: bool = True) -> None:
         self.name, self.ok, self.calls = name, ok, []
 
-    def check(self, activate: bool = False) -> CheckResult:
-        self.calls.append(("check", activate))
+    def check(self, activate: bool = False, min_valid_fraction: float = 0.2) -> CheckResult:
+        self.calls.append(("check", activate) if self.name != "camera" else
+                          ("check", min_valid_fraction))
         return CheckResult(self.name, "addr", self.ok, error=None if self.ok else "it is on fire")
 
     def stop(self) -> None:
@@ -25,6 +26,9 @@ class _Dev:
 
     def bias(self) -> None:
         self.calls.append("bias")
+
+    def object_detected(self) -> bool:
+        return False
 
     def calibrate(self) -> object:
         self.calls.append("calibrate")
@@ -102,6 +106,7 @@ def test_all_checks_passing_gives_the_devices_to_the_tree(monkeypatch) -> None:
     # gripper's width calibration is measured there (none configured), the fingers left open.
     assert made["ft"].calls == [("check", False), "bias"]
     assert made["gripper"].calls == [("check", True), "calibrate", "open"]
+    assert made["camera"].calls[0] == ("check", 0.0)  # streaming is enough to start
     assert backend.judge("packed", {}) is None  # no ground truth on a real cell
     backend.close()
     assert made["arm"].calls[-2:] == ["stop", "close"]
@@ -127,3 +132,21 @@ def test_configured_gripper_counts_skip_the_start_up_calibration(monkeypatch) ->
     assert "calibrate" not in made["gripper"].calls
     assert (seen["gripper"].open_count, seen["gripper"].closed_count) == (3, 228)  # type: ignore[attr-defined]
     backend.close()
+
+
+def test_a_gripper_that_holds_something_is_not_opened_to_calibrate_it(monkeypatch) -> None:
+    made: dict[str, _Dev] = {}
+
+    def opener(name: str):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            made[name] = _Dev(name)
+            if name == "gripper":
+                made[name].object_detected = lambda: True  # type: ignore[method-assign]
+            return made[name]
+
+        return make
+
+    monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
+    with pytest.raises(ConfigError, match="holds something.*open_count and closed_count"):
+        hardware.open_hardware(_prep())
+    assert "calibrate" not in made["gripper"].calls and "bias" not in made["ft"].calls
