@@ -50,5 +50,8 @@ class Camera(Protocol):
         ...
 
     def capture(self) -> Frame:
-        """Newest aligned frame. Raises ``TimeoutError`` when none arrives in time."""
+        """An aligned frame exposed after the call. Raises ``TimeoutError`` when none arrives
+        in time. A camera that streams on its own clock may block here for a frame period or
+        two; it says so with a class attribute ``captures_in_background = True`` (optional,
+        not part of the protocol's check), and the skills then wait for it off the tick."""
         ...

@@ -40,9 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.arm import MotionState
+from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.frames import frame_step
 from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure, wait
 from skills.params import guard_field, si
 from skills.perception import UprightPart, locate_upright_part
@@ -622,7 +624,8 @@ class PickFromSlot(_SlotSkill):
         dev, g = self.dev, self.params.guard
         return [
             dev.move("camera over the slot", g, self._view),
-            check("find the part in the slot", dev, g, self._look, Failure.NOTHING_FOUND),
+            frame_step("find the part in the slot", dev, g, self._locate, self._use_seen,
+                       self._not_seen, Failure.NOTHING_FOUND),
         ]
 
     def _approach_steps(self) -> list[GuardedMotion]:
@@ -671,18 +674,19 @@ class PickFromSlot(_SlotSkill):
             travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed, p.acceleration
         )
 
-    def _look(self) -> str | None:
-        camera, arm = self.dev.camera, self.dev.arm
+    def _locate(self, frame: Frame, world_T_camera: Pose) -> UprightPart | None:
+        camera = self.dev.camera
         assert camera is not None
-        frame = camera.capture()
-        world_T_camera = arm.tool_pose() @ camera.tool_T_camera()
-        self.seen = locate_upright_part(
+        return locate_upright_part(
             frame, camera.intrinsics(), world_T_camera, self.part, self.slot_xy,
             self.slot_floor_z, search=self.params.view_search,
         )
-        if self.seen is None:
-            return "no part seen standing in the slot"
-        return None
+
+    def _use_seen(self, seen: UprightPart | None) -> None:
+        self.seen = seen
+
+    def _not_seen(self) -> str | None:
+        return "no part seen standing in the slot" if self.seen is None else None
 
     def _over_wall(self) -> None:
         arm, p = self.dev.arm, self.params

@@ -209,6 +209,10 @@ class RealSenseD435:
     can refuse the first).
     """
 
+    #: A real camera streams on its own clock: its frames are waited for off the control tick
+    #: (``skills.frames``), where the twin's camera renders inside the tick.
+    captures_in_background = True
+
     def __init__(
         self,
         serial: str | None = None,

@@ -9,9 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.frames import frame_step
 from skills.motion import Guard, GuardedMotion, Sequence
 from skills.params import si
 from skills.perception.bin_parts import (
@@ -104,26 +106,30 @@ class Look:
                 dev.move("camera over the bin", g, self._over_bin),
                 self._detect_step("find the parts"),
                 dev.move("camera beyond its end", g, lambda: self._beyond_end(0)),
-                self._detect_step("look at its end", self._judge_end),
+                self._detect_step("look at its end", judge_end=True),
                 dev.move("camera beyond its other end", g, lambda: self._beyond_end(1)),
-                self._detect_step("look at its other end", self._judge_end),
+                self._detect_step("look at its other end", judge_end=True),
             ],
         )
 
-    def _detect_step(self, name: str, command: Any = None) -> GuardedMotion:
-        """Take a frame and find the parts in it; fails NOTHING_FOUND while no part is chosen."""
-        dev = self.dev
-        return GuardedMotion(
-            name,
-            command if command is not None else self._detect,
-            lambda: True,
-            dev.arm,
-            dev.ft,
-            dev.clock,
-            self.params.guard,
-            self._none_found,
-            Failure.NOTHING_FOUND,
+    def _detect_step(self, name: str, judge_end: bool = False) -> GuardedMotion:
+        """Take a frame and find the parts in it (or, ``judge_end``, judge the chosen part's end
+        from it); fails NOTHING_FOUND while no part is chosen. The frame and the detection run
+        off the tick where the camera streams in real time (:mod:`skills.frames`)."""
+        return frame_step(
+            name, self.dev, self.params.guard,
+            self._judge_work if judge_end else self._detect_work,
+            self._use_judged if judge_end else self._use_detections,
+            self._none_found, Failure.NOTHING_FOUND,
+            wanted=self._end_view_wanted if judge_end else None,
         )
+
+    def _end_view_wanted(self) -> bool:
+        """An end to judge, or the closer look from above not taken yet."""
+        d = self._undecided
+        if d is None:
+            return not self._judged and self._looked_again is False
+        return any(p.name == d.part for p in self.catalogue)
 
     # --- the steps' commands and checks ------------------------------------------------------
     def _over_bin(self) -> None:
@@ -146,34 +152,41 @@ class Look:
         xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
         self.dev.arm.move_to(camera_over(xy, p.second_height, self.dev), p.speed, p.acceleration)
 
-    def _detect(self) -> None:
+    def _detect_work(self, frame: Frame, pose: Pose) -> list[Detection]:
         camera = self.dev.camera
         assert camera is not None
-        frame = camera.capture()
-        pose = self.dev.arm.tool_pose() @ camera.tool_T_camera()
-        dets = detect_parts(frame, camera.intrinsics(), pose, self.catalogue, self.roi)
+        return detect_parts(frame, camera.intrinsics(), pose, self.catalogue, self.roi)
+
+    def _use_detections(self, dets: list[Detection]) -> None:
         self._choose(dets)
         self._remember(dets)
 
-    def _judge_end(self) -> None:
+    def _judge_work(self, frame: Frame, pose: Pose) -> tuple[str, Any]:
         """A view beyond an end of the chosen cup or bottle whose open end the wide view did
-        not decide: what that end shows (:func:`open_end_from_view`); after both, the end the
-        views agree on (:func:`combine_end_views`). Nothing to do for a part decided."""
+        not decide: what that end shows (:func:`open_end_from_view`). For a part decided (or
+        leaning), the closer look from above, once: it refines what the wide view saw."""
         d = self._undecided  # set by the move beyond the end
         if d is None:
             if not self._judged and self._looked_again is False:
-                self._looked_again = True
-                self._detect()  # the closer look from above: refines what it sees again
-            return
+                return "detect", self._detect_work(frame, pose)
+            return "none", None
         part = next((p for p in self.catalogue if p.name == d.part), None)
         if part is None:
-            return
+            return "none", None
         camera = self.dev.camera
         assert camera is not None
-        frame = camera.capture()
-        pose = self.dev.arm.tool_pose() @ camera.tool_T_camera()
-        self._judged.append(open_end_from_view(d, part, frame, camera.intrinsics(), pose, self.roi))
-        self.result = combine_end_views(d, self._judged)
+        return "end", open_end_from_view(d, part, frame, camera.intrinsics(), pose, self.roi)
+
+    def _use_judged(self, judged: tuple[str, Any]) -> None:
+        """After both end views, the end they agree on (:func:`combine_end_views`)."""
+        kind, value = judged
+        if kind == "detect":
+            self._looked_again = True
+            self._use_detections(value)
+        elif kind == "end":
+            assert self._undecided is not None
+            self._judged.append(value)
+            self.result = combine_end_views(self._undecided, self._judged)
 
     def _choose(self, dets: list[Detection]) -> None:
         """The part nearest ``near_xy``; a later view replaces the choice only when it decided

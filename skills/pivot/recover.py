@@ -21,9 +21,11 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.frames import frame_step
 from skills.motion import GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import HoleGraspSkill, hole_grasp_rotation, pinched_span
@@ -67,16 +69,11 @@ class PickFromAbove(HoleGraspSkill):
         dev, g = self.dev, self.params.guard
         return [
             dev.move("camera over the part", g, self._view),
-            GuardedMotion(
-                "find the standing part",
-                self._look,
-                lambda: True,
-                dev.arm,
-                dev.ft,
-                dev.clock,
-                g,
-                self._not_seen,
-            ),
+            frame_step("find the standing part", dev, g, self._locate, self._use_seen,
+                       self._not_seen)
+            if dev.camera is not None
+            else GuardedMotion("find the standing part", lambda: None, lambda: True, dev.arm,
+                               dev.ft, dev.clock, g, self._not_seen),
         ]
 
     def _grasp_steps(self) -> list[GuardedMotion]:
@@ -130,14 +127,10 @@ class PickFromAbove(HoleGraspSkill):
         target = np.array([*self.predicted_axis, self._rim_z() + p.view_height]) - rot @ cam
         self.dev.arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
 
-    def _look(self) -> None:
+    def _locate(self, frame: Frame, world_T_camera: Pose) -> UprightPart | None:
         camera = self.dev.camera
-        if camera is None:
-            return
-        assert self.predicted_axis is not None
-        frame = camera.capture()
-        world_T_camera = self.dev.arm.tool_pose() @ camera.tool_T_camera()
-        self.seen = locate_upright_part(
+        assert camera is not None and self.predicted_axis is not None
+        return locate_upright_part(
             frame,
             camera.intrinsics(),
             world_T_camera,
@@ -146,6 +139,9 @@ class PickFromAbove(HoleGraspSkill):
             self._frame_now().floor_z,
             search=self.params.view_search,
         )
+
+    def _use_seen(self, seen: UprightPart | None) -> None:
+        self.seen = seen
 
     def _not_seen(self) -> str | None:
         if self.dev.camera is None:
