@@ -229,6 +229,14 @@ class HardwareBackend:
                 _close(name, self.opened[name])
 
 
+def _refuse(prep: Any, opened: dict[str, Any], why: str) -> ConfigError:
+    """Close every device opened so far and say why the start was refused (raise it)."""
+    for name, dev in opened.items():
+        _close(name, dev)
+    return ConfigError(prep.doc.source, prep.doc.line_of(("devices",)), "devices",
+                       f"start-up checks failed, nothing moved: {why}")
+
+
 def open_hardware(prep: Any) -> HardwareBackend:
     """Connect and check every device before anything moves; refuse with the reasons."""
     config = prep.config
@@ -255,14 +263,7 @@ def open_hardware(prep: Any) -> HardwareBackend:
             _close(name, dev)
         raise
     if problems:
-        for name, dev in opened.items():
-            _close(name, dev)
-        raise ConfigError(
-            prep.doc.source,
-            prep.doc.line_of(("devices",)),
-            "devices",
-            "start-up checks failed, nothing moved: " + "; ".join(problems),
-        )
+        raise _refuse(prep, opened, "; ".join(problems))
     # Every width the skills command or read goes through the gripper's calibration: the counts
     # where this unit's fingers stop. Nominal counts (0 and 255) put a 2F-85 that stops at 3 and
     # 228 up to 10 mm off (the emulated cell opened 7 mm where it asked for 13 and struck the
@@ -278,11 +279,7 @@ def open_hardware(prep: Any) -> HardwareBackend:
             cal = opened["gripper"].calibrate()
             opened["gripper"].open()
         except (DeviceError, RuntimeError) as exc:
-            for name, dev in opened.items():
-                _close(name, dev)
-            raise ConfigError(prep.doc.source, prep.doc.line_of(("devices",)), "devices",
-                              f"start-up checks failed, nothing moved: the 2F-85's calibration: "
-                              f"{exc}") from None
+            raise _refuse(prep, opened, f"the 2F-85's calibration: {exc}") from None
         print(f"2F-85 calibrated: open_count {cal.open_count}, closed_count {cal.closed_count} "
               "(put them under devices.gripper to skip this)", file=sys.stderr)
     # The wrist sensor reads the tool's weight and the puck's power-up offset until it is zeroed;
@@ -293,11 +290,7 @@ def open_hardware(prep: Any) -> HardwareBackend:
     try:
         opened["ft"].bias()
     except (DeviceError, RuntimeError) as exc:
-        for name, dev in opened.items():
-            _close(name, dev)
-        raise ConfigError(prep.doc.source, prep.doc.line_of(("devices",)), "devices",
-                          f"start-up checks failed, nothing moved: zeroing the wrist sensor: "
-                          f"{exc}") from None
+        raise _refuse(prep, opened, f"zeroing the wrist sensor: {exc}") from None
     devices = Devices(opened["arm"], opened["gripper"], opened["ft"], clock, opened["camera"])
     machine = TimedMachine(clock, config.workflow.machining_time_s)
     return HardwareBackend(devices, machine, opened)

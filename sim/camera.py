@@ -136,7 +136,8 @@ class SimCamera:
         self.near = near
         self.far = far
         self._projection = projection_matrix(self._intrinsics, near, far).T.ravel().tolist()
-        self._colours: dict[tuple[int, int], list[float]] = {}  # (body, link) -> its rgba
+        # (body, link) -> its rgba; None: the link draws nothing (asked once, not every frame)
+        self._colours: dict[tuple[int, int], list[float] | None] = {}
         #: links left out of the frames rendered so far because they crossed the near plane
         self.links_hidden = 0
 
@@ -176,8 +177,8 @@ class SimCamera:
                 flags=p.ER_NO_SEGMENTATION_MASK,
             )
         finally:
-            for body, link in hidden:
-                p.changeVisualShape(body, link, rgbaColor=self._colours[(body, link)])
+            for key in hidden:
+                p.changeVisualShape(*key, rgbaColor=self._colours[key])
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(intr.height, intr.width, 4)[..., :3].copy()
         zbuf = np.asarray(zbuf, dtype=np.float64).reshape(intr.height, intr.width)
         n, f = self.near, self.far
@@ -211,10 +212,10 @@ class SimCamera:
                 key = (body, link)
                 if key not in self._colours:
                     shapes = [v for v in p.getVisualShapeData(body) if v[1] == link]
-                    if not shapes:
-                        continue  # nothing drawn
-                    self._colours[key] = list(shapes[0][7])
+                    self._colours[key] = list(shapes[0][7]) if shapes else None
                 rgba = self._colours[key]
+                if rgba is None:
+                    continue  # nothing drawn
                 p.changeVisualShape(body, link, rgbaColor=[rgba[0], rgba[1], rgba[2], 0.0])
                 hidden.append(key)
         self.links_hidden += len(hidden)

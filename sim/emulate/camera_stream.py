@@ -106,7 +106,6 @@ class CameraStreamServer:
         self._stop = threading.Event()
         self._frozen = threading.Event()
         self.frames_sent = 0  #: frame pairs sent (to any client)
-        self.frame_number = 0
         self._threads = [threading.Thread(target=self._accept, name="emu-d435-accept",
                                           daemon=True),
                          threading.Thread(target=self._stream, name="emu-d435-stream",
@@ -200,7 +199,6 @@ class CameraStreamServer:
             if self._frozen.is_set() or not self.clients:
                 continue
             rgb, depth = self.source.frame()
-            self.frame_number += 1
             z16 = to_z16(depth, self.depth_units)
             with self._lock:
                 clients = [(c, self._started.get(c, slot)) for c in self._clients]

@@ -4,6 +4,7 @@ simulator's pose only sets the scene and scores)."""
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -35,16 +36,15 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-@pytest.mark.parametrize("name", ["plastic_cup", "cookie_can", "medicine_bottle"])
-def test_both_end_views_find_the_open_end_of_a_part_the_wide_view_leaves_undecided(
-    name: str,
-) -> None:
-    part = CATALOGUE.get(name)
-    yaw = 0.4  # the part's +x (open) end
+@contextmanager
+def _wide_view(part, yaw: float, seed: int):  # type: ignore[no-untyped-def]
+    """``part`` lying settled under the Look's wide view of the bin (its +x end, the open one,
+    at ``yaw``): yields the camera, its movable view pose ``[pose]`` (set ``view[0]`` to look
+    elsewhere), the mount, the Look's parameters, the bin's ROI and the one detection."""
     x, y = LAYOUT.bin_center  # right under the wide view: neither end face in sight
     mount = default_tool_T_camera()
     params = LookParams()
-    with SimWorld(seed=3) as world:
+    with SimWorld(seed=seed) as world:
         build_cell(world, LAYOUT)
         spawn_part(world, part, lying_pose(part, x, y, yaw))
         for _ in range(100):
@@ -53,6 +53,16 @@ def test_both_end_views_find_the_open_end_of_a_part_the_wide_view_leaves_undecid
         cam = SimCamera(world, lambda: view[0], tool_T_camera=mount)
         roi = LAYOUT.bin_interior()
         (det,) = detect_parts(cam.capture(), cam.intrinsics(), view[0] @ mount, PARTS, roi)
+        yield cam, view, mount, params, roi, det
+
+
+@pytest.mark.parametrize("name", ["plastic_cup", "cookie_can", "medicine_bottle"])
+def test_both_end_views_find_the_open_end_of_a_part_the_wide_view_leaves_undecided(
+    name: str,
+) -> None:
+    part = CATALOGUE.get(name)
+    yaw = 0.4  # the part's +x (open) end
+    with _wide_view(part, yaw, seed=3) as (cam, view, mount, params, roi, det):
         assert det.part == name and not det.open_end_seen and not det.tilted
         judged, leaning = [], replace(det, tilted=True)
         for xy in end_views(det, params.second_offset, roi, [det]):
@@ -99,18 +109,7 @@ def test_a_closed_end_face_shows_about_what_a_whole_face_would() -> None:
     open/closed rules use is that of a whole face (within the pixels' aspect)."""
     part = CATALOGUE.get("plastic_cup")
     yaw = 0.4
-    x, y = LAYOUT.bin_center
-    mount = default_tool_T_camera()
-    params = LookParams()
-    with SimWorld(seed=4) as world:
-        build_cell(world, LAYOUT)
-        spawn_part(world, part, lying_pose(part, x, y, yaw))
-        for _ in range(100):
-            world.step()
-        view = [look_down_pose((x, y), params.view_height, mount)]
-        cam = SimCamera(world, lambda: view[0], tool_T_camera=mount)
-        roi = LAYOUT.bin_interior()
-        (det,) = detect_parts(cam.capture(), cam.intrinsics(), view[0] @ mount, PARTS, roi)
+    with _wide_view(part, yaw, seed=4) as (cam, view, mount, params, roi, det):
         u = np.array([math.cos(yaw), math.sin(yaw)])
         (closed_xy,) = [
             xy
