@@ -17,10 +17,12 @@ Contract forms (scripts rely on them; keep them exactly):
 from __future__ import annotations
 
 import argparse
+import logging
 import math
+import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -373,5 +375,26 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
+def entry() -> None:
+    """The ``cell`` console script: :func:`main`, then the process's end.
+
+    A run that lost the arm's link abandoned its ur_rtde interfaces rather than wait seconds in
+    their disconnect (see :func:`drivers.ur5.rtde_adapter.links_abandoned`); everything the run
+    owes (state, journal, log, summary) is written by the time :func:`main` returns, so the
+    process then ends at once with the same status, its output flushed."""
+    end_process(main())
+
+
+def end_process(code: int) -> NoReturn:
+    """Exit with ``code``; at once, without destructors, where an arm's link was abandoned."""
+    adapter = sys.modules.get("drivers.ur5.rtde_adapter")
+    if adapter is not None and adapter.links_abandoned():
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

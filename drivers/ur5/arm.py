@@ -770,10 +770,18 @@ class UR5Arm:
         )
 
     def close(self) -> None:
-        """Stop, then drop the links (shutdown path)."""
+        """Stop, then drop the links (shutdown path). A lost link is abandoned, not
+        disconnected, and no further reconnect attempt starts: see
+        :func:`drivers.ur5.rtde_adapter.links_abandoned` for why and what the process owes."""
         self.stop()
         try:
-            self._rtde.disconnect()
+            with self._lock:
+                lost = self._link_lost
+                self._attempts = self.settings.reconnect_attempts
+            if lost:
+                self._rtde.abandon()
+            else:
+                self._rtde.disconnect()
         finally:
             if self.dashboard is not None:
                 self.dashboard.close()

@@ -20,6 +20,22 @@ from typing import Any, Protocol, runtime_checkable
 
 RTDE_PORT = 30004  #: the controller's RTDE port (fixed; ur_rtde does not let it be changed)
 
+#: Interfaces of dead links given up by :meth:`URRTDEAdapter.abandon`, process-wide: nothing but
+#: the end of the process disposes of them (see :func:`links_abandoned`).
+_ABANDONED: list[Any] = []
+
+
+def links_abandoned() -> bool:
+    """True once an interface of a dead link was given up: the process must then end with
+    ``os._exit`` after flushing what it writes.
+
+    Why: ur_rtde's ``disconnect()`` on a dead link first tries to stop the control script and
+    reconnect, which took 2.8 s after a pulled cable (``cell run`` against ``cell emulate``);
+    and a ``RTDEControlInterface`` destroyed while a reconnect attempt of the driver is still
+    inside ur_rtde aborts the process (``terminate called``, exit 134). Neither has anything
+    left to do on a dead socket, so the process ends without running their destructors."""
+    return bool(_ABANDONED)
+
 
 @runtime_checkable
 class RTDEAdapter(Protocol):
@@ -32,6 +48,11 @@ class RTDEAdapter(Protocol):
         ...
 
     def disconnect(self) -> None: ...
+
+    def abandon(self) -> None:
+        """Give up both interfaces of a dead link without disconnecting them (see
+        :func:`links_abandoned`)."""
+        ...
 
     def is_connected(self) -> bool:
         """Both RTDE links up (cheap: a flag in ur_rtde)."""
@@ -179,6 +200,13 @@ class URRTDEAdapter:
         for iface in (self._control, self._receive):
             if iface is not None:
                 iface.disconnect()
+
+    def abandon(self) -> None:
+        _ABANDONED.extend(
+            i for i in (self._control, self._receive, *self._retired) if i is not None
+        )
+        self._control = self._receive = None
+        self._retired = []
 
     def receive_connected(self) -> bool:
         return self._receive is not None and bool(self._receive.isConnected())

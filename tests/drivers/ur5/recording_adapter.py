@@ -57,6 +57,10 @@ class RecordingAdapter:
         self._rec("disconnect")
         self.connected = False
 
+    def abandon(self) -> None:
+        self._rec("abandon")
+        self.connected = False
+
     def is_connected(self) -> bool:
         self._rec("is_connected")
         return self.connected

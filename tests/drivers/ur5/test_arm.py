@@ -327,6 +327,27 @@ def test_lost_link_is_a_fault_with_bounded_reconnects_and_backoff() -> None:
     assert arm.status().state is MotionState.MOVING
 
 
+def test_close_abandons_a_lost_link_and_starts_no_further_attempt() -> None:
+    arm, rtde, clock = make(UR5Settings(reconnect_attempts=4, reconnect_first_delay=0.5))
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.connected = False
+    assert arm.status().state is MotionState.FAULT
+    arm.close()
+    # ur_rtde's disconnect on a dead link blocks for seconds: the link is given up instead.
+    assert "abandon" in rtde.names() and "disconnect" not in rtde.names()
+    attempts = rtde.names().count("reconnect")
+    for _ in range(500):
+        clock.t += 0.008
+        arm.status()
+    assert rtde.names().count("reconnect") == attempts
+
+
+def test_close_disconnects_a_live_link() -> None:
+    arm, rtde, _ = make()
+    arm.close()
+    assert "disconnect" in rtde.names() and "abandon" not in rtde.names()
+
+
 def test_reconnect_that_raises_counts_as_a_failed_attempt() -> None:
     arm, rtde, clock = make(UR5Settings(reconnect_attempts=2))
     rtde.reconnect_results = [RuntimeError("timed out connecting"), True]

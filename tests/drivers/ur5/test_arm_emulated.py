@@ -176,3 +176,20 @@ def test_after_a_cable_pull_the_link_comes_back_at_the_configured_rate_with_the_
     again = emulator.requested_frequencies()[before:]
     assert again and all(f == 50.0 for f in again), again
     assert emulator.status()["watchdog_hz"] == 5.0
+
+
+def test_a_process_that_lost_the_link_ends_at_once_with_its_status_and_output() -> None:
+    # bench/link_loss_exit.py's child, as `cell run` ends after a pulled cable: the arm's
+    # close() abandons the dead interfaces and end_process skips their destructors. Leaving
+    # them to the interpreter's exit instead aborted the process (terminate called, exit 134)
+    # while a reconnect attempt was inside ur_rtde; disconnecting them took seconds.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[3] / "bench" / "link_loss_exit.py"
+    proc = subprocess.run([sys.executable, str(bench), "--child", "abandon"],
+                          capture_output=True, text=True, timeout=60, cwd=bench.parents[1])
+    assert proc.returncode == 1, proc.stderr[-2000:]
+    assert "terminate called" not in proc.stderr
+    assert "PULLED" in proc.stdout  # written before the end, and flushed
