@@ -157,11 +157,16 @@ class FT300:
 
     def _close_port(self) -> None:
         ser, self._serial = self._serial, None
-        if ser is not None:
-            try:
-                ser.close()
-            except Exception:  # closing a broken port must not mask the cause
-                pass
+        if ser is None:
+            return
+        if str(self.port).startswith("socket://"):
+            # pyserial's TCP port sleeps 0.3 s after closing its socket (room for a quick
+            # reconnect to the same server); nothing here waits for that, and a cell stopping
+            # after a lost arm link must be gone within 0.5 s.
+            threading.Thread(target=_close_quietly, args=(ser,), name="ft300-close",
+                             daemon=True).start()
+        else:
+            _close_quietly(ser)
 
     def _read_loop(self) -> None:
         """Reader thread: bytes -> parser -> newest sample; records why it died, if it does."""
@@ -306,3 +311,10 @@ class FT300:
             problems.append(f"raw force {force:.1f} N at rest > {max_force_n:g} N")
         return CheckResult(DEVICE, self.port, not problems, details,
                            "; ".join(problems) or None)
+
+
+def _close_quietly(ser: Any) -> None:
+    try:
+        ser.close()
+    except Exception:  # closing a broken port must not mask the cause
+        pass
