@@ -253,30 +253,40 @@ class URRTDEAdapter:
             except Exception:  # already dead: nothing to close
                 pass
 
+    def _ctl(self) -> Any:
+        """The control interface, refused once ur_rtde has seen its link drop: a command on
+        it waits for a controller that will not answer (``stopL`` on the link of a controller
+        whose process was killed never returned), so it raises here and the driver counts a
+        lost link. A link that drops during a call is the driver's ``data_timeout`` to catch."""
+        ctl = self._control
+        if ctl is None or not ctl.isConnected():
+            raise RuntimeError("RTDE control link down")
+        return ctl
+
     def reupload_script(self) -> bool:
-        return bool(self._control.reuploadScript())
+        return bool(self._ctl().reuploadScript())
 
     def move_l(self, pose: Sequence[float], speed: float, acceleration: float) -> bool:
-        return bool(self._control.moveL(list(pose), speed, acceleration, True))
+        return bool(self._ctl().moveL(list(pose), speed, acceleration, True))
 
     def move_l_path(self, path: Sequence[Sequence[float]]) -> bool:
-        return bool(self._control.moveL([list(row) for row in path], True))
+        return bool(self._ctl().moveL([list(row) for row in path], True))
 
     def move_j(self, q: Sequence[float], speed: float, acceleration: float) -> bool:
-        return bool(self._control.moveJ(list(q), speed, acceleration, True))
+        return bool(self._ctl().moveJ(list(q), speed, acceleration, True))
 
     def async_status(self) -> tuple[bool, int]:
         status = self._control.getAsyncOperationProgressEx()
         return bool(status.isAsyncOperationRunning()), int(status.operationId())
 
     def servo_l(self, pose: Sequence[float], time: float, lookahead: float, gain: float) -> bool:
-        return bool(self._control.servoL(list(pose), 0.0, 0.0, time, lookahead, gain))
+        return bool(self._ctl().servoL(list(pose), 0.0, 0.0, time, lookahead, gain))
 
     def servo_stop(self, deceleration: float) -> bool:
-        return bool(self._control.servoStop(deceleration))
+        return bool(self._ctl().servoStop(deceleration))
 
     def stop_l(self, deceleration: float) -> None:
-        self._control.stopL(deceleration, True)
+        self._ctl().stopL(deceleration, True)
 
     def force_mode(
         self,
@@ -287,22 +297,22 @@ class URRTDEAdapter:
         limits: Sequence[float],
     ) -> bool:
         return bool(
-            self._control.forceMode(
+            self._ctl().forceMode(
                 list(task_frame), list(selection), list(wrench), frame_type, list(limits)
             )
         )
 
     def force_mode_stop(self) -> bool:
-        return bool(self._control.forceModeStop())
+        return bool(self._ctl().forceModeStop())
 
     def is_program_running(self) -> bool:
         return bool(self._control.isProgramRunning())
 
     def set_watchdog(self, min_frequency: float) -> bool:
-        return bool(self._control.setWatchdog(min_frequency))
+        return bool(self._ctl().setWatchdog(min_frequency))
 
     def kick_watchdog(self) -> bool:
-        return bool(self._control.kickWatchdog())
+        return bool(self._ctl().kickWatchdog())
 
     def tcp_pose(self) -> list[float]:
         return list(self._receive.getActualTCPPose())

@@ -193,3 +193,32 @@ def test_a_process_that_lost_the_link_ends_at_once_with_its_status_and_output() 
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert "terminate called" not in proc.stderr
     assert "PULLED" in proc.stdout  # written before the end, and flushed
+
+
+def test_a_stop_after_the_controller_vanished_returns_with_a_lost_link() -> None:
+    # The whole controller gone at once (its process killed): the wrist sensor's loss reached the
+    # cell first and its guard stopped the arm before any status poll had seen the link go.
+    # ur_rtde's stopL on the dead link then never returned (the tick thread hung for minutes in
+    # `cell run` against a killed `cell emulate`).
+    import threading
+
+    from sim.emulate.ur_standalone import loopback_host
+
+    # An address of its own: the module's emulator holds the fixed ports on loopback_host().
+    host = "127.201." + ".".join(loopback_host().split(".")[2:])
+    emu = URAloneProcess(host=host, script_start_delay=0.15).start()
+    try:
+        arm = UR5Arm.connect(emu.host, settings=UR5Settings(reconnect_attempts=1))
+        arm.move_to(offset(arm.tool_pose(), dz=-0.10), 0.02, 0.5)
+        time.sleep(0.1)
+        emu._proc.kill()  # noqa: SLF001 -- a controller that vanishes, not one that says goodbye
+        emu._proc.join(timeout=5.0)  # noqa: SLF001
+        time.sleep(0.2)  # the sockets' ends reach ur_rtde's reader threads
+        done = threading.Event()
+        threading.Thread(target=lambda: (arm.stop(), done.set()), daemon=True).start()
+        assert done.wait(5.0), "stop() hung on the dead link"
+        st = arm.status()
+        assert st.state is MotionState.FAULT and st.link_lost, st.message
+        arm.close()
+    finally:
+        emu.stop()
