@@ -635,13 +635,14 @@ class URController:
         running = prog is not None and prog.running
         protective = self._protective_since is not None
         q = b.joint_positions()
+        tcp = b.tcp_pose()
         out: dict[str, Any] = {
             "timestamp": self.t,
             "actual_q": q,
             "target_q": q,
             "actual_qd": b.joint_velocities(),
-            "actual_TCP_pose": b.tcp_pose(),
-            "target_TCP_pose": b.tcp_pose(),
+            "actual_TCP_pose": tcp,
+            "target_TCP_pose": tcp,
             "actual_TCP_speed": b.tcp_speed(),
             "actual_TCP_force": b.tcp_force(),
             "robot_mode": ROBOT_MODE_RUNNING,

@@ -1,0 +1,33 @@
+"""The emulators' real-time loop: a late step slips the twin's clock, it never bursts."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from sim.emulate.realtime import RealTimeLoop
+
+PERIOD = 0.01
+
+
+def test_a_step_that_overran_is_not_caught_up_in_a_burst() -> None:
+    starts: list[float] = []
+
+    def step() -> None:
+        starts.append(time.monotonic())
+        if len(starts) == 5:
+            time.sleep(6 * PERIOD)  # one step costs six periods
+        if len(starts) >= 15:
+            loop.stop()
+
+    loop = RealTimeLoop(PERIOD, step)
+    thread = threading.Thread(target=loop.run)
+    thread.start()
+    thread.join(timeout=5.0)
+    gaps = [b - a for a, b in zip(starts[5:-1], starts[6:], strict=True)]
+    # Catching up would run the next five steps back to back (gaps near zero): the world would
+    # move faster than the wall clock with no command from the cell between them.
+    assert min(gaps) > 0.5 * PERIOD, [round(g * 1e3, 1) for g in gaps]
+    stats = loop.margin_stats()
+    assert stats["overruns"] >= 1
+    assert stats["slipped_s"] >= 4 * PERIOD  # the twin's time fell behind by about the overrun
