@@ -248,6 +248,7 @@ def test_cli_run_refuses_the_sim_backend_and_devices_that_fail_their_checks(tmp_
     hw.write_text(
         "cell:\n  backend: hw\ndevices:\n  arm: {host: 127.0.0.1}\n"
         f"  gripper: {{port: {tmp_path}/no_tty0}}\n  ft: {{port: {tmp_path}/no_tty1}}\n"
+        "skills:\n  pivot: {grip_force_n: 20, hold_force_n: 20}\n  slot: {hold_force_n: 20}\n"
     )
     r = _cell("run", "--config", str(hw), cwd=tmp_path)
     assert r.returncode == 2 and "Traceback" not in r.stderr

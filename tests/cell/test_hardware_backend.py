@@ -48,9 +48,33 @@ class _Dev:
         self.calls.append("disconnect")
 
 
-def _prep():
-    config, doc = config_from_text("cell:\n  backend: hw\n", "hw.yaml")
+#: Gripper forces a 2F-85 can apply (the defaults are the twin's, below its 20 N).
+FORCES = "skills:\n  pivot: {grip_force_n: 20, hold_force_n: 20}\n  slot: {hold_force_n: 20}\n"
+
+
+def _prep(text: str = "cell:\n  backend: hw\n" + FORCES):
+    config, doc = config_from_text(text, "hw.yaml")
     return prepare(config, doc)
+
+
+def test_a_grip_force_the_2f85_cannot_apply_is_refused_before_any_device_opens(
+        monkeypatch) -> None:
+    opened: list[str] = []
+
+    def opener(name: str):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            opened.append(name)
+            return _Dev()
+
+        return make
+
+    monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
+    text = "cell:\n  backend: hw\n" + FORCES.replace("grip_force_n: 20", "grip_force_n: 2")
+    with pytest.raises(ConfigError) as err:
+        hardware.open_hardware(_prep(text))
+    assert err.value.key == "skills.pivot.grip_force_n" and err.value.line == 4
+    assert "20-235 N" in err.value.reason and "apply 20 N" in err.value.reason
+    assert opened == []
 
 
 def test_a_failed_check_refuses_the_run_and_closes_what_was_opened(monkeypatch) -> None:
@@ -126,7 +150,8 @@ def test_configured_gripper_counts_skip_the_start_up_calibration(monkeypatch) ->
 
     monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
     config, doc = config_from_text(
-        "cell:\n  backend: hw\ndevices:\n  gripper:\n    open_count: 3\n    closed_count: 228\n",
+        "cell:\n  backend: hw\ndevices:\n  gripper:\n    open_count: 3\n    closed_count: 228\n"
+        + FORCES,
         "hw.yaml")
     backend = hardware.open_hardware(prepare(config, doc))
     assert "calibrate" not in made["gripper"].calls

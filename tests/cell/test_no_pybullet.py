@@ -61,6 +61,7 @@ def _hw_config(tmp_path: Path) -> Path:
         "  arm: {host: 127.0.0.1, connect_timeout_s: 0.5}\n"
         f"  gripper: {{transport: urcap, urcap_port: {free_port()}, timeout_s: 0.5}}\n"
         f"  ft: {{port: {tmp_path / 'no_tty'}, stale_after_s: 0.5}}\n"
+        "skills:\n  pivot: {grip_force_n: 20, hold_force_n: 20}\n  slot: {hold_force_n: 20}\n"
         "log:\n"
         f"  tick_log: {tmp_path / 'ticks.jsonl'}\n"
         f"  state_file: {tmp_path / 'state.json'}\n"
