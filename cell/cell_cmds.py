@@ -85,6 +85,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--parts", type=int, default=None, help="parts in the bin (bin.parts)")
     p.add_argument("--record", type=Path, default=None, help="write an animated GIF of the run")
+    p.add_argument("--trace", type=Path, default=None,
+                   help="CSV, one row per step of the twin: its time, wrist wrench (raw, tool "
+                   "frame), finger opening, TCP position and arm mode (as `cell emulate --trace`)")
     p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
     p.add_argument(
         "--max-sim-time",
@@ -280,6 +283,11 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
             prep.state.journal.close()
         raise
     log = session.log
+    trace = None
+    if getattr(args, "trace", None) is not None:
+        from sim.trace import TwinTrace
+
+        trace = TwinTrace(args.trace, backend.world, backend.robot)
     recorder = None
     if args.record is not None:
         from cell.recording import CellRecorder, caption_for
@@ -330,6 +338,8 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         if hasattr(backend, "account"):
             parts = backend.account()
     finally:
+        if trace is not None:
+            trace.close()
         session.close()
         log.close()
         backend.close()

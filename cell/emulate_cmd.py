@@ -1,7 +1,8 @@
 """`cell emulate`: the cell's devices, emulated on their real wires over the PyBullet twin, in
 real time, so `cell run` and `cell check-hardware` drive them through the real drivers.
 
-Contract: ``cell emulate [--config FILE] [--report FILE] [--print-config]``. Prints ``ready`` on
+Contract: ``cell emulate [--config FILE] [--report FILE] [--print-config]`` (and ``--trace FILE``,
+a per-step CSV of the twin). Prints ``ready`` on
 stdout once every device listens; runs until SIGINT/SIGTERM (exit 0), writing the report after
 each finished cycle and on the way out. The twin judges by physics alone (where each part is):
 ``packed`` = parts standing in the box, ``fed`` = parts that reached the slot (packed ones
@@ -51,6 +52,9 @@ def add_parser(sub: Any) -> None:
                    help=f"cell configuration (default: the shipped {EXAMPLE.name})")
     p.add_argument("--report", type=Path, default=None,
                    help="JSON report: cycles, fed, packed, parts (judged by the twin)")
+    p.add_argument("--trace", type=Path, default=None,
+                   help="CSV, one row per step of the twin: its time, wrist wrench (raw, tool "
+                   "frame), finger opening, TCP position and arm mode; for diagnosing a run")
     p.add_argument("--print-config", action="store_true",
                    help="print the shipped example configuration's path and exit")
     p.set_defaults(func=cmd_emulate)
@@ -286,6 +290,11 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
         tmp.replace(args.report)
 
     twin_arm = backend.robot.arm
+    trace = None
+    if args.trace is not None:
+        from sim.trace import TwinTrace
+
+        trace = TwinTrace(args.trace, backend.world, backend.robot)
 
     def step() -> None:
         with lock:
@@ -345,5 +354,7 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
         loop.stop()
         thread.join(timeout=2.0)
         write_report()
+        if trace is not None:
+            trace.close()
     print(json.dumps({"realtime": loop.margin_stats()}), file=sys.stderr)
     return 0

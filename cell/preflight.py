@@ -36,14 +36,14 @@ OUTPUTS: dict[str, tuple[tuple[str, Kind], ...]] = {
     "perceive": (("json", "file"), ("save_failures", "dir")),
     "train-perception": (("out", "file"),),
     "compare": (("json", "file"),),
-    "sim": (("json", "file"), ("record", "file")),
+    "sim": (("json", "file"), ("record", "file"), ("trace", "file")),
     "run": (("json", "file"),),
     "tree": (("out", "dir"),),
     "check-hardware": (("json", "file"),),
     "schema": (("out", "file"),),
     "soak": (("json", "file"),),
     "init": (("dir", "dir"),),
-    "emulate": (("report", "file"),),
+    "emulate": (("report", "file"), ("trace", "file")),
 }
 
 #: Commands that write nothing but their output on the terminal.

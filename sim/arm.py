@@ -347,6 +347,11 @@ class SimArm:
             self._mode = "hold"
             self._state = MotionState.DONE
 
+    @property
+    def mode(self) -> str:
+        """What drives the joints now: hold, path, joints, servo or force (diagnostics)."""
+        return self._mode
+
     def servo(self, target: Pose) -> None:
         """Set the TCP target (base frame) for the next control step.
 

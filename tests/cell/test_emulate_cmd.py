@@ -25,10 +25,11 @@ def test_emulate_serves_the_arm_and_reports_on_sigterm(tmp_path: Path) -> None:
     config = emulated_config(tmp_path)
     host = config.read_text().split("host: ", 1)[1].split()[0]
     report = tmp_path / "report.json"
+    trace = tmp_path / "trace.csv"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "cell.cli", "emulate", "--config", str(config), "--report",
-         str(report)],
+         str(report), "--trace", str(trace)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
     )
     try:
@@ -54,6 +55,19 @@ def test_emulate_serves_the_arm_and_reports_on_sigterm(tmp_path: Path) -> None:
     assert {"cycles", "fed", "packed", "parts"} <= set(data)
     assert data["packed"] == 0 and len(data["parts"]) == 10
     assert all(p["where"] == "in_bin" for p in data["parts"])
+    # The trace: one row a step of the twin, its own clock at the control period, the tool
+    # hanging at rest (its weight on the sensor, about 12 N) with the jaws as they are.
+    lines = trace.read_text().splitlines()
+    header = lines[0].split(",")
+    rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
+    assert header[:3] == ["wall_s", "twin_s", "fx_n"] and len(rows) > 50
+    twin = [float(r["twin_s"]) for r in rows]
+    steps = {round(b - a, 4) for a, b in zip(twin, twin[1:], strict=False)}
+    assert steps == {0.008}
+    last = rows[-1]
+    weight = sum(float(last[k]) ** 2 for k in ("fx_n", "fy_n", "fz_n")) ** 0.5
+    assert 5.0 < weight < 30.0 and 0.0 <= float(last["opening_m"]) <= 0.086
+    assert last["mode"] in ("hold", "path", "joints", "servo", "force")
 
 
 def test_print_config_names_the_shipped_example() -> None:

@@ -38,16 +38,16 @@ VALID: dict[str, list[str]] = {
     ],
     "train-perception": ["train-perception", "--scenes", "2", "--epochs", "1", "--out", "{W}"],
     "compare": ["compare", "--part", "bushing", "--trials", "1", "--json", "{J}"],
-    "sim": ["sim", "--cycles", "1", "--json", "{J}", "--record", "{G}"],
+    "sim": ["sim", "--cycles", "1", "--json", "{J}", "--record", "{G}", "--trace", "{C}"],
     "run": ["run", "--config", "{HW}", "--json", "{J}"],
     "tree": ["tree", "--out", "{D}"],
     "check-hardware": ["check-hardware", "--config", "{HW}", "--json", "{J}"],
     "schema": ["schema", "--out", "{J}"],
     "soak": ["soak", "--cycles", "1", "--json", "{J}"],
     "init": ["init", "{D}"],
-    "emulate": ["emulate", "--report", "{J}"],
+    "emulate": ["emulate", "--report", "{J}", "--trace", "{C}"],
 }
-SUFFIX = {"{J}": "x.json", "{G}": "x.gif", "{D}": "folder", "{Y}": "layout.yaml", "{W}": "w.pt"}
+SUFFIX = {"{J}": "x.json", "{G}": "x.gif", "{C}": "x.csv", "{D}": "folder", "{Y}": "layout.yaml", "{W}": "w.pt"}
 
 
 def _commands() -> list[str]:

@@ -57,3 +57,22 @@ def test_the_caption_names_the_running_steps_own_abort_force() -> None:
     assert force_limit(nodes["put back"], 80.0) == 250.0
     assert force_limit(nodes["plan pick"], 123.0) == 123.0  # no guard above: the default
     assert force_limit(None, 123.0) == 123.0  # nothing running
+
+
+def test_the_trace_has_a_row_a_step_with_the_twins_own_state(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(
+        ["sim", "--cycles", "1", "--max-sim-time", "3", "--quiet", "--trace", "t.csv"], capsys
+    )
+    assert code == 1, err  # cut by --max-sim-time
+    lines = (tmp_path / "t.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
+    twin = [float(r["twin_s"]) for r in rows]
+    assert np.allclose(np.diff(twin), 0.008) and 2.9 < twin[-1] - twin[0] <= 3.1
+    # The tool hangs from the sensor (its weight, not zeroed) and the arm moves off home.
+    assert all(5.0 < abs(float(r["fz_n"])) < 30.0 for r in rows[:5])
+    z = [float(r["tcp_z_m"]) for r in rows]
+    assert max(z) - min(z) > 0.01 and {r["mode"] for r in rows} & {"path", "joints"}
