@@ -47,7 +47,10 @@ VALID: dict[str, list[str]] = {
     "init": ["init", "{D}"],
     "emulate": ["emulate", "--report", "{J}", "--trace", "{C}"],
 }
-SUFFIX = {"{J}": "x.json", "{G}": "x.gif", "{C}": "x.csv", "{D}": "folder", "{Y}": "layout.yaml", "{W}": "w.pt"}
+SUFFIX = {
+    "{J}": "x.json", "{G}": "x.gif", "{C}": "x.csv", "{D}": "folder", "{Y}": "layout.yaml",
+    "{W}": "w.pt",
+}
 
 
 def _commands() -> list[str]:
