@@ -11,6 +11,7 @@ crushes something, so the guard must see the stream die as a failure, not as "no
 
 from __future__ import annotations
 
+import select
 import threading
 import time
 from collections import deque
@@ -20,13 +21,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from drivers.ft300.protocol import FrameParser, start_stream_request, stop_stream_bytes
+from drivers.ft300.protocol import (
+    FRAME_LEN,
+    FrameParser,
+    start_stream_request,
+    stop_stream_bytes,
+)
 from drivers.health import CheckResult, DeviceError, backoff_delays
 
 DEVICE = "FT300"
 #: Optional hook called from the reader thread with each valid sample and its arrival time
 #: (``time.monotonic()``); for logging and latency measurements. It must be quick and must
 #: not raise (an exception ends the reader, and wrench() then raises DeviceError).
+READ_WAIT = 0.02  #: s the reader waits for bytes before it looks at its stop flag again
+
 SampleHook = Callable[[NDArray[np.float64], float], None]
 
 
@@ -37,7 +45,9 @@ class FT300:
     ``unit_id`` (the Modbus address the start request goes to, 9 by default), ``timeout`` (s: the
     first valid frame must arrive this soon after the start request), ``stale_after`` (s: a
     sample older than this is an error), ``bias_samples`` (samples averaged by :meth:`bias`),
-    ``open_attempts`` (bounded tries to open the port, with back-off).
+    ``open_attempts`` (bounded tries to open the port, with back-off), ``on_sample`` (called with
+    each sample and its arrival time on the thread that took it: the reader, or a caller of
+    :meth:`wrench` that found the newest sample stale).
 
     Use :meth:`start` / :meth:`stop` or ``with FT300(...) as ft:``.
     """
@@ -59,7 +69,8 @@ class FT300:
         self.timeout, self.stale_after = timeout, stale_after
         self.open_attempts = max(1, open_attempts)
         self._on_sample = on_sample
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  #: the newest sample and its statistics
+        self._io = threading.Lock()  #: the line and the parser: one reader at a time
         self._recent: deque[NDArray[np.float64]] = deque(maxlen=max(1, bias_samples))
         self._stamps: deque[float] = deque(maxlen=101)  #: for the rate over the last 100 gaps
         self._newest: NDArray[np.float64] | None = None
@@ -169,25 +180,43 @@ class FT300:
             _close_quietly(ser)
 
     def _read_loop(self) -> None:
-        """Reader thread: bytes -> parser -> newest sample; records why it died, if it does."""
+        """Reader thread: wait for bytes, then take them under the line's lock (never blocking
+        there); records why the line died, if it does.
+
+        The wait is outside the lock, so a caller of :meth:`wrench` that finds the newest sample
+        stale can take what has arrived itself while this thread is not scheduled."""
         ser = self._serial
         assert ser is not None
         try:
+            fd = ser.fileno()
             while not self._stopping.is_set():
-                waiting = ser.in_waiting
-                # Take what is there, or block (up to the port timeout) for the bytes that end
-                # the frame under way: a frame is handled as soon as its last byte lands, with
-                # one wake-up per frame, not one per byte. (A TCP port's in_waiting is only 0/1.)
-                data = ser.read(waiting if waiting > 1 else self._parser.missing())
-                if not data:
+                ready, _, _ = select.select([fd], [], [], READ_WAIT)
+                if not ready:
                     continue
-                now = time.monotonic()
-                samples = self._parser.feed(data)
-                if samples:
-                    self._store(samples, now)
+                with self._io:
+                    self._drain(ser)
+                # A frame under way: sleep until its last byte is due (10 bits a byte), so a
+                # frame costs one wake-up, not one per byte.
+                missing = self._parser.missing()
+                if missing < FRAME_LEN:
+                    self._stopping.wait(missing * 10.0 / self.baudrate)
         except Exception as exc:  # any failure of the line ends the stream
             if not self._stopping.is_set():
                 self._reader_error = f"serial read failed: {exc}"
+
+    def _drain(self, ser: Any) -> None:
+        """Take every byte already received and store the samples it completes; never waits
+        (``in_waiting`` bytes are there: a TCP port says 1 while readable). Call with ``_io``."""
+        while True:
+            waiting = ser.in_waiting
+            if waiting <= 0:
+                return
+            data = ser.read(waiting)
+            if not data:
+                return
+            samples = self._parser.feed(data)
+            if samples:
+                self._store(samples, time.monotonic())
 
     def _store(self, samples: list[NDArray[np.float64]], now: float) -> None:
         with self._lock:
@@ -206,7 +235,11 @@ class FT300:
     # -- ForceTorqueSensor -------------------------------------------------------------------
 
     def _fresh_newest(self) -> NDArray[np.float64]:
-        """The newest raw sample, or :class:`DeviceError` saying why it cannot be trusted."""
+        """The newest raw sample, or :class:`DeviceError` saying why it cannot be trusted.
+
+        A sample that looks stale is checked against the line first: frames that arrived while
+        the reader thread was not scheduled are taken here (if the reader holds the line right
+        now, it is taking them itself and the sample stays stale for this call)."""
         with self._lock:
             newest, stamp = self._newest, self._stamp
         if self._reader_error is not None:
@@ -214,6 +247,17 @@ class FT300:
         if newest is None:
             raise DeviceError(DEVICE, self.port, "no sample yet (start() not called or failed)")
         age = time.monotonic() - stamp
+        ser = self._serial
+        if age > self.stale_after and ser is not None and self._io.acquire(blocking=False):
+            try:
+                self._drain(ser)
+            except Exception:  # noqa: BLE001 -- the line's failure is the reader's to report
+                pass
+            finally:
+                self._io.release()
+            with self._lock:
+                newest, stamp = self._newest, self._stamp
+            age = time.monotonic() - stamp
         if age > self.stale_after:
             raise DeviceError(
                 DEVICE, self.port,
