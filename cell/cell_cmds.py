@@ -284,10 +284,6 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         raise
     log = session.log
     trace = None
-    if getattr(args, "trace", None) is not None:
-        from sim.trace import TwinTrace
-
-        trace = TwinTrace(args.trace, backend.world, backend.robot)
     recorder = None
     if args.record is not None:
         from cell.recording import CellRecorder, caption_for
@@ -329,6 +325,10 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     parts = None
     stills: list[Path] = []
     try:
+        if getattr(args, "trace", None) is not None:
+            from sim.trace import TwinTrace
+
+            trace = TwinTrace(args.trace, backend.world, backend.robot)
         if recorder is not None:
             stills.append(_bin_picture(backend, prep, args.record, "start"))
         result = loop.run(max_time)

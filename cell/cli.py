@@ -21,6 +21,7 @@ import logging
 import math
 import os
 import sys
+import traceback
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -382,13 +383,28 @@ def entry() -> None:
     their disconnect (see :func:`drivers.ur5.rtde_adapter.links_abandoned`); everything the run
     owes (state, journal, log, summary) is written by the time :func:`main` returns, so the
     process then ends at once with the same status, its output flushed."""
-    end_process(main())
+    try:
+        code = main()
+    except BaseException as exc:
+        if not _links_abandoned():
+            raise
+        # Even so the destructors must not run: say what happened, then end as planned.
+        if isinstance(exc, SystemExit):
+            code = exc.code if isinstance(exc.code, int) else 1
+        else:
+            traceback.print_exc()
+            code = 130 if isinstance(exc, KeyboardInterrupt) else 1
+    end_process(code)
+
+
+def _links_abandoned() -> bool:
+    adapter = sys.modules.get("drivers.ur5.rtde_adapter")
+    return adapter is not None and bool(adapter.links_abandoned())
 
 
 def end_process(code: int) -> NoReturn:
     """Exit with ``code``; at once, without destructors, where an arm's link was abandoned."""
-    adapter = sys.modules.get("drivers.ur5.rtde_adapter")
-    if adapter is not None and adapter.links_abandoned():
+    if _links_abandoned():
         logging.shutdown()
         sys.stdout.flush()
         sys.stderr.flush()

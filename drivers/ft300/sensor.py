@@ -30,11 +30,12 @@ from drivers.ft300.protocol import (
 from drivers.health import CheckResult, DeviceError, backoff_delays
 
 DEVICE = "FT300"
-#: Optional hook called from the reader thread with each valid sample and its arrival time
-#: (``time.monotonic()``); for logging and latency measurements. It must be quick and must
-#: not raise (an exception ends the reader, and wrench() then raises DeviceError).
 READ_WAIT = 0.02  #: s the reader waits for bytes before it looks at its stop flag again
+READ_CHUNK = 4096  #: bytes asked of the port per read; it returns what has arrived (timeout 0)
 
+#: Optional hook called with each valid sample and its arrival time (``time.monotonic()``), on
+#: the thread that took it; for logging and latency measurements. It must be quick and must not
+#: raise (an exception ends the reader, and wrench() then raises DeviceError).
 SampleHook = Callable[[NDArray[np.float64], float], None]
 
 
@@ -139,14 +140,21 @@ class FT300:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-        ser = self._serial
-        if ser is not None:
-            try:
-                ser.write(stop_stream_bytes())
-                ser.flush()
-            except Exception:  # the line may already be gone; closing is what matters
-                pass
-        self._close_port()
+        # Not while a caller of wrench() is taking bytes from the line (bounded: a drain
+        # never waits for the line).
+        held = self._io.acquire(timeout=1.0)
+        try:
+            ser = self._serial
+            if ser is not None:
+                try:
+                    ser.write(stop_stream_bytes())
+                    ser.flush()
+                except Exception:  # the line may already be gone; closing is what matters
+                    pass
+            self._close_port()
+        finally:
+            if held:
+                self._io.release()
 
     def _open(self) -> Any:
         import serial  # the hardware path only: the twin never needs pyserial
@@ -157,8 +165,9 @@ class FT300:
             try:
                 # serial_for_url: a device path, or a serial device server's raw TCP port
                 # (``socket://host:port``, an RS-485/USB-to-Ethernet gateway) -- same bytes.
+                # timeout 0: a read returns what has arrived; the reader waits in select().
                 return serial.serial_for_url(self.port, self.baudrate, bytesize=8, parity="N",
-                                             stopbits=1, timeout=0.02, write_timeout=0.5)
+                                             stopbits=1, timeout=0, write_timeout=0.5)
             except (serial.SerialException, OSError, ValueError) as exc:
                 last = exc
                 if attempt < len(delays):
@@ -206,12 +215,13 @@ class FT300:
 
     def _drain(self, ser: Any) -> None:
         """Take every byte already received and store the samples it completes; never waits
-        (``in_waiting`` bytes are there: a TCP port says 1 while readable). Call with ``_io``."""
+        (the port's timeout is 0). Call with ``_io``.
+
+        A line that is gone raises here: a serial device that was unplugged and a TCP port
+        whose server closed both report "readable" and then read nothing, which pyserial
+        raises as an error."""
         while True:
-            waiting = ser.in_waiting
-            if waiting <= 0:
-                return
-            data = ser.read(waiting)
+            data = ser.read(READ_CHUNK)
             if not data:
                 return
             samples = self._parser.feed(data)

@@ -770,15 +770,17 @@ class UR5Arm:
         )
 
     def close(self) -> None:
-        """Stop, then drop the links (shutdown path). A lost link is abandoned, not
-        disconnected, and no further reconnect attempt starts: see
+        """Stop, then drop the links (shutdown path); no further reconnect attempt starts. A
+        control link ur_rtde has seen drop is abandoned, not disconnected: see
         :func:`drivers.ur5.rtde_adapter.links_abandoned` for why and what the process owes."""
         self.stop()
         try:
             with self._lock:
-                lost = self._link_lost
                 self._attempts = self.settings.reconnect_attempts
-            if lost:
+            # Only a control link ur_rtde has seen drop is abandoned: one still up (the data went
+            # stale, an upload timed out) is disconnected, which stops the control script and so
+            # the arm; nothing else would once this process ends.
+            if self._link_lost and not self._rtde.control_connected():
                 self._rtde.abandon()
             else:
                 self._rtde.disconnect()

@@ -50,8 +50,12 @@ class RTDEAdapter(Protocol):
     def disconnect(self) -> None: ...
 
     def abandon(self) -> None:
-        """Give up both interfaces of a dead link without disconnecting them (see
-        :func:`links_abandoned`)."""
+        """Give up both interfaces of a dead link without disconnecting them, and refuse to
+        build new ones (see :func:`links_abandoned`)."""
+        ...
+
+    def control_connected(self) -> bool:
+        """ur_rtde has not seen the control link drop (cheap: a flag)."""
         ...
 
     def is_connected(self) -> bool:
@@ -178,6 +182,7 @@ class URRTDEAdapter:
         # Interfaces given up on: kept referenced, never destroyed under a thread of theirs
         # that may still be inside a blocking call.
         self._retired: list[Any] = []
+        self._abandoned = False
 
     def connect(self) -> None:
         self.connect_receive()
@@ -187,14 +192,18 @@ class URRTDEAdapter:
         # Imported here, not at the top: only the hardware path needs ur_rtde.
         import rtde_receive
 
-        self._receive = rtde_receive.RTDEReceiveInterface(
-            self.host, self.frequency, RECEIVE_VARIABLES
+        if self._abandoned:
+            raise RuntimeError("the link was abandoned (shutting down)")
+        self._receive = self._keep(
+            rtde_receive.RTDEReceiveInterface(self.host, self.frequency, RECEIVE_VARIABLES)
         )
 
     def connect_control(self) -> None:
         import rtde_control
 
-        self._control = rtde_control.RTDEControlInterface(self.host, self.frequency)
+        if self._abandoned:
+            raise RuntimeError("the link was abandoned (shutting down)")
+        self._control = self._keep(rtde_control.RTDEControlInterface(self.host, self.frequency))
 
     def disconnect(self) -> None:
         for iface in (self._control, self._receive):
@@ -202,11 +211,21 @@ class URRTDEAdapter:
                 iface.disconnect()
 
     def abandon(self) -> None:
+        # A reconnect attempt already inside connect_*() on another thread must not leave a
+        # live interface behind (with a fresh script running) that nothing will close.
+        self._abandoned = True
         _ABANDONED.extend(
             i for i in (self._control, self._receive, *self._retired) if i is not None
         )
         self._control = self._receive = None
         self._retired = []
+
+    def _keep(self, iface: Any) -> Any:
+        """``iface`` just built, or None (and abandoned with the rest) after :meth:`abandon`."""
+        if self._abandoned:
+            _ABANDONED.append(iface)
+            return None
+        return iface
 
     def receive_connected(self) -> bool:
         return self._receive is not None and bool(self._receive.isConnected())

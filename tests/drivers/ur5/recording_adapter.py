@@ -61,6 +61,9 @@ class RecordingAdapter:
         self._rec("abandon")
         self.connected = False
 
+    def control_connected(self) -> bool:
+        return self.connected
+
     def is_connected(self) -> bool:
         self._rec("is_connected")
         return self.connected

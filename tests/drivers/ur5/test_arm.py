@@ -342,6 +342,22 @@ def test_close_abandons_a_lost_link_and_starts_no_further_attempt() -> None:
     assert rtde.names().count("reconnect") == attempts
 
 
+def test_close_disconnects_a_link_lost_to_stale_data_whose_socket_is_still_up() -> None:
+    # Only disconnect() stops the control script (and so a running move) once this process
+    # ends: a link declared lost while ur_rtde still holds it open is not abandoned.
+    arm, rtde, clock = make(UR5Settings(data_timeout=0.5, reconnect_attempts=1))
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.data_frozen = True
+    rtde.reconnect_results = [RuntimeError("timed out")]  # the socket stays as it was
+    for _ in range(70):
+        clock.t += 0.008
+        st = arm.status()
+    assert st.state is MotionState.FAULT and st.link_lost
+    arm.close()
+    assert "disconnect" in rtde.names() and "abandon" not in rtde.names()
+
+
 def test_close_disconnects_a_live_link() -> None:
     arm, rtde, _ = make()
     arm.close()

@@ -195,30 +195,47 @@ def test_a_process_that_lost_the_link_ends_at_once_with_its_status_and_output() 
     assert "PULLED" in proc.stdout  # written before the end, and flushed
 
 
+VANISHED = r"""
+import sys, threading, time
+from cell.cli import end_process
+from drivers.arm import MotionState
+from drivers.pose import Pose
+from drivers.ur5.arm import UR5Arm, UR5Settings
+from sim.emulate.ur_standalone import URAloneProcess
+
+emu = URAloneProcess(script_start_delay=0.15).start()
+arm = UR5Arm.connect(emu.host, settings=UR5Settings(reconnect_attempts=1))
+tool = arm.tool_pose()
+arm.move_to(Pose(tool.position - [0.0, 0.0, 0.10], tool.rotation), 0.02, 0.5)
+time.sleep(0.1)
+emu._proc.kill()  # a controller that vanishes, not one that says goodbye
+emu._proc.join(timeout=5.0)
+time.sleep(0.2)  # the sockets' ends reach ur_rtde's reader threads
+done = threading.Event()
+threading.Thread(target=lambda: (arm.stop(), done.set()), daemon=True).start()
+if not done.wait(5.0):
+    print("HUNG", flush=True)
+    end_process(3)
+st = arm.status()
+print("STATE", st.state.name, st.link_lost, flush=True)
+arm.close()
+end_process(0)
+"""
+
+
 def test_a_stop_after_the_controller_vanished_returns_with_a_lost_link() -> None:
     # The whole controller gone at once (its process killed): the wrist sensor's loss reached the
     # cell first and its guard stopped the arm before any status poll had seen the link go.
     # ur_rtde's stopL on the dead link then never returned (the tick thread hung for minutes in
-    # `cell run` against a killed `cell emulate`).
-    import threading
+    # `cell run` against a killed `cell emulate`). In a process of its own: the lost link's
+    # interfaces are abandoned there, and only the end of a process disposes of them.
+    import subprocess
+    import sys
+    from pathlib import Path
 
-    from sim.emulate.ur_standalone import loopback_host
-
-    # An address of its own: the module's emulator holds the fixed ports on loopback_host().
-    host = "127.201." + ".".join(loopback_host().split(".")[2:])
-    emu = URAloneProcess(host=host, script_start_delay=0.15).start()
-    try:
-        arm = UR5Arm.connect(emu.host, settings=UR5Settings(reconnect_attempts=1))
-        arm.move_to(offset(arm.tool_pose(), dz=-0.10), 0.02, 0.5)
-        time.sleep(0.1)
-        emu._proc.kill()  # noqa: SLF001 -- a controller that vanishes, not one that says goodbye
-        emu._proc.join(timeout=5.0)  # noqa: SLF001
-        time.sleep(0.2)  # the sockets' ends reach ur_rtde's reader threads
-        done = threading.Event()
-        threading.Thread(target=lambda: (arm.stop(), done.set()), daemon=True).start()
-        assert done.wait(5.0), "stop() hung on the dead link"
-        st = arm.status()
-        assert st.state is MotionState.FAULT and st.link_lost, st.message
-        arm.close()
-    finally:
-        emu.stop()
+    root = Path(__file__).resolve().parents[3]
+    proc = subprocess.run([sys.executable, "-c", VANISHED], capture_output=True, text=True,
+                          timeout=90, cwd=root)
+    assert "HUNG" not in proc.stdout, "stop() hung on the dead link"
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-2000:]
+    assert "STATE FAULT True" in proc.stdout
