@@ -91,6 +91,13 @@ class ArmDevice(_Section):
     connect_timeout_s: float = Field(
         5.0, gt=0.0, le=60.0, description="dashboard server (TCP 29999) reply timeout"
     )
+    watchdog_hz: float | None = Field(
+        None, gt=0.0, le=500.0,
+        description="arm ur_rtde's watchdog: the controller stops the control script (and the "
+        "arm) when the cell has not polled it for 1/hz s -- a dead process or a lost link. Off "
+        "by default: some ticks still take up to 1.3 s (planning), which a watchdog faster than "
+        "that would trip",
+    )
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
         min_length=6,

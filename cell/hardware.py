@@ -45,7 +45,7 @@ def _open_arm(cfg: Any, layout: Any, clock: Any) -> Any:
     return UR5Arm.connect(
         d.host,
         clock=clock,
-        settings=UR5Settings(frequency=d.rtde_frequency_hz),
+        settings=UR5Settings(frequency=d.rtde_frequency_hz, watchdog_hz=d.watchdog_hz),
         dashboard_timeout=d.connect_timeout_s,
     )
 
@@ -215,7 +215,7 @@ class HardwareBackend:
 
     def step(self) -> None:
         """Poll the arm once per tick even when no motion runs: it is the heartbeat that lets a
-        controller-side watchdog (`UR5Settings.watchdog_hz`) stop the arm if this process dies
+        controller-side watchdog (`devices.arm.watchdog_hz`) stop the arm if this process dies
         or the link drops. The drivers run their own I/O; the tick loop paces wall time."""
         self.devices.arm.status()
 

@@ -464,7 +464,9 @@ class FTSampler(Behaviour):
         if arm.link_lost:
             why = f"arm link lost: {arm.message}"
             self.ctx.devices.arm.stop()
-            self.ctx.events.abort(f"{why}; arm stopped by its controller", Failure.DEVICE_LOST)
+            # Nothing reaches the arm now: what stops it is the controller's watchdog, where one
+            # is armed (devices.arm.watchdog_hz), or the end of the move it was given.
+            self.ctx.events.abort(f"{why}; no command reaches the arm", Failure.DEVICE_LOST)
             self.ctx.events.stop(why, StopKind.ARM_LINK_LOST)
             self.feedback_message = why
             return Status.FAILURE
