@@ -58,6 +58,10 @@ class RTDEAdapter(Protocol):
         """ur_rtde has not seen the control link drop (cheap: a flag)."""
         ...
 
+    def receive_connected(self) -> bool:
+        """ur_rtde has not seen the receive link drop (cheap: a flag)."""
+        ...
+
     def is_connected(self) -> bool:
         """Both RTDE links up (cheap: a flag in ur_rtde)."""
         ...

@@ -64,6 +64,9 @@ class RecordingAdapter:
     def control_connected(self) -> bool:
         return self.connected
 
+    def receive_connected(self) -> bool:
+        return self.connected
+
     def is_connected(self) -> bool:
         self._rec("is_connected")
         return self.connected

@@ -358,6 +358,18 @@ def test_close_disconnects_a_link_lost_to_stale_data_whose_socket_is_still_up() 
     assert "disconnect" in rtde.names() and "abandon" not in rtde.names()
 
 
+def test_close_waits_a_moment_for_the_control_side_to_see_the_drop_then_abandons() -> None:
+    # Two sockets: the receive side saw the cable go, the control side notices a little later.
+    arm, rtde, _ = make(UR5Settings(reconnect_attempts=1))
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    rtde.connected = False
+    assert arm.status().link_lost
+    answers = iter([True, True, True])
+    rtde.control_connected = lambda: next(answers, False)  # type: ignore[method-assign]
+    arm.close()
+    assert "abandon" in rtde.names() and "disconnect" not in rtde.names()
+
+
 def test_close_disconnects_a_live_link() -> None:
     arm, rtde, _ = make()
     arm.close()
