@@ -200,6 +200,9 @@ class FT300Peer:
                     self.injected_bytes += len(f)
             seq += 1
             frame = encode_frame(list(self.wrench_of(seq)))
-            t_write = time.monotonic()
-            if self._write(frame):
-                self.sent.append((seq, t_write))
+            # Recorded before the write: a reader fast enough can hold the frame before this
+            # thread runs again, and a test comparing what it read with `sent` then saw one
+            # frame more than was sent.
+            self.sent.append((seq, time.monotonic()))
+            if not self._write(frame):
+                self.sent.pop()
