@@ -16,14 +16,24 @@ from cell.recording import CLOSE_UP, OVERVIEW, STRIP, force_limit
 from .test_cli import run_cli
 
 
+def _cut_short_sim(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+    seconds: float, *extra: str,
+) -> str:
+    """`cell sim` of one cycle in ``tmp_path``, cut after ``seconds`` of simulated time; its
+    standard output."""
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(
+        ["sim", "--cycles", "1", "--max-sim-time", str(seconds), "--quiet", *extra], capsys
+    )
+    assert code == 1, err  # cut by --max-sim-time: out of time
+    return out
+
+
 def test_the_recorded_gif_has_the_close_up_and_the_caption(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.chdir(tmp_path)
-    code, out, err = run_cli(
-        ["sim", "--cycles", "1", "--max-sim-time", "5", "--quiet", "--record", "r.gif"], capsys
-    )
-    assert code == 1, err  # cut by --max-sim-time: out of time
+    out = _cut_short_sim(tmp_path, capsys, monkeypatch, 5, "--record", "r.gif")
     gif = Image.open(tmp_path / "r.gif")
     assert gif.size == (OVERVIEW[0], OVERVIEW[1] + STRIP)
     assert gif.n_frames >= 3
@@ -62,11 +72,7 @@ def test_the_caption_names_the_running_steps_own_abort_force() -> None:
 def test_the_trace_has_a_row_a_step_with_the_twins_own_state(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.chdir(tmp_path)
-    code, out, err = run_cli(
-        ["sim", "--cycles", "1", "--max-sim-time", "3", "--quiet", "--trace", "t.csv"], capsys
-    )
-    assert code == 1, err  # cut by --max-sim-time
+    _cut_short_sim(tmp_path, capsys, monkeypatch, 3, "--trace", "t.csv")
     lines = (tmp_path / "t.csv").read_text().splitlines()
     header = lines[0].split(",")
     rows = [dict(zip(header, line.split(","), strict=True)) for line in lines[1:]]
