@@ -1,4 +1,14 @@
-"""The twin's parallel gripper: two mirrored, force-limited prismatic fingers (2F-85-like).
+"""The twin's parallel gripper: two mirrored, force-limited prismatic fingers, as the gripper's
+description (:class:`drivers.gripper_spec.GripperSpec`, the 2F-85's by default) says it is.
+
+What the description decides here, as on the unit: the force a close applies is the force
+register's step in the unit's range (a 2F-85 asked for 2 N grips with 20 N: its register's 0 is
+its weakest grip); the finger speed is clamped into the unit's range; the opening the skills
+read is the unit's position count, refreshed at the driver's poll rate (sample and hold); an
+object is detected when contact stops the fingers before the requested opening; and each pad
+rides on a second, coupled joint along the approach axis (``<finger>_lift``) that follows the
+linkage's tip travel as the opening changes (:meth:`GripperSpec.tip_advance`), so a 2F-85's tips
+advance about 2.5 mm over a close from 70 to 61 mm, as the real fingers do.
 
 Each finger is a PyBullet POSITION_CONTROL motor whose force is capped: closing on a part, a
 finger stops where the part blocks it and then presses with exactly the commanded force, which is
@@ -25,14 +35,17 @@ one mu_S.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from sim.robot_model import FINGER_EFFORT, FINGER_TRAVEL, FINGER_VELOCITY, FINGER_WIDTH
+from drivers.gripper_spec import GripperSpec, default_gripper
 from sim.world import SimWorld
 
 FINGER_NAMES = ("finger_a", "finger_b")
-STILL_SPEED = 0.002  #: m/s: a finger slower than this is still
-STALL_STEPS = 5  #: control steps a finger must stay still to count as stalled (40 ms at 125 Hz)
+LIFT_NAMES = ("finger_a_lift", "finger_b_lift")
+LIFT_FORCE = 2000.0  #: N the lift joint's motor may use: the linkage is not backdriven
+LIFT_GAIN = 0.5  #: position gain of the lift joint's motor (PyBullet's, per physics step)
 ARRIVED = 0.0004  #: m: a finger this near its target has arrived (about one 2F-85 step)
 OPEN_FORCE = 100.0  #: N per finger when opening
 LOST = 0.003  #: m: after a stall, the opening closing in by this much means the part is lost
@@ -42,23 +55,32 @@ RATCHET_SLACK = 0.0002  #: m a self-locking finger may be pushed back open
 class SimGripper:
     """Implements :class:`drivers.gripper.Gripper` on the robot body's ``finger_a``/``finger_b``."""
 
-    stroke: float = 2 * FINGER_TRAVEL  #: 0.085 m, largest opening between the pads
-    finger_width: float = FINGER_WIDTH  #: 0.020 m, pad width ``w``
-
     def __init__(
         self,
         world: SimWorld,
         body_id: int,
         joint_indices: dict[str, int],
         self_locking: bool = True,
+        spec: GripperSpec | None = None,
     ) -> None:
-        """``joint_indices`` maps ``finger_a``/``finger_b`` to the body's joint (= link) index;
-        ``self_locking``: fingers cannot be pushed back open while closing (see module doc)."""
+        """``joint_indices`` maps ``finger_a``/``finger_b`` (and ``finger_a_lift``/
+        ``finger_b_lift`` where the body has them) to the body's joint (= link) index;
+        ``self_locking``: fingers cannot be pushed back open while closing (see module doc);
+        ``spec``: the gripper's description (default: the shipped 2F-85)."""
+        self.spec = spec = spec or default_gripper()
+        self.stroke: float = spec.stroke  #: m, largest opening between the pads
+        self.finger_width: float = spec.pad_width  #: m, pad width ``w``
+        self._travel = 0.5 * spec.stroke  #: m each finger travels from the tool axis
+        self._stall_steps = max(1, int(math.ceil(spec.stall_time / world.settings.control_dt)))
+        self._next_poll = 0.0  #: s (the world's clock), when the driver next reads the status
         self.self_locking = self_locking
         self._world = world
         self._p = world.p
         self._body = body_id
         self._joints = tuple(joint_indices[name] for name in FINGER_NAMES)
+        self._lifts = tuple(joint_indices[n] for n in LIFT_NAMES if n in joint_indices)
+        self.commanded_force = 0.0  #: N per finger the last close applies (the register's step)
+        self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
         self._still = 0  # consecutive control steps with both fingers still
         self._steps = 0  # control steps since the last command
@@ -66,15 +88,17 @@ class SimGripper:
         self._stalled = False
         self._stall_width = 0.0  # opening (m) where the fingers stalled
         self._locking = False  # the ratchet is engaged (a close command runs, self-locking)
-        self._limits = [FINGER_TRAVEL, FINGER_TRAVEL]  # each finger's upper joint limit now (m)
+        self._limits = [self._travel, self._travel]  # each finger's upper joint limit now (m)
         # The 2F-85's linkage moves both fingers together, symmetric about the tool axis; a
         # gear constraint couples the two prismatic joints the same way (q_b = q_a).
         self._gear = self._p.createConstraint(
             body_id, self._joints[0], body_id, self._joints[1], self._p.JOINT_GEAR,
             [1, 0, 0], [0, 0, 0], [0, 0, 0],
         )
-        self._p.changeConstraint(self._gear, gearRatio=-1, maxForce=10 * FINGER_EFFORT, erp=0.2)
+        self._p.changeConstraint(self._gear, gearRatio=-1, maxForce=10 * spec.force_max, erp=0.2)
         world.after_step(self._after_step)
+        self._follow_linkage()
+        self._poll()
 
     # --- setup helpers (not part of the interface) ---------------------------------------
 
@@ -97,9 +121,13 @@ class SimGripper:
         self._release()
         for joint in self._joints:
             self._p.resetJointState(self._body, joint, q)
-        self._command(2 * q, FINGER_VELOCITY, OPEN_FORCE)
+        for joint in self._lifts:
+            self._p.resetJointState(self._body, joint, self.spec.tip_advance(2 * q))
+        self._command(2 * q, self.spec.speed_max, OPEN_FORCE)
         self._active = False
         self._target = None
+        self._follow_linkage()
+        self._poll()
 
     # --- the Gripper interface -----------------------------------------------------------
 
@@ -107,26 +135,39 @@ class SimGripper:
         """Start opening (or moving) to ``width`` (m, full stroke if None); ``speed`` (m/s) is
         each finger's speed, so the opening changes at twice it."""
         target = self.stroke if width is None else float(np.clip(width, 0.0, self.stroke))
-        self._command(target, speed, OPEN_FORCE)
+        self._command(target, self.spec.applied_speed(speed), OPEN_FORCE)
 
     def close(self, force: float, speed: float = 0.05, width: float = 0.0) -> None:
         """Start closing towards ``width`` (m, 0 = fully) with at most ``force`` (N) per finger,
-        each finger at ``speed`` (m/s). On a part the fingers stall and keep pressing with
-        ``force``; they never close past ``width``."""
+        each finger at ``speed`` (m/s). On a part the fingers stall and keep pressing with the
+        force the unit applies for ``force`` (its register's step within its range: never less
+        than its weakest grip); they never close past ``width``."""
         target = float(np.clip(width, 0.0, self.stroke))
-        self._command(target, speed, float(np.clip(force, 0.0, FINGER_EFFORT)))
+        self.commanded_force = self.spec.applied_force(force)
+        self._command(target, self.spec.applied_speed(speed), self.commanded_force)
 
     def width(self) -> float:
-        """Current opening between the pads (m), from the joint states."""
+        """The opening (m) as the unit reports it: its position count, as last polled."""
+        return self._reported[0]
+
+    def true_width(self) -> float:
+        """The opening between the pads (m) from the joint states (the judge's, not a skill's)."""
         return float(sum(self._p.getJointState(self._body, j)[0] for j in self._joints))
 
+    def tip_advance(self, width: float) -> float:
+        """m the fingertips reach further along the approach at ``width`` than fully closed
+        (the description's linkage)."""
+        return self.spec.tip_advance(width)
+
     def moving(self) -> bool:
-        """True while a command is in progress: fingers neither arrived nor stalled."""
-        return self._active
+        """True while a command is in progress: fingers neither arrived nor stalled. A command
+        counts as moving until the unit has been polled after it."""
+        return self._active or self._reported[1]
 
     def object_detected(self) -> bool:
-        """True when both fingers stalled short of the commanded opening (a part between them)."""
-        return self._stalled
+        """True when both fingers stalled short of the commanded opening (a part between them),
+        as last polled."""
+        return self._reported[2] and self._stalled
 
     def fault(self) -> str | None:
         """The twin's gripper never faults."""
@@ -140,7 +181,7 @@ class SimGripper:
         else:
             self._release()
         self._target = opening
-        speed = float(np.clip(speed, 1e-4, FINGER_VELOCITY))
+        speed = float(np.clip(speed, self.spec.speed_min, self.spec.speed_max))
         for joint in self._joints:
             self._p.setJointMotorControl2(
                 self._body,
@@ -160,10 +201,10 @@ class SimGripper:
         """Free the fingers to open again (full travel)."""
         self._locking = False
         for i, joint in enumerate(self._joints):
-            if self._limits[i] != FINGER_TRAVEL:
-                self._limits[i] = FINGER_TRAVEL
+            if self._limits[i] != self._travel:
+                self._limits[i] = self._travel
                 self._p.changeDynamics(
-                    self._body, joint, jointLowerLimit=0.0, jointUpperLimit=FINGER_TRAVEL
+                    self._body, joint, jointLowerLimit=0.0, jointUpperLimit=self._travel
                 )
 
     def _after_step(self) -> None:
@@ -171,12 +212,36 @@ class SimGripper:
         query costs about as much as all the arithmetic here; moving a joint limit does not
         change the state read)."""
         locking = self._locking
-        if not locking and self._target is None:
+        if locking or self._target is not None:
+            states = self._p.getJointStates(self._body, self._joints)
+            if locking:
+                self._ratchet(states)
+            self._watch(states)
+        self._follow_linkage()
+        now = self._world.clock.now()
+        if now >= self._next_poll - 1e-9:
+            self._poll()
+            self._next_poll = max(self._next_poll + 1.0 / self.spec.poll_hz, now)
+
+    def _follow_linkage(self) -> None:
+        """Drive each pad's lift joint to where the linkage puts the tip at that finger's
+        opening: the coupled second joint of the module doc."""
+        if not self._lifts or self.spec.crank <= 0:
             return
-        states = self._p.getJointStates(self._body, self._joints)
-        if locking:
-            self._ratchet(states)
-        self._watch(states)
+        for finger, lift in zip(self._joints, self._lifts, strict=True):
+            q = self._p.getJointState(self._body, finger)[0]
+            self._p.setJointMotorControl2(
+                self._body, lift, self._p.POSITION_CONTROL,
+                targetPosition=self.spec.tip_advance(2.0 * q), force=LIFT_FORCE,
+                maxVelocity=1.0, positionGain=LIFT_GAIN,
+            )
+
+    def _poll(self) -> None:
+        """The driver's status read: the opening in the unit's position counts, its motion and
+        object flags."""
+        self._reported = (
+            self.spec.reported_width(self.true_width()), self._active, self._stalled
+        )
 
     def _ratchet(self, states: list) -> None:  # type: ignore[type-arg]
         """Move each finger's opening limit in behind it: it may close further, not reopen.
@@ -212,14 +277,15 @@ class SimGripper:
             self._stalled = False
             self._target = None
             return
-        self._still = self._still + 1 if abs(va) < STILL_SPEED and abs(vb) < STILL_SPEED else 0
+        still = self.spec.stall_speed
+        self._still = self._still + 1 if abs(va) < still and abs(vb) < still else 0
         width = qa + qb
         if self._stalled:
             if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:
                 self._stalled = False
                 self._active = True
                 self._still = 0
-        elif self._still >= STALL_STEPS and self._steps > STALL_STEPS:
+        elif self._still >= self._stall_steps and self._steps > self._stall_steps:
             self._active = False
             self._stalled = True
             self._stall_width = width

@@ -17,7 +17,8 @@ from drivers.tool import FINGER_LENGTH
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_JOINTS, forward_kinematics
 from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
-from sim.gripper import FINGER_NAMES, SimGripper
+from drivers.gripper_spec import GripperSpec, default_gripper
+from sim.gripper import FINGER_NAMES, LIFT_NAMES, SimGripper
 from sim.robot_model import FINGER_THICKNESS, write_urdf
 from sim.world import SimWorld, matrix_from_quaternion
 
@@ -31,16 +32,19 @@ class SimRobot:
         base_pose: Pose | None = None,
         home_joints: ArrayLike | None = None,
         gripper_self_locking: bool = True,
+        gripper: GripperSpec | None = None,
     ) -> None:
         """Load the robot with its base frame at ``base_pose`` (world frame; default: origin),
         arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open.
         ``gripper_self_locking``: see :mod:`sim.gripper` (the 2F-85's fingers are not pushed
-        back open by the part)."""
+        back open by the part); ``gripper``: the gripper's description (the shipped 2F-85 by
+        default): the fingers' sizes, force and speed ranges, position counts and linkage."""
+        self.gripper_spec = gripper = gripper or default_gripper()
         self.world = world
         self.base_pose = base_pose or Pose()
         p = world.p
         self.body_id = p.loadURDF(
-            str(write_urdf()),
+            str(write_urdf(spec=gripper)),
             self.base_pose.position.tolist(),
             self.base_pose.quaternion.tolist(),
             useFixedBase=True,
@@ -54,8 +58,9 @@ class SimRobot:
         self.gripper = SimGripper(
             world,
             self.body_id,
-            {name: self.joint_index[name] for name in FINGER_NAMES},
+            {name: self.joint_index[name] for name in FINGER_NAMES + LIFT_NAMES},
             self_locking=gripper_self_locking,
+            spec=gripper,
         )
         home = HOME_JOINTS if home_joints is None else np.asarray(home_joints, float)
         arm_joints = [self.joint_index[name] for name in ARM_JOINTS]

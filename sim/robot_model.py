@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, TCP_Z
 from drivers.ur5.kinematics import (
     ARM_CHAIN,
@@ -50,14 +51,21 @@ ARM_EFFORT = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
 # Tool stack (its sizes are in drivers.tool).
 FT_MASS = 0.3
 GRIPPER_BODY_MASS = 0.9
-FINGER_THICKNESS = 0.008  # x
-FINGER_WIDTH = 0.020  # y: the pad width w of the paper's Eq. 2
+#: The shipped gripper's facts (drivers/data/grippers/robotiq_2f85.yaml); a twin built for
+#: another description takes them from it (:func:`urdf_text`).
+_SHIPPED = default_gripper()
+FINGER_THICKNESS = _SHIPPED.pad_thickness  # x
+FINGER_WIDTH = _SHIPPED.pad_width  # y: the pad width w of the paper's Eq. 2
 FINGER_MASS = 0.03
-FINGER_TRAVEL = 0.0425  # each finger 0..FINGER_TRAVEL from the tool axis; opening = sum
-FINGER_EFFORT = 235.0  # N, the 2F-85's largest grip force
-FINGER_VELOCITY = 0.15  # m/s, the 2F-85's fastest finger speed
+CARRIAGE_MASS = 0.005  #: the link between a finger's lift joint and its closing joint
+FINGER_TRAVEL = 0.5 * _SHIPPED.stroke  # each finger 0..FINGER_TRAVEL from the tool axis
+FINGER_EFFORT = _SHIPPED.force_max  # N, the largest grip force
+FINGER_VELOCITY = _SHIPPED.speed_max  # m/s, the fastest finger speed
+#: m each finger's lift joint may move along the approach (the linkage's tip travel is within)
+LIFT_RANGE = (-0.03, 0.01)
+LIFT_EFFORT = 2000.0  #: N: the linkage holds the pad along the approach (stiff, not backdriven)
 #: Mass (kg) hanging on the wrist sensor: puck, gripper body, fingers (and the massless tcp link).
-TOOL_MASS = FT_MASS + GRIPPER_BODY_MASS + 2 * FINGER_MASS + 1e-4
+TOOL_MASS = FT_MASS + GRIPPER_BODY_MASS + 2 * (FINGER_MASS + CARRIAGE_MASS) + 1e-4
 
 
 # ---------------------------------------------------------------------------------------------
@@ -111,7 +119,7 @@ class LinkSpec:
 _ALONG_Y = (-PI / 2, 0.0, 0.0)  # turns a shape's z onto the link's y
 
 
-def _links() -> list[LinkSpec]:
+def _links(spec: GripperSpec) -> list[LinkSpec]:
     """Masses from ur_description; inertias of cylinders (as ur_description does); simple shapes."""
     m = ARM_MASSES
     body_h = GRIPPER_BODY_SIZE[2]
@@ -163,16 +171,18 @@ def _links() -> list[LinkSpec]:
             (Shape("box", GRIPPER_BODY_SIZE, (0, 0, body_h / 2)),),
             "0.15 0.15 0.15 1",
         ),
-        _finger_link("finger_a", +1.0),
-        _finger_link("finger_b", -1.0),
+        LinkSpec("finger_a_carriage", CARRIAGE_MASS),
+        LinkSpec("finger_b_carriage", CARRIAGE_MASS),
+        _finger_link("finger_a", +1.0, spec),
+        _finger_link("finger_b", -1.0, spec),
         LinkSpec("tcp", 1e-4),  # in TOOL_MASS
     ]
 
 
-def _finger_link(name: str, side: float) -> LinkSpec:
+def _finger_link(name: str, side: float, spec: GripperSpec) -> LinkSpec:
     """A finger whose link frame is on the tool axis at the body's end; the pad faces the axis."""
-    size = (FINGER_THICKNESS, FINGER_WIDTH, FINGER_LENGTH)
-    centre = (side * FINGER_THICKNESS / 2, 0.0, FINGER_LENGTH / 2)
+    size = (spec.pad_thickness, spec.pad_width, spec.pad_length)
+    centre = (side * spec.pad_thickness / 2, 0.0, spec.pad_length / 2)
     return LinkSpec(
         name, FINGER_MASS, centre, _box_inertia(FINGER_MASS, size),
         (Shape("box", size, centre),), "0.8 0.5 0.1 1",
@@ -180,6 +190,9 @@ def _finger_link(name: str, side: float) -> LinkSpec:
 
 
 def _joints() -> list[JointSpec]:
+    """Each finger hangs on two prismatic joints: ``<finger>_lift`` along the approach (tool z),
+    which :class:`sim.gripper.SimGripper` drives to follow the linkage's tip travel as the
+    opening changes (the coupled second joint), and ``<finger>`` along the closing axis."""
     return [
         BASE_FIXED,
         *ARM_CHAIN,
@@ -187,11 +200,19 @@ def _joints() -> list[JointSpec]:
         JointSpec("ft_joint", "tool0", "ft_sensor", (0, 0, 0), kind="fixed"),
         JointSpec("ft_gripper_joint", "ft_sensor", "gripper_body", (0, 0, FT_HEIGHT), kind="fixed"),
         JointSpec(
-            "finger_a", "gripper_body", "finger_a", (0, 0, GRIPPER_BODY_SIZE[2]),
+            "finger_a_lift", "gripper_body", "finger_a_carriage", (0, 0, GRIPPER_BODY_SIZE[2]),
+            axis=(0, 0, 1), kind="prismatic",
+        ),
+        JointSpec(
+            "finger_b_lift", "gripper_body", "finger_b_carriage", (0, 0, GRIPPER_BODY_SIZE[2]),
+            axis=(0, 0, 1), kind="prismatic",
+        ),
+        JointSpec(
+            "finger_a", "finger_a_carriage", "finger_a", (0, 0, 0),
             axis=(1, 0, 0), kind="prismatic",
         ),
         JointSpec(
-            "finger_b", "gripper_body", "finger_b", (0, 0, GRIPPER_BODY_SIZE[2]),
+            "finger_b", "finger_b_carriage", "finger_b", (0, 0, 0),
             axis=(-1, 0, 0), kind="prismatic",
         ),
         JointSpec("tcp_joint", "gripper_body", "tcp", (0, 0, TCP_Z - FT_HEIGHT), kind="fixed"),
@@ -220,7 +241,7 @@ def _link_xml(link: LinkSpec) -> str:
     return "\n".join(out)
 
 
-def _joint_xml(joint: JointSpec) -> str:
+def _joint_xml(joint: JointSpec, spec: GripperSpec) -> str:
     out = [
         f'  <joint name="{joint.name}" type="{joint.kind}">',
         f'    <parent link="{joint.parent}"/>',
@@ -235,33 +256,41 @@ def _joint_xml(joint: JointSpec) -> str:
             f' velocity="{ARM_VELOCITY:.9g}"/>',
             '    <dynamics damping="0" friction="0"/>',
         ]
+    elif joint.kind == "prismatic" and joint.name.endswith("_lift"):
+        out += [
+            f'    <axis xyz="{_f(joint.axis)}"/>',
+            f'    <limit lower="{LIFT_RANGE[0]:.9g}" upper="{LIFT_RANGE[1]:.9g}"'
+            f' effort="{LIFT_EFFORT:.9g}" velocity="1"/>',
+            '    <dynamics damping="0" friction="0"/>',
+        ]
     elif joint.kind == "prismatic":
         out += [
             f'    <axis xyz="{_f(joint.axis)}"/>',
-            f'    <limit lower="0" upper="{FINGER_TRAVEL:.9g}" effort="{FINGER_EFFORT:.9g}"'
-            f' velocity="{FINGER_VELOCITY:.9g}"/>',
+            f'    <limit lower="0" upper="{0.5 * spec.stroke:.9g}" effort="{spec.force_max:.9g}"'
+            f' velocity="{spec.speed_max:.9g}"/>',
             '    <dynamics damping="0" friction="0"/>',
         ]
     out.append("  </joint>")
     return "\n".join(out)
 
 
-def urdf_text() -> str:
-    """The robot's URDF (UR5 + FT puck + gripper), as text."""
+def urdf_text(spec: GripperSpec | None = None) -> str:
+    """The robot's URDF (UR5 + FT puck + the gripper ``spec``, the 2F-85 by default), as text."""
+    spec = spec or _SHIPPED
     parts = ['<?xml version="1.0"?>', '<robot name="ur5_ft300_2f85">']
-    parts += [_link_xml(link) for link in _links()]
-    parts += [_joint_xml(joint) for joint in _joints()]
+    parts += [_link_xml(link) for link in _links(spec)]
+    parts += [_joint_xml(joint, spec) for joint in _joints()]
     parts.append("</robot>")
     return "\n".join(parts) + "\n"
 
 
-def write_urdf(directory: Path | None = None) -> Path:
+def write_urdf(directory: Path | None = None, spec: GripperSpec | None = None) -> Path:
     """Write the URDF once per content (named by its hash) and return its path.
 
     PyBullet loads URDFs from files; a content-addressed name in the temp directory lets parallel
     test processes share the file without races (same content, atomic rename).
     """
-    text = urdf_text()
+    text = urdf_text(spec)
     digest = hashlib.sha1(text.encode()).hexdigest()[:12]
     directory = directory or Path(tempfile.gettempdir()) / "pivot_cell_urdf"
     directory.mkdir(parents=True, exist_ok=True)

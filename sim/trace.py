@@ -37,7 +37,7 @@ class TwinTrace:
         tcp = r.arm.tool_pose().position
         self._file.write(
             f"{time.time():.4f},{self._world.clock.now():.4f},{w[0]:.3f},{w[1]:.3f},{w[2]:.3f},"
-            f"{w[3]:.4f},{w[4]:.4f},{w[5]:.4f},{r.gripper.width():.5f},{tcp[0]:.5f},"
+            f"{w[3]:.4f},{w[4]:.4f},{w[5]:.4f},{r.gripper.true_width():.5f},{tcp[0]:.5f},"
             f"{tcp[1]:.5f},{tcp[2]:.5f},{r.arm.mode}\n"
         )
 

@@ -105,7 +105,7 @@ class TwinFingers:
         self.stroke = float(gripper.stroke)
         self._lock = threading.Lock()
         self._pending: tuple[float, float, float] | None = None
-        self._width = float(gripper.width())
+        self._width = float(gripper.true_width())
         self._moving = bool(gripper.moving())
         self._object = bool(gripper.object_detected())
         world.after_step(self._sync)
@@ -133,11 +133,11 @@ class TwinFingers:
         g = self._gripper
         if pending is not None:
             width, speed, force = pending
-            if width >= g.width():
+            if width >= g.true_width():
                 g.open(width, speed)
             else:
                 g.close(force, speed, width)
-        snapshot = (float(g.width()), bool(g.moving()), bool(g.object_detected()))
+        snapshot = (float(g.true_width()), bool(g.moving()), bool(g.object_detected()))
         with self._lock:
             if self._pending is None:
                 self._width, self._moving, self._object = snapshot

@@ -166,6 +166,7 @@ def test_joint_positions_and_reset(world: SimWorld, robot: SimRobot) -> None:
 def test_pushing_into_the_floor_trips_the_protective_stop(world: SimWorld) -> None:
     add_floor(world)
     robot = SimRobot(world)
+    robot.gripper.reset_width(0.0)  # closed: the tips 5 mm past the TCP (the linkage's reference)
     arm = robot.arm
     above = Pose(np.array([0.5, 0.0, 0.01]), HOME_TCP.rotation)  # fingertips 5 mm up
     arm.move_to(above, 0.25, 1.0)
@@ -175,9 +176,10 @@ def test_pushing_into_the_floor_trips_the_protective_stop(world: SimWorld) -> No
     status = arm.status()
     assert status.state is MotionState.FAULT and status.protective_stop
     assert status.message.startswith("protective stop: tool force")
-    # It stopped within a millimetre of touching, and holds there.
+    # It stopped within a millimetre or so of touching (the pads ride on their lift joints), and
+    # holds there.
     depth = 0.005 - arm.tool_pose().position[2]  # fingertips below the floor's top (m)
-    assert -1e-3 < depth < 1e-3
+    assert -1e-3 < depth < 1.5e-3
     held = arm.tool_pose()
     for _ in range(50):
         world.step()

@@ -15,7 +15,8 @@ from sim.world import SimWorld
 
 from .conftest import add_floor, run_motion
 
-TOOL_MASS = rm.FT_MASS + rm.GRIPPER_BODY_MASS + 2 * rm.FINGER_MASS + 1e-4  # below ft_joint, kg
+TOOL_MASS = (rm.FT_MASS + rm.GRIPPER_BODY_MASS + 2 * (rm.FINGER_MASS + rm.CARRIAGE_MASS)
+             + 1e-4)  # below ft_joint, kg
 G = 9.81
 
 
@@ -45,7 +46,9 @@ def test_tool_weight_pulls_along_plus_tool_z_when_pointing_down(
     """The load the tool puts on the sensor: hanging straight down it is +m g along tool z."""
     settle(world)
     load = robot.ft.true_load()
-    assert load[2] == pytest.approx(TOOL_MASS * G, rel=1e-3)
+    # 0.15 % over m g: the fingers' lift joints, held by their motors, leave PyBullet's reaction
+    # a few hundredths of a newton off (a bias at the working pose removes it)
+    assert load[2] == pytest.approx(TOOL_MASS * G, rel=2e-3)
     assert np.allclose(load[[0, 1, 3, 4, 5]], 0.0, atol=1e-2)
 
 
@@ -82,6 +85,7 @@ def test_pressing_the_fingertips_into_a_floor_gives_negative_fz(world: SimWorld)
     arm, ft = robot.arm, robot.ft
     arm.move_to(Pose(np.array([0.5, 0.0, 0.02]), HOME_TCP.rotation), 0.25, 1.0)
     run_motion(world, robot)
+    robot.gripper.reset_width(0.0)  # closed: the tips at their reference, as the TCP says
     ft.bias()
     # Fingertips are 5 mm beyond the TCP: 3 mm into the floor, a stiff position servo against
     # a rigid floor; the arm's protective stop (150 N) ends it.

@@ -59,7 +59,7 @@ def test_pad_faces_are_width_apart_and_the_tcp_between_the_tips(
     world: SimWorld, robot: SimRobot
 ) -> None:
     """Pads from the collision boxes: inner faces at +-width/2 along tool x; TCP 5 mm above
-    the tips' end; pad 20 mm wide."""
+    the tips' end when closed, the linkage's tip travel at other openings; pad 20 mm wide."""
     p = world.p
     for width in (0.085, 0.04):
         robot.gripper.reset_width(width)
@@ -70,10 +70,12 @@ def test_pad_faces_are_width_apart_and_the_tcp_between_the_tips(
         # Home has tool x = world x, so finger_a is on +x.
         inner = lo_a[0] - hi_b[0]
         assert inner == pytest.approx(width, abs=2e-4)  # AABB margins are ~0.1 mm
-        assert robot.gripper.width() == pytest.approx(width, abs=1e-9)
+        assert robot.gripper.true_width() == pytest.approx(width, abs=1e-9)
+        assert robot.gripper.width() == pytest.approx(width, abs=robot.gripper.spec.count_step)
         assert (lo_a[0] + hi_b[0]) / 2 == pytest.approx(tcp.position[0], abs=2e-4)
         assert hi_a[1] - lo_a[1] == pytest.approx(0.020, abs=4e-4)
-        assert tcp.position[2] - lo_a[2] == pytest.approx(0.005, abs=2e-4)
+        advance = robot.gripper.spec.tip_advance(width)
+        assert tcp.position[2] - lo_a[2] == pytest.approx(0.005 + advance, abs=2e-4)
 
 
 def test_urdf_file_is_cached_by_content(tmp_path) -> None:
