@@ -87,6 +87,7 @@ CHECK_STEP = 0.01  #: m of path length between poses checked for reachability be
 # control steps in a row (so one solver spike does not trip it).
 PROTECTIVE_FORCE = 150.0  #: N
 PROTECTIVE_STEPS = 3
+PROTECTIVE_RELIEF = 1.0  #: N a step: a contact force falling faster than this is being relieved
 
 # Force mode (impedance to a virtual target + admittance on the sensor).
 FORCE_STIFFNESS = np.array([4000.0] * 3 + [30.0] * 3)  #: N/m, N*m/rad at the TCP
@@ -220,6 +221,7 @@ class SimArm:
         self._last_target: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._clipped = False  # the last step was slowed to the joint speed limit
         self._over = 0  # control steps in a row with the tool force over the protective limit
+        self._last_force = 0.0  # N, the contact force at the last step it was computed
         self._protective = False  # the current FAULT is a protective stop
         self._force: dict[str, NDArray[np.float64]] = {}
         self._virtual: Pose | None = None
@@ -452,9 +454,14 @@ class SimArm:
         weight = TOOL_MASS * self._world.settings.gravity
         if math.sqrt(fx * fx + fy * fy + fz * fz) + weight <= PROTECTIVE_FORCE:
             self._over = 0
+            self._last_force = 0.0
             return False
         force = self.contact_force()
-        self._over = self._over + 1 if force > PROTECTIVE_FORCE else 0
+        # A force over the limit that falls is being relieved (the arm backing away from what it
+        # pressed, after the stop was cleared): only a force that stays or grows trips it.
+        rising = force >= self._last_force - PROTECTIVE_RELIEF
+        self._last_force = force
+        self._over = self._over + 1 if force > PROTECTIVE_FORCE and rising else 0
         if self._over < PROTECTIVE_STEPS:
             return False
         self._leave_force_mode()

@@ -46,6 +46,8 @@ FINGER_NAMES = ("finger_a", "finger_b")
 LIFT_NAMES = ("finger_a_lift", "finger_b_lift")
 LIFT_FORCE = 2000.0  #: N the lift joint's motor may use: the linkage is not backdriven
 LIFT_GAIN = 0.5  #: position gain of the lift joint's motor (PyBullet's, per physics step)
+LIFT_PLAY = 2e-5  #: m the lift joint's limits leave either side of the linkage's tip position
+LIFT_STEP = 1e-5  #: m the target must move before the limits are moved (a call each costs)
 ARRIVED = 0.0004  #: m: a finger this near its target has arrived (about one 2F-85 step)
 OPEN_FORCE = 100.0  #: N per finger when opening
 LOST = 0.003  #: m: after a stall, the opening closing in by this much means the part is lost
@@ -79,6 +81,7 @@ class SimGripper:
         self._body = body_id
         self._joints = tuple(joint_indices[name] for name in FINGER_NAMES)
         self._lifts = tuple(joint_indices[n] for n in LIFT_NAMES if n in joint_indices)
+        self._lift_targets = [math.inf, math.inf]  #: m, where each lift joint is held now
         self.commanded_force = 0.0  #: N per finger the last close applies (the register's step)
         self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
@@ -123,6 +126,7 @@ class SimGripper:
             self._p.resetJointState(self._body, joint, q)
         for joint in self._lifts:
             self._p.resetJointState(self._body, joint, self.spec.tip_advance(2 * q))
+        self._lift_targets = [math.inf, math.inf]
         self._command(2 * q, self.spec.speed_max, OPEN_FORCE)
         self._active = False
         self._target = None
@@ -224,16 +228,24 @@ class SimGripper:
             self._next_poll = max(self._next_poll + 1.0 / self.spec.poll_hz, now)
 
     def _follow_linkage(self) -> None:
-        """Drive each pad's lift joint to where the linkage puts the tip at that finger's
-        opening: the coupled second joint of the module doc."""
+        """Hold each pad's lift joint where the linkage puts the tip at that finger's opening:
+        the coupled second joint of the module doc. The joint's limits close round the target
+        (a motor alone yields a millimetre under a 150 N press, a linkage does not)."""
         if not self._lifts or self.spec.crank <= 0:
             return
-        for finger, lift in zip(self._joints, self._lifts, strict=True):
+        for i, (finger, lift) in enumerate(zip(self._joints, self._lifts, strict=True)):
             q = self._p.getJointState(self._body, finger)[0]
+            target = self.spec.tip_advance(2.0 * q)
+            if abs(target - self._lift_targets[i]) < LIFT_STEP:
+                continue
+            self._lift_targets[i] = target
+            self._p.changeDynamics(self._body, lift, jointLowerLimit=target - LIFT_PLAY,
+                                   jointUpperLimit=target + LIFT_PLAY,
+                                   jointLimitForce=LIFT_FORCE)
             self._p.setJointMotorControl2(
                 self._body, lift, self._p.POSITION_CONTROL,
-                targetPosition=self.spec.tip_advance(2.0 * q), force=LIFT_FORCE,
-                maxVelocity=1.0, positionGain=LIFT_GAIN,
+                targetPosition=target, force=LIFT_FORCE, maxVelocity=1.0,
+                positionGain=LIFT_GAIN,
             )
 
     def _poll(self) -> None:
