@@ -24,6 +24,13 @@ class Gripper(Protocol):
         """Current opening between the pads (m)."""
         ...
 
+    def tip_advance(self, width: float) -> float:
+        """How far (m) the fingertips reach further along the approach axis at opening ``width``
+        (m) than when fully closed: a linkage-driven gripper's tips travel as its jaws move (the
+        2F-85's advance 13 mm from open to closed), which a skill setting a fingertip on a
+        surface must take into account. 0 for fingers on a slide."""
+        ...
+
     def moving(self) -> bool:
         """True while the fingers still travel."""
         ...

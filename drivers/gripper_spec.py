@@ -263,7 +263,9 @@ def shipped_grippers() -> list[str]:
     return sorted(p.stem for p in SHIPPED_DIR.glob("*.yaml"))
 
 
-def load_gripper(name_or_path: str | Path = DEFAULT_GRIPPER, base: Path | None = None) -> GripperSpec:
+def load_gripper(
+    name_or_path: str | Path = DEFAULT_GRIPPER, base: Path | None = None
+) -> GripperSpec:
     """A shipped description by name (``robotiq_2f85``) or a YAML file (relative to ``base``).
 
     Raises :class:`GripperSpecError` (unknown name, unreadable or invalid file)."""

@@ -444,6 +444,9 @@ class FaultyGripper:
     def object_detected(self) -> bool:
         return self.inner.object_detected()
 
+    def tip_advance(self, width: float) -> float:
+        return self.inner.tip_advance(width)
+
     def fault(self) -> str | None:
         if self.injector.gripper_faulted():
             return GRIPPER_FAULT_CODE

@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.pose import Pose
 from drivers.tool import FINGER_LENGTH
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_JOINTS, forward_kinematics
 from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
-from drivers.gripper_spec import GripperSpec, default_gripper
 from sim.gripper import FINGER_NAMES, LIFT_NAMES, SimGripper
 from sim.robot_model import FINGER_THICKNESS, write_urdf
 from sim.world import SimWorld, matrix_from_quaternion

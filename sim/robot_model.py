@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from drivers.gripper_spec import GripperSpec, default_gripper
-from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, TCP_Z
+from drivers.tool import FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, TCP_Z
 from drivers.ur5.kinematics import (
     ARM_CHAIN,
     ARM_JOINTS,

@@ -41,13 +41,25 @@ UNITS: dict[str, tuple[str, float]] = {
 SHOWN_UNIT = {"rad": "deg", "rad/s": "deg/s", "rad/s^2": "deg/s^2"}
 
 
-def si(default: float, unit: str, low: float, high: float, doc: str) -> Any:
-    """A configurable field: ``default`` in SI, accepted range ``[low, high]`` in SI."""
+#: What a gripper-facing parameter commands, for the check against the gripper's description:
+#: ``grip_force`` (N per finger, within its force range), ``finger_speed`` (m/s, its speed range).
+ACTUATORS = ("grip_force", "finger_speed")
+
+
+def si(
+    default: float, unit: str, low: float, high: float, doc: str, actuator: str | None = None
+) -> Any:
+    """A configurable field: ``default`` in SI, accepted range ``[low, high]`` in SI.
+    ``actuator``: what it commands the gripper (:data:`ACTUATORS`), so a configuration asking
+    the gripper for what it cannot do is refused at load, against the gripper's description."""
+    if actuator is not None and actuator not in ACTUATORS:
+        raise ValueError(f"unknown actuator {actuator!r}; known: {', '.join(ACTUATORS)}")
     if unit not in UNITS:
         raise ValueError(f"unknown unit {unit!r}; known: {', '.join(UNITS)}")
     if not low <= default <= high:
         raise ValueError(f"default {default} outside [{low}, {high}]")
-    return field(default=default, metadata={"unit": unit, "low": low, "high": high, "doc": doc})
+    return field(default=default, metadata={"unit": unit, "low": low, "high": high, "doc": doc,
+                                            "actuator": actuator})
 
 
 def guard_field(max_force: float, timeout: float, doc: str) -> Any:
@@ -71,6 +83,7 @@ class ConfigKey:
     high: float  #: SI
     default: float  #: SI
     doc: str
+    actuator: str | None = None  #: what it commands the gripper (:data:`ACTUATORS`), if anything
 
     @property
     def shown_unit(self) -> str:
@@ -112,7 +125,7 @@ def config_keys(cls: type) -> tuple[ConfigKey, ...]:
             suffix, scale = UNITS[meta["unit"]]
             keys.append(
                 ConfigKey(f.name + suffix, f.name, None, meta["unit"], scale, meta["low"],
-                          meta["high"], float(f.default), meta["doc"])
+                          meta["high"], float(f.default), meta["doc"], meta.get("actuator"))
             )
     return tuple(keys)
 

@@ -48,7 +48,9 @@ class RepositionParams:
     )
     approach_height: float = si(0.08, "m", 0.0, 0.3, "above the part the jaws come down from")
     lift: float = si(0.003, "m", 0.0, 0.02, "the part is lifted off the floor to be carried")
-    grip_force: float = si(20.0, "N", 1.0, 100.0, "per finger of the pinch")
+    grip_force: float = si(
+        20.0, "N", 0.1, 235.0, "per finger of the pinch", actuator="grip_force"
+    )
     speed: float = si(0.08, "m/s", 0.005, 0.5, "of the TCP over and down to the part")
     drag_speed: float = si(0.03, "m/s", 0.005, 0.2, "of the TCP carrying the part")
     acceleration: float = si(0.5, "m/s^2", 0.01, 3.0, "of the TCP")

@@ -99,7 +99,9 @@ class SlotParams:
     wall_gap: float = si(
         0.004, "m", 0.0, 0.02, "between each pad and the wall before the pinch (pick)"
     )
-    hold_force: float = si(15.0, "N", 1.0, 100.0, "per finger of the hole grasp (pick)")
+    hold_force: float = si(
+        20.0, "N", 0.1, 235.0, "per finger of the hole grasp (pick)", actuator="grip_force"
+    )
     view_height: float = si(
         0.20, "m", 0.05, 1.0, "of the camera above the rim when looking (pick)"
     )

@@ -409,7 +409,8 @@ def run_trial(
             failure = StepResult(
                 Status.FAILURE, f"plan: {choice.clearance.reason()}", Failure.NO_CLEAR_PIVOT
             )
-        tilt = Tilt(frame, params, dev)
+        grasp = Grasp(frame, params, dev)
+        tilt = Tilt(lambda: grasp.frame, params, dev)
         if make_align is None:
             align = Align(lambda: tilt.frame, setup.part, params, dev)
         else:
@@ -419,7 +420,7 @@ def run_trial(
             if getattr(align, "lifting", False) and watch.phase != "lift":
                 watch.enter("lift")
 
-        phases = [("grasp", Grasp(frame, params, dev)), ("tilt", tilt), ("align", align)]
+        phases = [("grasp", grasp), ("tilt", tilt), ("align", align)]
         for phase_name, skill in phases if failure is None else []:
             if phase_name == "grasp":
                 watch.grasp_began()

@@ -26,6 +26,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import replace
 
+from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.health import CheckResult, DeviceError
 from drivers.robotiq_gripper.registers import (
     OBJ_MOVING,
@@ -58,8 +59,10 @@ class Robotiq2F85:
     ``calibration``: the unit's open/closed position counts (see :meth:`calibrate`);
     ``finger_width``: pad width ``w`` (m; the twin's 0.020 by default, so planning agrees);
     ``poll_hz``: status reads a second; ``stale_after``: s after which the newest status counts
-    as lost (a fault); ``clock``: monotonic seconds. Call :meth:`start` (or use ``with``) before
-    use and :meth:`disconnect` after; disconnecting leaves the fingers where they are.
+    as lost (a fault); ``clock``: monotonic seconds; ``spec``: the gripper's description (the
+    shipped 2F-85 by default), whose linkage gives :meth:`tip_advance`. Call :meth:`start` (or
+    use ``with``) before use and :meth:`disconnect` after; disconnecting leaves the fingers where
+    they are.
     """
 
     stroke: float = STROKE
@@ -72,7 +75,9 @@ class Robotiq2F85:
         poll_hz: float = 50.0,
         stale_after: float = 0.5,
         clock: Callable[[], float] = time.monotonic,
+        spec: GripperSpec | None = None,
     ) -> None:
+        self.spec = spec or default_gripper()
         if poll_hz <= 0 or stale_after <= 0:
             raise ValueError("poll_hz and stale_after must be > 0")
         self.transport = transport
@@ -175,6 +180,11 @@ class Robotiq2F85:
         if st is None:
             raise DeviceError(DEVICE, self.transport.address, "no status received yet")
         return self.calibration.width(st.po)
+
+    def tip_advance(self, width: float) -> float:
+        """m the tips reach further along the approach at ``width`` than closed (the linkage of
+        the gripper's description)."""
+        return self.spec.tip_advance(width)
 
     def moving(self) -> bool:
         """True while the newest go-to is not yet echoed or the fingers still travel."""

@@ -176,7 +176,8 @@ class Align(HoleGraspSkill):
         self._frame = self._frame_source()
         tool = arm.tool_pose()
         hook = self._frame.hook_depth(p.l_a, p.alpha)
-        self.centre = turn_centre(tool, gripper.width(), hook, p.tip_offset)
+        reach = p.tip_offset + gripper.tip_advance(gripper.width())
+        self.centre = turn_centre(tool, gripper.width(), hook, reach)
         axis = self._frame.normal
         z = tool.rotation[:, 2]
         down = np.array([0.0, 0.0, -1.0])
@@ -207,7 +208,8 @@ class Align(HoleGraspSkill):
         p, part = self.params, self.part
         tool = self.dev.arm.tool_pose()
         assert self._frame is not None
-        tip_z = float(tool.position[2] + p.tip_offset * tool.rotation[2, 2])
+        reach = p.tip_offset + self.dev.gripper.tip_advance(self.dev.gripper.width())
+        tip_z = float(tool.position[2] + reach * tool.rotation[2, 2])
         floor = self._frame.floor_z
         goal = max(floor + part.length - p.wall_depth, floor + p.floor_clearance)
         depth = max(0.0, tip_z - goal)

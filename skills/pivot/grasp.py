@@ -1,59 +1,97 @@
 """Grasp (Sec. III-C, Fig. 2(i)): tilt the gripper by alpha over the lying part's open end, so
-that one finger drops into the hole and the other lands on the top surface at l, then close."""
+that one finger drops into the hole and the other lands on the top surface at l, then close.
+
+The Grasp is steered by what a real cell senses, not by the heights a twin knows exactly:
+
+1. The jaws open to the planned opening plus the approach clearance, and the gripper comes down
+   at alpha until the outer fingertip is ``touch_standoff`` above where S should be -- a margin
+   larger than what the camera, the hand-eye calibration and the part's tolerances leave unknown
+   of the height. Where the tip is comes from the gripper's linkage: a 2F-85's tips sit 8 mm
+   higher at a 70 mm opening than closed (:meth:`drivers.gripper.Gripper.tip_advance`).
+2. It feels for S: a force-controlled descent (the arm's force mode, straight down) until the
+   wrist feels the top surface push back with ``touch_force``. That measures the part's height;
+   the pivot frame's floor is corrected from it (:attr:`Grasp.frame`), so the Tilt turns about
+   the real corner G.
+3. The jaws close onto H while the arm keeps the outer finger on S: the TCP follows half the
+   closing along the closing line (the 2F-85's jaws are symmetric), backs off along the fingers
+   by the tips' advance (its linkage), and presses S down with the force the pinch needs to hold
+   there by friction. A 2F-85 pinches with 20 N at least; at S that pinch pulls the pad along the
+   surface with ``F cos(alpha)`` against a grip of ``mu (F sin(alpha) + P)``, so S holds only
+   with a press ``P >= F (cos(alpha) / mu - sin(alpha))``, ``mu`` the least pad friction the
+   cell counts on (``pinch_friction``). Without it the close drags S towards the rim and shoves
+   the part (the twin measured l_a 0.9 -> 0.3 and the part pushed 4 mm).
+4. The grasp is confirmed from what the wrist and the jaws report: the fingers stopped (the
+   unit's object flag), at an opening within ``width_tolerance`` of the one the plan puts H at,
+   with S pressed. A close that ran past H (the inner finger missed the rim) fails as a miss.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+
+import numpy as np
 
 from drivers.devices import Devices
 from drivers.pose import Pose
 from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
+from skills.slot import ForcePush, world_force
 from skills.status import Failure, Status, StepResult
+
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def pinch_press(grip_force: float, alpha: float, friction: float) -> float:
+    """N the arm must press S down with so that a pinch of ``grip_force`` (N) at ``alpha`` (rad)
+    does not drag the outer pad along the top surface, with pad friction at least ``friction``
+    (module doc, step 3). 0 where friction alone holds it."""
+    return max(0.0, grip_force * (math.cos(alpha) / friction - math.sin(alpha)))
 
 
 class Grasp:
-    """Open, approach along the fingers, close onto H while S stays put; fail if nothing is held.
+    """Open, approach, feel for S, close onto H pressing S; fail if the grasp is not felt."""
 
-    The outer finger's tip is set on the top surface at S (the edge of its pad face is the
-    finger's lowest point), pressed ``press_depth`` into it. The jaws then close while the arm
-    moves the TCP towards the outer finger by half the closing, so the outer finger stays at S
-    and the inner one travels alone to the rim at H. A plain close would not do: the 2F-85's
-    fingers are coupled, so either S is held by friction and the inner finger stalls short of H,
-    or S slides and the part is shoved along the floor; both shrink ``l`` away from the plan.
-    """
+    touch_step = "feel for S"
+    close_step = "close onto H"
 
     def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
         self.frame, self.params, self.dev = frame, params, dev
         p = params
-        target = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
-        self.target: Pose = Pose(target.position - p.press_depth * frame.up, target.rotation)
-        opening = frame.opening(p.l_a, p.alpha)
-        if opening + p.approach_clearance > dev.gripper.stroke:
+        gripper = dev.gripper
+        self.opening = frame.opening(p.l_a, p.alpha)  #: m, the jaws with S and H touched
+        if self.opening + p.approach_clearance > gripper.stroke:
             raise ValueError(
-                f"grasp needs a jaw opening of {(opening + p.approach_clearance) * 1e3:.1f} mm, "
-                f"the gripper has {dev.gripper.stroke * 1e3:.1f} mm"
+                f"grasp needs a jaw opening of {(self.opening + p.approach_clearance) * 1e3:.1f} "
+                f"mm, the gripper has {gripper.stroke * 1e3:.1f} mm"
             )
-        self._start_width = opening + p.approach_clearance  #: m, the jaws on the approach
-        self._pre = self._keep_outer_pad_at_s()
-        # The lead climbs by sin(alpha) along the closing line: keep that within half the press
-        # so the outer finger stays on S (the cookie can's 33 deg lifted it off at 1 mm).
-        self._lead = min(p.close_lead, 0.5 * p.press_depth / max(math.sin(p.alpha), 1e-6))
-        self._closed_from = 0.0  #: m, the jaw opening when the close began
-        self._moved_at = 0.0  #: s (clock), the last tick the fingers moved, or the close began
+        self._start_width = self.opening + p.approach_clearance  #: m, the jaws on the approach
+        #: N, the press at S the pinch needs (module doc)
+        self.press = max(p.touch_force, pinch_press(p.grip_force, p.alpha, p.pinch_friction))
+        self.rotation = frame.grasp_rotation(p.alpha)
+        self._x, self._z = self.rotation[:, 0], self.rotation[:, 2]
+        # The outer pad's tip over S, ``touch_standoff`` up; only the inner finger has the
+        # approach clearance, so the TCP sits half of it towards the inner finger.
+        reach = p.tip_offset + gripper.tip_advance(self._start_width)
+        s_point = frame.point(frame.section.a - 2.0 * frame.section.a * p.l_a,
+                              2.0 * frame.section.b)
+        tcp = s_point - 0.5 * self._start_width * self._x - reach * self._z
+        self.standoff = Pose(tcp + p.touch_standoff * UP, self.rotation)
+        self._pre = Pose(self.standoff.position - p.approach_distance * self._z, self.rotation)
+        self.touch = ForcePush(
+            self.touch_step, dev, p.guard, (0.0, 0.0, -1.0), p.touch_force, p.touch_speed,
+            2.0 * p.touch_standoff + p.height_tolerance, settle=p.touch_settle,
+        )
+        self.s_height: float | None = None  #: m, where the outer tip found S
+        self.shove = 0.0  #: m the TCP gave way along the closing line while closing (diagnostic)
+        self._touched: Pose | None = None  #: the TCP pose where S was felt
+        self._closed_from = 0.0  #: m, the reported opening when the close began
+        self._advance_from = 0.0  #: m, the tips' advance then
+        self._press_offset = 0.0  #: m the press regulation has moved the TCP down since
+        self._moved_at = 0.0  #: s (clock), the last tick the fingers moved
+        self._t = 0.0
         self.sequence = Sequence("grasp", self._steps())
-
-    def _keep_outer_pad_at_s(self) -> Pose:
-        """The approach opening keeps the outer pad's face at S: only the inner finger has the
-        clearance, so it starts short of H. Shifts ``target`` by half the clearance and returns
-        the pose ``approach_distance`` before it along the fingers, shifted alike."""
-        p = self.params
-        z = self.target.rotation[:, 2]
-        pre = Pose(self.target.position - p.approach_distance * z, self.target.rotation)
-        shift = 0.5 * p.approach_clearance * self.target.rotation[:, 0]
-        self.target = Pose(self.target.position - shift, self.target.rotation)
-        return Pose(pre.position - shift, pre.rotation)
 
     def _steps(self) -> list[GuardedMotion]:
         dev, p, g = self.dev, self.params, self.params.guard
@@ -64,9 +102,11 @@ class Grasp:
             dev.move(
                 "approach at alpha",
                 g,
-                lambda: arm.move_to(self.target, p.approach_speed, p.acceleration),
+                lambda: arm.move_to(self.standoff, p.approach_speed, p.acceleration),
             ),
-            GuardedMotion("close onto H", self._close, self._closed, arm, dev.ft, dev.clock, g),
+            self.touch.motion,
+            GuardedMotion(self.close_step, self._close, self._closed, arm, dev.ft, dev.clock, g,
+                          self._close_failed, Failure.MISSED),
         ]
 
     def _over_pre(self) -> None:
@@ -79,36 +119,79 @@ class Grasp:
         above[2] = max(above[2], float(tool.position[2]))
         arm.move_path([Pose(above, pre.rotation), pre], 2 * p.approach_speed, p.acceleration)
 
+    # --- the close ---------------------------------------------------------------------------
     def _close(self) -> None:
-        p, gripper = self.params, self.dev.gripper
+        p, gripper, arm = self.params, self.dev.gripper, self.dev.arm
+        if not self.touch.contact:
+            return  # _close_failed says why
+        self._touched = arm.tool_pose()
+        reach = p.tip_offset + gripper.tip_advance(gripper.width())
+        tip = self._touched.position + 0.5 * gripper.width() * self._x + reach * self._z
+        self.s_height = float(tip[2])
+        # The part's top is where the tip stopped: the floor of the pivot plane follows from it.
+        floor = self.s_height - 2.0 * self.frame.section.b
+        self.frame = dataclasses.replace(self.frame, floor_z=floor)
         self._closed_from = gripper.width()
-        self._moved_at = self.dev.clock.now()
+        self._advance_from = gripper.tip_advance(self._closed_from)
+        self._press_offset = 0.0
+        self._moved_at = self._t = self.dev.clock.now()
         gripper.close(p.grip_force, p.close_speed)
 
     def _closed(self) -> bool:
-        # Keep the outer (+x) finger where it is: closing moves it by half the closing
-        # towards the TCP, so the TCP follows it that far along +x -- and leads by
-        # ``close_lead``, since a finger held on S by friction only closes when the palm
-        # moves. When the inner finger stops at H the lead is all S is dragged.
-        gripper, clock = self.dev.gripper, self.dev.clock
-        closing = self._closed_from - gripper.width()
-        x = self.target.rotation[:, 0]
-        position = self.target.position + (0.5 * closing + self._lead) * x
-        self.dev.arm.servo(Pose(position, self.target.rotation))
-        if gripper.moving():
-            self._moved_at = clock.now()
+        """Keep the outer pad on S and pressing it while the jaws close (module doc, step 3);
+        done once the fingers have stood still for ``close_settle``."""
+        gripper, clock, p = self.dev.gripper, self.dev.clock, self.params
+        if self._touched is None:
             return False
-        return clock.now() - self._moved_at >= 0.2
+        now = clock.now()
+        dt, self._t = max(0.0, now - self._t), now
+        width = gripper.width()
+        closing = self._closed_from - width
+        advance = gripper.tip_advance(width) - self._advance_from
+        pressing = float(world_force(self.dev) @ UP)
+        self._press_offset += p.press_gain * (self.press - pressing) * dt
+        self._press_offset = min(max(self._press_offset, -p.touch_standoff), p.height_tolerance)
+        position = (
+            self._touched.position
+            + (0.5 * closing + min(p.close_lead, 0.5 * closing)) * self._x
+            - advance * self._z
+            - self._press_offset * UP
+        )
+        self.dev.arm.servo(Pose(position, self.rotation))
+        if gripper.moving():
+            self._moved_at = now
+            return False
+        return now - self._moved_at >= p.close_settle
+
+    def _close_failed(self) -> str | None:
+        """No top surface where the part should lie, or the jaws ran past where the plan puts H
+        (the inner finger did not catch the rim)."""
+        if not self.touch.contact:
+            return "the outer finger found no top surface where the part should lie"
+        p, width = self.params, self.dev.gripper.width()
+        if width < self.opening - p.width_tolerance:
+            return (f"the jaws closed to {width * 1e3:.1f} mm, past the rim at "
+                    f"{self.opening * 1e3:.1f} mm: the inner finger missed it")
+        return None
 
     def tick(self) -> StepResult:
         result = self.sequence.tick()
         if result.status is Status.SUCCESS:
             self.dev.arm.stop()
-            if not self.dev.gripper.object_detected():
+            gripper = self.dev.gripper
+            pressing = float(world_force(self.dev) @ UP)
+            if not gripper.object_detected():
                 return StepResult(
                     Status.FAILURE, "grasp: missed, the fingers closed on nothing", Failure.MISSED
+                )
+            if pressing < 0.5 * self.press:
+                return StepResult(
+                    Status.FAILURE,
+                    f"grasp: S is not pressed ({pressing:.1f} N, want {self.press:.1f} N): the "
+                    "outer finger lost the top surface", Failure.MISSED,
                 )
         return result
 
     def halt(self) -> None:
         self.sequence.halt()
+

@@ -18,14 +18,42 @@ class PivotParams:
     l_a: float
     alpha: float  #: rad
     grip_force: float = si(
-        2.0, "N", 0.1, 50.0, "per finger while the grasp pivots the part (Grasp, Tilt)"
+        20.0, "N", 0.1, 235.0, "per finger while the grasp pivots the part (Grasp, Tilt)",
+        actuator="grip_force",
     )
-    hold_force: float = si(15.0, "N", 1.0, 100.0, "per finger of the hole grasp that lifts")
-    press_depth: float = si(
-        0.0005, "m", 0.0, 0.005, "the outer fingertip is set into S (a light, sure contact)"
+    hold_force: float = si(
+        20.0, "N", 0.1, 235.0, "per finger of the hole grasp that lifts", actuator="grip_force"
+    )
+    touch_standoff: float = si(
+        0.004, "m", 0.0, 0.03,
+        "the outer tip stops this far above S before feeling for it (more than the height "
+        "the camera, the hand-eye calibration and the part's tolerances leave unknown)",
+    )
+    height_tolerance: float = si(
+        0.004, "m", 0.0, 0.03, "S may lie this much lower than expected and still be found"
+    )
+    touch_force: float = si(5.0, "N", 1.0, 50.0, "the wrist feels S pushing back with this")
+    touch_speed: float = si(0.01, "m/s", 0.001, 0.1, "of the descent that feels for S")
+    touch_settle: float = si(
+        0.05, "s", 0.0, 1.0, "the descent stands still pressing this long to count as contact"
+    )
+    pinch_friction: float = si(
+        0.6, "1", 0.1, 2.0,
+        "the least pad-part friction the grasp counts on: S is pressed so the pinch cannot "
+        "drag the outer pad along the surface",
+    )
+    press_gain: float = si(
+        0.0002, "m/(N*s)", 0.0, 0.01, "the TCP moves down per newton S is pressed too little"
+    )
+    close_settle: float = si(0.2, "s", 0.0, 2.0, "the fingers stand still this long: closed")
+    width_tolerance: float = si(
+        0.006, "m", 0.0, 0.03,
+        "the jaws may close this far past the planned rim contact before it counts as a miss",
     )
     close_lead: float = si(0.001, "m", 0.0, 0.01, "the palm leads the outer finger closing")
-    close_speed: float = si(0.02, "m/s", 0.001, 0.15, "of each finger while closing onto H")
+    close_speed: float = si(
+        0.02, "m/s", 0.001, 0.15, "of each finger while closing onto H", actuator="finger_speed"
+    )
     #: m of extra jaw opening during the approach (in the cell: the planner's gripper model,
     #: :class:`drivers.parts.Gripper`, so the plan and the skill agree; not a key of its own)
     approach_clearance: float = 0.010
@@ -87,7 +115,9 @@ class PivotParams:
     align_press: float = si(
         0.0005, "m", 0.0, 0.005, "the turn's centre lies inside the rim (keeps the contact)"
     )
-    narrow_speed: float = si(0.02, "m/s", 0.001, 0.15, "of each finger narrowing the jaws")
+    narrow_speed: float = si(
+        0.02, "m/s", 0.001, 0.15, "of each finger narrowing the jaws", actuator="finger_speed"
+    )
     clear_height: float = si(0.03, "m", 0.0, 0.2, "above the rim for moves over the part")
     view_height: float = si(
         0.20, "m", 0.05, 1.0, "of the wrist camera above the rim (the recovery's look)"

@@ -42,12 +42,17 @@ class Tilt:
     closing would drag S towards the rim early.
     """
 
-    def __init__(self, frame: PivotFrame, params: PivotParams, dev: Devices) -> None:
-        self.frame = frame
+    def __init__(
+        self, frame: PivotFrame | Callable[[], PivotFrame], params: PivotParams, dev: Devices
+    ) -> None:
+        """``frame`` may be a callable, read when the arc starts (the frame the Grasp measured:
+        its floor where the outer finger found S)."""
+        self._frame_source = frame if callable(frame) else (lambda: frame)
+        self.frame = self._frame_source()
         self.params = params
         self.dev = dev
         p = params
-        self.tip = frame.section.tip_angle  #: rad, beta where the weight passes over G
+        self.tip = self.frame.section.tip_angle  #: rad, beta where the weight passes over G
         self.angle = p.tilt_angle if p.tilt_angle is not None else 0.5 * math.pi  #: theta (rad)
         self.start_width = 0.0  #: m, jaw opening when the arc started
         self.eased = False  #: the jaws have eased past the tip-over angle
@@ -76,6 +81,7 @@ class Tilt:
 
     def _path(self) -> Callable[[float], Pose]:
         arm, gripper, p = self.dev.arm, self.dev.gripper, self.params
+        self.frame = self._frame_source()
         tool = arm.tool_pose()
         self.start_width = gripper.width()
         if p.tilt_squeeze is not None:
@@ -96,7 +102,7 @@ class Tilt:
         p = self.params
         floor = self.frame.floor_z + p.tilt_floor_clearance
         corners = [
-            (side * 0.5 * width + side * back, p.tip_offset)
+            (side * 0.5 * width + side * back, p.tip_offset + self.dev.gripper.tip_advance(width))
             for side in (1.0, -1.0)
             for back in (0.0, p.finger_thickness)
         ]

@@ -30,6 +30,9 @@ class _Dev:
     def object_detected(self) -> bool:
         return False
 
+    def tip_advance(self, width: float) -> float:
+        return 0.0
+
     def calibrate(self) -> object:
         self.calls.append("calibrate")
 

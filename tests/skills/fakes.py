@@ -122,6 +122,9 @@ class FakeGripper:
     def object_detected(self) -> bool:
         return self.closed_on is not None and not self._moving
 
+    def tip_advance(self, width: float) -> float:
+        return 0.0  # fingers on a slide
+
     def fault(self) -> str | None:
         return None
 

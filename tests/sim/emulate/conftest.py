@@ -102,6 +102,9 @@ class LinearFingers:
         with self._lock:
             return self._at(self.clock()) != self._stop_at
 
+    def tip_advance(self, width: float) -> float:
+        return 0.0
+
     def object_detected(self) -> bool:
         with self._lock:
             return self._stop_at != self._target and not self.moving_unlocked()
