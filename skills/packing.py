@@ -5,10 +5,10 @@ set down a few millimetres short of its place towards ``-x, -y``, then pushed ``
 box floor pushes back, ``+x`` until a wall or a packed neighbour does, ``+y`` likewise, let go and
 the gripper withdrawn up (a last short ``+x`` push closes the millimetre the part was eased back
 before the ``+y`` push, see ``back_off``). Each push runs in the arm's force mode
-(:class:`~skills.slot.ForcePush`, ``forceMode`` on a UR): ``contact_force`` along the push, position
-held on the other axes, until the TCP stands still pressing -- the measured contact, wherever it
-is. The force is added to the wrench read as the push begins (the held part's weight and the
-sensor's offset), so only the reaction of the floor, a wall or a neighbour ends a push.
+(:class:`~skills.force.ForcePush`, ``forceMode`` on a UR): ``contact_force`` along the push,
+position held on the other axes, until the TCP stands still pressing -- the measured contact,
+wherever it is. The force is added to the wrench read as the push begins (the held part's weight
+and the sensor's offset), so only the reaction of the floor, a wall or a neighbour ends a push.
 
 Why the hole grasp helps: the finger in the hole and the one on the wall hold the part from one
 side only, so no finger sits between the part and the things it is pushed against; the gripper
@@ -31,12 +31,12 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.force import ForcePush
 from skills.motion import Guard, GuardedMotion, Sequence, wait
 from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
     ContactMove,
-    ForcePush,
     SequenceSkill,
     WrenchReference,
     check,

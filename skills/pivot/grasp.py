@@ -34,10 +34,10 @@ import numpy as np
 
 from drivers.devices import Devices
 from drivers.pose import Pose
+from skills.force import ForcePush, world_force
 from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
-from skills.slot import ForcePush, world_force
 from skills.status import Failure, Status, StepResult
 
 UP = np.array([0.0, 0.0, 1.0])

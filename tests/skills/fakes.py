@@ -6,6 +6,7 @@ configurable object width. Tests advance them with ``tick()``, as the world's st
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -102,6 +103,8 @@ class FakeGripper:
         self._target = 0.085
         self._moving = False
         self.closed_on: float | None = None
+        #: m per tick the jaws move; None: they reach the target in one tick
+        self.step: float | None = None
 
     def open(self, width: float | None = None, speed: float = 0.1) -> None:
         self._target = self.stroke if width is None else width
@@ -130,6 +133,10 @@ class FakeGripper:
 
     def tick(self) -> None:
         if self._moving:
+            gap = self._target - self._width
+            if self.step is not None and abs(gap) > self.step:
+                self._width += math.copysign(self.step, gap)
+                return
             self._width = self._target
             self._moving = False
 

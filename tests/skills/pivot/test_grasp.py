@@ -10,7 +10,8 @@ from drivers.devices import Devices
 from drivers.parts import Section, delta_round
 from skills.motion import Guard
 from skills.pivot import Grasp, PivotFrame, PivotParams, Tilt
-from skills.status import Status
+from skills.pivot.grasp import pinch_press
+from skills.status import Failure, Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
 
 SECTION = Section(0.034, 0.017, delta_round(0.034, 0.028, 0.020))
@@ -18,10 +19,13 @@ FRAME = PivotFrame(SECTION, np.array([0.5, 0.0, 0.017]), 0.0)
 PARAMS = PivotParams(l_a=0.9, alpha=math.radians(16.3))
 
 
-def devices(object_width=0.055):
+def devices(object_width=0.055, closing_speed=None):
+    """Fakes; ``closing_speed`` (m/s): the jaws move at it (None: in one tick)."""
+    gripper = FakeGripper(object_width)
+    gripper.step = None if closing_speed is None else closing_speed * 0.008
     return {
         "arm": FakeArm(),
-        "gripper": FakeGripper(object_width),
+        "gripper": gripper,
         "ft": FakeFT(),
         "clock": FakeClock(),
     }
@@ -35,32 +39,78 @@ def make_grasp(d):
     return Grasp(FRAME, PARAMS, dev(d))
 
 
-def test_grasp_opens_approaches_and_closes_keeping_s_put() -> None:
-    d = devices()
+def s_top(dz: float = 0.0) -> float:
+    """Height (m) of the part's top surface where S lies: the frame's, ``dz`` off."""
+    return FRAME.floor_z + 2.0 * SECTION.b + dz
+
+
+def surface(d, grasp: Grasp, top: float, stiffness: float = 20000.0):
+    """An ``on_tick`` hook: the part's top at ``top`` pushes back on the outer fingertip as a
+    spring of ``stiffness`` (N/m) once the tip is below it, and holds a force-mode descent
+    where it pushes with the touch force."""
+    arm, ft, gripper = d["arm"], d["ft"], d["gripper"]
+    x, z = grasp.rotation[:, 0], grasp.rotation[:, 2]
+
+    def hook(_: int) -> None:
+        pose = arm.tool_pose()
+        width = gripper.width()
+        tip = pose.position + 0.5 * width * x + (PARAMS.tip_offset + gripper.tip_advance(width)) * z
+        depth = top - float(tip[2])
+        push = stiffness * depth if depth > 0 else 0.0
+        arm.blocked = push >= PARAMS.touch_force  # the descent goes on until it feels S
+        ft.value = np.concatenate([pose.rotation.T @ np.array([0.0, 0.0, push]), np.zeros(3)])
+
+    return hook
+
+
+def test_grasp_feels_s_where_it_is_and_closes_pressing_it() -> None:
+    # The part's top lies 1.5 mm lower than the frame says (a height error the camera left).
+    d = devices(closing_speed=0.05)
     grasp = make_grasp(d)
-    result, ticks = run(grasp, d)
+    top = s_top(-0.0015)
+    result, _ = run(grasp, d, on_tick=surface(d, grasp, top))
     assert result.status is Status.SUCCESS, result.message
     kinds = [c[0] for c in d["arm"].commands]
-    assert kinds == ["path", "path"]  # above the open end, then along the fingers
-    at_grasp = d["arm"].commands[1][1][-1]
-    planned = FRAME.grasp_pose(0.9, PARAMS.alpha, PARAMS.tip_offset)
-    x = planned.rotation[:, 0]
-    opening = FRAME.opening(0.9, PARAMS.alpha) + PARAMS.approach_clearance
-    # the outer finger's pad (TCP + w/2 x) starts on S, pressed press_depth into it
-    outer_start = at_grasp.position + 0.5 * opening * x
-    outer_planned = planned.position + 0.5 * FRAME.opening(0.9, PARAMS.alpha) * x
-    assert np.allclose(outer_start, outer_planned - [0, 0, PARAMS.press_depth], atol=1e-9)
-    # closing: the TCP followed the outer finger, which stayed put (up to the lead)
-    outer_end = d["arm"].pose.position + 0.5 * d["gripper"].width() * x
-    lead = min(PARAMS.close_lead, 0.5 * PARAMS.press_depth / math.sin(PARAMS.alpha))
-    assert np.linalg.norm(outer_end - outer_start) == pytest.approx(lead, abs=1e-9)
+    assert kinds == ["path", "path", "force"]  # above the open end, to the standoff, feel S
+    # the height was measured where the tip met S (within the spring's give at the touch force)
+    assert grasp.s_height == pytest.approx(top, abs=2 * PARAMS.touch_force / 20000.0)
+    assert grasp.frame.floor_z == pytest.approx(FRAME.floor_z - 0.0015, abs=0.0005)
+    # the arm pressed S with what the pinch needs (at least half of it when the jaws settled)
+    assert grasp.press > PARAMS.touch_force
+    pushed = float(d["arm"].pose.rotation @ d["ft"].value[:3] @ np.array([0.0, 0.0, 1.0]))
+    assert pushed >= 0.5 * grasp.press
+    # closing: the TCP followed half the closing (the outer pad stays on S up to the lead)
+    x = grasp.rotation[:, 0]
+    pressed = -grasp._press_offset * np.array([0.0, 0.0, 1.0])  # the press moved it down
+    moved = (d["arm"].pose.position - grasp._touched.position - pressed) @ x
+    closing = grasp._closed_from - d["gripper"].width()
+    assert moved == pytest.approx(0.5 * closing + min(PARAMS.close_lead, 0.5 * closing), abs=1e-9)
     assert d["gripper"].closed_on == pytest.approx(0.055)
 
 
-def test_grasp_fails_when_the_fingers_close_on_nothing() -> None:
-    d = devices(object_width=None)
-    result, _ = run(make_grasp(d), d)
-    assert result.status is Status.FAILURE and "closed on nothing" in result.message
+def test_grasp_fails_as_a_miss_when_there_is_no_top_surface() -> None:
+    d = devices(closing_speed=0.05)
+    grasp = make_grasp(d)
+    far_below = s_top(-0.05)
+    result, _ = run(grasp, d, on_tick=surface(d, grasp, far_below))
+    assert result.status is Status.FAILURE and result.code is Failure.MISSED
+    assert grasp.s_height is None
+
+
+def test_grasp_fails_as_a_miss_when_the_fingers_close_on_nothing() -> None:
+    d = devices(object_width=None, closing_speed=0.05)
+    grasp = make_grasp(d)
+    result, _ = run(grasp, d, on_tick=surface(d, grasp, s_top()))
+    assert result.status is Status.FAILURE and result.code is Failure.MISSED
+    assert d["gripper"].width() < grasp.opening - PARAMS.width_tolerance
+
+
+def test_pinch_press_is_what_friction_alone_cannot_hold() -> None:
+    # F (cos a / mu - sin a): 20 N at 16.3 deg with mu 0.5 needs 32.8 N; a high friction none.
+    assert pinch_press(20.0, math.radians(16.3), 0.5) == pytest.approx(
+        20.0 * (math.cos(math.radians(16.3)) / 0.5 - math.sin(math.radians(16.3)))
+    )
+    assert pinch_press(20.0, math.radians(60.0), 2.0) == 0.0
 
 
 def test_force_guard_stops_the_arm_within_one_tick() -> None:

@@ -1,0 +1,113 @@
+"""Contact by force: the wrist's reading in the base frame and the force-mode push that ends on
+a measured contact. Packing, slot feeding and the pivot's Grasp (feeling for S) share them; they
+sit apart from those skills so that each imports them without importing the others."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from drivers.devices import Devices
+from drivers.pose import Pose
+from skills.motion import Failed, Guard, GuardedMotion, arm_failure
+
+__all__ = ["ForcePush", "world_force"]
+
+
+def world_force(dev: Devices) -> NDArray[np.float64]:
+    """The force (N) the environment applies to the tool, in the base frame."""
+    return dev.arm.tool_pose().rotation @ np.asarray(dev.ft.wrench()[:3], float)
+
+
+class ForcePush:
+    """A push by hybrid force-position control: the arm's force mode presses ``force`` (N) along
+    ``direction`` (a base-frame axis, e.g. ``(1, 0, 0)``) at most ``speed`` (m/s) and holds
+    position on every other axis; it ends on the *measured* contact -- the TCP has stood still
+    (slower than ``still_speed``) for ``settle`` s while the force against it is at least
+    ``contact_ratio`` of ``force`` -- or, having gone ``reach`` m with nothing felt, without one.
+
+    This is how the paper packs (Sec. IV-C: -z, +x, +y until contact): the force, not a
+    position, decides where the part ends, so a part a millimetre off its nominal place still
+    ends pressed against its neighbour with the configured force instead of at a guessed
+    target. The commanded force is added to the one read at the start (the held part's weight
+    and the sensor's offset), so only the environment's reaction counts.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        dev: Devices,
+        guard: Guard,
+        direction: ArrayLike,
+        force: float,
+        speed: float,
+        reach: Callable[[], float] | float,
+        settle: float = 0.15,
+        still_speed: float = 0.002,
+        contact_ratio: float = 0.7,
+    ) -> None:
+        d = np.asarray(direction, float)
+        axis = int(np.argmax(np.abs(d)))
+        if np.count_nonzero(d) != 1:
+            raise ValueError(f"a force push runs along one base axis, got {direction}")
+        self.dev, self.axis, self.sign = dev, axis, float(np.sign(d[axis]))
+        self.force, self.speed, self.settle = force, speed, settle
+        self.still_speed, self.contact_ratio = still_speed, contact_ratio
+        self._reach = reach if callable(reach) else (lambda r=float(reach): r)
+        self.contact = False
+        self.contact_pose: Pose | None = None
+        self.resisting = 0.0  #: N, the newest force against the push (above the reference)
+        self.travelled = 0.0  #: m along the push since it began
+        self._ref = np.zeros(3)
+        self._start_pos = np.zeros(3)
+        self._last: tuple[float, float] | None = None  #: (time, position along the push)
+        self._still_since: float | None = None
+        self._limit = 0.0
+        self.motion = GuardedMotion(
+            name, self._start, self._finished, dev.arm, dev.ft, dev.clock, guard, self._failed
+        )
+
+    def _start(self) -> None:
+        arm = self.dev.arm
+        self._ref = world_force(self.dev)
+        self._start_pos = arm.tool_pose().position.copy()
+        self._limit = float(self._reach())
+        self.contact, self.contact_pose, self.travelled = False, None, 0.0
+        self._last, self._still_since = None, None
+        selection = [False] * 6
+        selection[self.axis] = True
+        wrench = [0.0] * 6
+        # The wrench the tool applies is minus the force on it: reference plus the push.
+        wrench[self.axis] = float(-self._ref[self.axis]) + self.sign * self.force
+        limits = [0.0] * 6
+        limits[self.axis] = self.speed
+        arm.force_mode(selection, wrench, limits)
+
+    def _finished(self) -> bool:
+        arm, now = self.dev.arm, self.dev.clock.now()
+        here = float(arm.tool_pose().position[self.axis])
+        self.travelled = self.sign * (here - float(self._start_pos[self.axis]))
+        self.resisting = -self.sign * float(world_force(self.dev)[self.axis] - self._ref[self.axis])
+        speed = None
+        if self._last is not None and now > self._last[0]:
+            speed = abs(here - self._last[1]) / (now - self._last[0])
+        self._last = (now, here)
+        if self.travelled > self._limit:
+            arm.stop()
+            return True
+        pressing = self.resisting >= self.contact_ratio * self.force
+        if speed is not None and speed < self.still_speed and pressing:
+            if self._still_since is None:
+                self._still_since = now
+            if now - self._still_since >= self.settle:
+                arm.stop()
+                self.contact, self.contact_pose = True, arm.tool_pose()
+                return True
+        else:
+            self._still_since = None
+        return False
+
+    def _failed(self) -> Failed | None:
+        return arm_failure(self.dev.arm)
