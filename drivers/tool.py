@@ -12,15 +12,23 @@ Tool axes: z out of the flange towards the fingertips, x the closing axis.
 
 from __future__ import annotations
 
+from drivers.gripper_spec import default_gripper
+
 FT_HEIGHT = 0.0375  #: the FT300 puck
 FT_RADIUS = 0.0375  #: the FT300 puck's cylinder
 GRIPPER_BODY_HEIGHT = 0.090  #: the 2F-85's body, from the puck to where the fingers leave it
 #: the 2F-85's body as a box: x (closing axis), y, z (approach)
 GRIPPER_BODY_SIZE = (0.075, 0.035, GRIPPER_BODY_HEIGHT)
-FINGER_LENGTH = 0.055  #: the fingers, hanging below the gripper body
+FINGER_LENGTH = 0.055  #: the fingers, hanging below the gripper body fully open
 FINGER_BASE_Z = FT_HEIGHT + GRIPPER_BODY_HEIGHT  #: where the fingers leave the body
-FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH
-#: TCP offset from the flange along tool z (m): 5 mm above the fingertips' end.
+#: How far the tips advance from fully open to closed (the 2F-85's linkage, 13.2 mm): the
+#: fingers hang ``FINGER_LENGTH`` below the body open and this much more closed.
+TIP_TRAVEL = default_gripper().tip_advance(0.0) - default_gripper().tip_advance(
+    default_gripper().stroke
+)
+FINGER_TIP_Z = FINGER_BASE_Z + FINGER_LENGTH + TIP_TRAVEL  #: the tips, fingers closed
+#: TCP offset from the flange along tool z (m): 5 mm above the fingertips' end, fingers closed
+#: (at wider openings the tips sit higher: :meth:`drivers.gripper.Gripper.tip_advance`).
 TCP_Z = FINGER_TIP_Z - 0.005
 
 __all__ = [
@@ -32,4 +40,5 @@ __all__ = [
     "GRIPPER_BODY_HEIGHT",
     "GRIPPER_BODY_SIZE",
     "TCP_Z",
+    "TIP_TRAVEL",
 ]

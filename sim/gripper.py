@@ -82,6 +82,9 @@ class SimGripper:
         self._joints = tuple(joint_indices[name] for name in FINGER_NAMES)
         self._lifts = tuple(joint_indices[n] for n in LIFT_NAMES if n in joint_indices)
         self._lift_targets = [math.inf, math.inf]  #: m, where each lift joint is held now
+        #: the lift joint is 0 fully open (the pads hang their length below the body) and goes
+        #: down the linkage's advance as the jaws close
+        self._open_advance = spec.tip_advance(spec.stroke)
         self.commanded_force = 0.0  #: N per finger the last close applies (the register's step)
         self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
@@ -125,7 +128,9 @@ class SimGripper:
         for joint in self._joints:
             self._p.resetJointState(self._body, joint, q)
         for joint in self._lifts:
-            self._p.resetJointState(self._body, joint, self.spec.tip_advance(2 * q))
+            self._p.resetJointState(
+                self._body, joint, self.spec.tip_advance(2 * q) - self._open_advance
+            )
         self._lift_targets = [math.inf, math.inf]
         self._command(2 * q, self.spec.speed_max, OPEN_FORCE)
         self._active = False
@@ -235,7 +240,7 @@ class SimGripper:
             return
         for i, (finger, lift) in enumerate(zip(self._joints, self._lifts, strict=True)):
             q = self._p.getJointState(self._body, finger)[0]
-            target = self.spec.tip_advance(2.0 * q)
+            target = self.spec.tip_advance(2.0 * q) - self._open_advance
             if abs(target - self._lift_targets[i]) < LIFT_STEP:
                 continue
             self._lift_targets[i] = target

@@ -62,7 +62,7 @@ FINGER_TRAVEL = 0.5 * _SHIPPED.stroke  # each finger 0..FINGER_TRAVEL from the t
 FINGER_EFFORT = _SHIPPED.force_max  # N, the largest grip force
 FINGER_VELOCITY = _SHIPPED.speed_max  # m/s, the fastest finger speed
 #: m each finger's lift joint may move along the approach (the linkage's tip travel is within)
-LIFT_RANGE = (-0.03, 0.01)
+LIFT_RANGE = (-0.005, 0.03)
 LIFT_EFFORT = 2000.0  #: N: the linkage holds the pad along the approach (stiff, not backdriven)
 #: Mass (kg) hanging on the wrist sensor: puck, gripper body, fingers (and the massless tcp link).
 TOOL_MASS = FT_MASS + GRIPPER_BODY_MASS + 2 * (FINGER_MASS + CARRIAGE_MASS) + 1e-4

@@ -49,7 +49,8 @@ def test_tcp_is_on_the_tool_z_axis_past_the_fingertips_minus_5_mm() -> None:
     offset = flange.inverse() @ tcp
     assert np.allclose(offset.position, [0, 0, kin.TCP_Z], atol=1e-12)
     assert np.allclose(offset.rotation, np.eye(3), atol=1e-12)
-    assert kin.TCP_Z == pytest.approx(0.0375 + 0.09 + 0.055 - 0.005)
+    # puck, gripper body, fingers open, the linkage's advance to closed, less 5 mm
+    assert kin.TCP_Z == pytest.approx(0.0375 + 0.09 + 0.055 + 0.0132 - 0.005, abs=1e-4)
 
 
 def test_jacobian_matches_finite_differences() -> None:
