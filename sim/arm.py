@@ -36,6 +36,12 @@ How it moves, and why:
   spring gives the contact a finite stiffness (:data:`FORCE_STIFFNESS`), which a stiff position
   servo against a rigid simulated contact cannot: there the force jumps from zero to the joint
   torque limit.
+* **Command lag** (:meth:`SimArm.set_command_lag`, 0 by default): over RTDE a target takes
+  effect a few milliseconds after it is sent. With a lag of ``n`` control steps the joint
+  targets the motors get are the ones commanded ``n`` steps earlier (a delay line on the
+  commands); what the arm reports (state, commanded joints) is at once, as a controller
+  acknowledges a command before it moves. Force mode's own loop runs on the controller without
+  the lag; a protective stop holds at once.
 * **Protective stop**: like a UR5 at its default 150 N safety limit, the arm faults with
   ``protective_stop=True`` and holds where it is when the force on the tool (less its weight)
   stays above :data:`PROTECTIVE_FORCE`; the next motion command clears it. Position control
@@ -47,6 +53,7 @@ from __future__ import annotations
 import bisect
 import functools
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -232,16 +239,33 @@ class SimArm:
         self._gains = ([POSITION_GAIN] * 6, [1.0] * 6)
         self._command_of: tuple[object, object] | None = None
         self._command: tuple[list[float], list[float], list[float]] = ([], [], [])
+        # The command lag: the last lag + 1 steps' (q_from, q_to), the oldest actuated.
+        self._lag = 0
+        self._line: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque()
         world.before_step(self._control)
         world.before_substep(self._actuate)
 
     # --- setup helpers (not part of the interface) ---------------------------------------
+
+    def set_command_lag(self, steps: int) -> None:
+        """Targets take effect ``steps`` control steps after they are commanded (0: at once);
+        see the module doc. Set it before the arm moves."""
+        if int(steps) != steps or steps < 0:
+            raise ValueError(f"the command lag must be a whole number of steps >= 0, got {steps}")
+        self._lag = int(steps)
+        self._line.clear()
+
+    @property
+    def command_lag(self) -> int:
+        """Control steps between a target commanded and the motors getting it."""
+        return self._lag
 
     def reset_joints(self, q: ArrayLike) -> None:
         """Teleport the arm to joints ``q`` (rad) and hold them; setup only, before contact."""
         q = np.asarray(q, float).reshape(6)
         for joint, angle in zip(self._joints, q, strict=True):
             self._p.resetJointState(self._body, joint, float(angle))
+        self._line.clear()
         self._hold(q)
         self._state, self._message, self._protective = MotionState.IDLE, "", False
         self._over = 0
@@ -434,6 +458,7 @@ class SimArm:
 
     def _leave_force_mode(self) -> None:
         if self._mode == "force":
+            self._line.clear()  # nothing commanded before force mode is still on its way
             self._hold(self.joint_positions())
 
     def contact_force(self) -> float:
@@ -465,6 +490,7 @@ class SimArm:
         if self._over < PROTECTIVE_STEPS:
             return False
         self._leave_force_mode()
+        self._line.clear()  # the controller's own stop: no lag
         self._hold(self.joint_positions())
         self._state = MotionState.FAULT
         self._message = f"protective stop: tool force {force:.0f} N > {PROTECTIVE_FORCE:.0f} N"
@@ -473,7 +499,19 @@ class SimArm:
         return True
 
     def _control(self) -> None:
-        """Once per control step, before physics: the next joint target."""
+        """Once per control step, before physics: the next joint target, into the delay line
+        of the command lag."""
+        self._control_step()
+        if self._lag:
+            if self._mode == "force":
+                self._line.clear()
+            else:
+                self._line.append((self._q_from, self._q_to))
+                while len(self._line) > self._lag + 1:
+                    self._line.popleft()
+
+    def _control_step(self) -> None:
+        """The next joint target, ``(q_from, q_to)`` of this control step, as commanded."""
         self._substep = 0
         if self._protective_stop():
             return
@@ -598,7 +636,7 @@ class SimArm:
         command changes, so the pair of objects identifies the command. Float arithmetic
         element by element gives numpy's elementwise results exactly.
         """
-        q_from, q_to = self._q_from, self._q_to
+        q_from, q_to = self._line[0] if self._line else (self._q_from, self._q_to)
         key = self._command_of
         if key is None or key[0] is not q_from or key[1] is not q_to:
             start = q_from.tolist()

@@ -110,6 +110,12 @@ class SimCamera:
     hand-eye calibration (default :func:`default_tool_T_camera`). ``near`` / ``far`` (m) bound the
     rendered range; nothing closer than ``near`` is seen (the D435's minimum range is similar).
     ``noise=None`` gives exact depth. All randomness comes from ``world.rng``.
+
+    ``mount_error``: where the camera really sits in the frame of the calibrated mount (a
+    hand-eye calibration's error, :meth:`sim.uncertainty.Draws.mount_error`). Frames are
+    rendered from the true mount, ``tool_T_camera @ mount_error``, while :meth:`tool_T_camera`
+    keeps reporting the calibrated one, as a real cell's calibration does: whatever perceives
+    with it sees the scene off by the error, through the geometry, nothing added afterwards.
     """
 
     def __init__(
@@ -121,6 +127,7 @@ class SimCamera:
         noise: DepthNoise | None = DepthNoise(),
         near: float = 0.1,
         far: float = 2.0,
+        mount_error: Pose | None = None,
     ) -> None:
         if not 0.0 < near < far:
             raise ValueError(f"need 0 < near < far, got near={near} m, far={far} m")
@@ -130,6 +137,10 @@ class SimCamera:
         self.frames_taken = 0
         self._tool_T_camera = (
             tool_T_camera if tool_T_camera is not None else default_tool_T_camera()
+        )
+        #: the mount the frames are rendered from (the calibrated one, off by ``mount_error``)
+        self._true_tool_T_camera = (
+            self._tool_T_camera if mount_error is None else self._tool_T_camera @ mount_error
         )
         self._intrinsics = intrinsics if intrinsics is not None else d435_intrinsics()
         self.noise = noise
@@ -146,12 +157,18 @@ class SimCamera:
         return self._intrinsics
 
     def tool_T_camera(self) -> Pose:
-        """Pose of the optical frame in the tool frame (m, rad)."""
+        """Pose of the optical frame in the tool frame (m, rad): the calibrated mount."""
         return self._tool_T_camera
 
+    def true_tool_T_camera(self) -> Pose:
+        """Where the optical frame really is in the tool frame (m, rad): the calibrated mount
+        off by ``mount_error`` (the twin's truth, for tests and the judge)."""
+        return self._true_tool_T_camera
+
     def world_T_camera(self) -> Pose:
-        """Pose of the optical frame in the world (robot-base) frame now (m, rad)."""
-        return self._base_T_tool() @ self._tool_T_camera
+        """Pose of the optical frame in the world (robot-base) frame now (m, rad): where the
+        frames are rendered from (the true mount)."""
+        return self._base_T_tool() @ self._true_tool_T_camera
 
     def capture(self) -> Frame:
         """Render the scene now; ``stamp`` is the simulation time (s). Never times out."""

@@ -77,12 +77,14 @@ def build_cell(
     layout: CellLayout | None = None,
     floor_friction: float = 0.4,
     fixture_friction: float = 0.5,
+    z_offset: float = 0.0,
 ) -> CellBodies:
     """Create the fixtures of ``layout`` (validated first) as static bodies.
 
     ``floor_friction`` is the floor's own coefficient; PyBullet multiplies it with the part's, so
     with parts at 1.0 it is the part-floor ``mu_G`` of the paper. ``fixture_friction`` is used for
-    the bin, machine and tray.
+    the bin, machine and tray. ``z_offset`` (m) raises every fixture above where the layout puts
+    it: the cell's true height against the configured one (:mod:`sim.uncertainty`).
     """
     layout = (layout or CellLayout()).validate()
     if floor_friction < 0 or fixture_friction < 0:
@@ -91,14 +93,14 @@ def build_cell(
     floor = _static_boxes(
         world,
         [((0.5 * layout.floor_size[0], 0.5 * layout.floor_size[1], 0.5 * ft), (0.0, 0.0, 0.0))],
-        (0.0, 0.0, -0.5 * ft),
+        (0.0, 0.0, z_offset - 0.5 * ft),
         floor_friction,
         (0.55, 0.55, 0.52, 1.0),
     )
     bin_ = _static_boxes(
         world,
         _walls(layout.bin_inner_size, layout.bin_wall_height, layout.bin_wall_thickness, 0.0),
-        (*layout.bin_center, 0.0),
+        (*layout.bin_center, z_offset),
         fixture_friction,
         (0.20, 0.35, 0.65, 1.0),
     )
@@ -116,7 +118,7 @@ def build_cell(
             ((0.5 * w, 0.5 * side_y, dz), (0.0, 0.5 * (w + side_y), zc)),
             ((0.5 * w, 0.5 * side_y, dz), (0.0, -0.5 * (w + side_y), zc)),
         ],
-        (*layout.machine_center, 0.0),
+        (*layout.machine_center, z_offset),
         fixture_friction,
         (0.30, 0.30, 0.33, 1.0),
     )
@@ -125,6 +127,7 @@ def build_cell(
     tray_boxes = _walls(ti, layout.tray_wall_height, layout.tray_wall_thickness, 0.0)
     tray_boxes.append(((0.5 * ti[0], 0.5 * ti[1], 0.5 * tf), (0.0, 0.0, 0.5 * tf)))
     tray = _static_boxes(
-        world, tray_boxes, (*layout.tray_center, 0.0), fixture_friction, (0.60, 0.45, 0.25, 1.0)
+        world, tray_boxes, (*layout.tray_center, z_offset), fixture_friction,
+        (0.60, 0.45, 0.25, 1.0),
     )
     return CellBodies(floor=floor, bin=bin_, machine=machine, tray=tray)

@@ -21,13 +21,19 @@ straight down; turned sideways it is off by up to about 0.15 N and 0.03 N*m (abo
 tool's weight, varying with the orientation; a PyBullet effect, with or without joint motors),
 which a bias at the working orientation removes.
 
-Realism: one sample per control step (125 Hz, the FT300 streams at 100 Hz), Gaussian noise of
-0.1 N and 0.003 N*m per axis, and a constant random offset of a few newtons that :meth:`bias`
-removes, as on the real sensor after power-up.
+Realism: by default one sample per control step (125 Hz), Gaussian noise of 0.1 N and 0.003
+N*m per axis, and a constant random offset of a few newtons that :meth:`bias` removes, as on the
+real sensor after power-up. :meth:`SimForceTorqueSensor.configure` makes it an FT300 (what the
+pivot trials do, :mod:`sim.uncertainty`): a stream at 100 Hz whose newest sample is held between
+frames (the 125 Hz control loop sees a new one in four steps of five), values rounded to the
+stream's 0.01 N and 0.001 N*m, and the noise of the unit. The arm's own protective stop does not
+go through the FT300 (a UR watches its joints): :meth:`sampled_true_load` is the load at every
+control step.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -39,7 +45,7 @@ FORCE_NOISE = 0.1  #: N, standard deviation per force axis
 TORQUE_NOISE = 0.003  #: N*m, standard deviation per torque axis
 FORCE_OFFSET = 3.0  #: N, the power-up offset is uniform in +-this per force axis
 TORQUE_OFFSET = 0.1  #: N*m, the power-up offset is uniform in +-this per torque axis
-BIAS_SAMPLES = 8  #: samples averaged by bias() (64 ms at 125 Hz), so the zero carries less noise
+BIAS_SAMPLES = 8  #: samples averaged by bias() (64 ms at 125 Hz, 80 ms at 100 Hz): a quieter zero
 
 
 class SimForceTorqueSensor:
@@ -70,7 +76,34 @@ class SimForceTorqueSensor:
         self._true = np.zeros(6)
         self._recent: deque[NDArray[np.float64]] = deque(maxlen=BIAS_SAMPLES)
         self._stamp = -np.inf
+        self._period = 0.0  #: s between samples; 0: one every control step
+        self._next = -np.inf  #: s (clock) of the next sample on the stream's grid
+        self._resolution = np.zeros(6)  #: N, N*m per count; 0: not rounded
         world.after_step(self.sample)
+
+    def configure(
+        self,
+        rate_hz: float | None = None,
+        force_noise: float = FORCE_NOISE,
+        torque_noise: float = TORQUE_NOISE,
+        force_resolution: float = 0.0,
+        torque_resolution: float = 0.0,
+    ) -> None:
+        """The sensor's stream: ``rate_hz`` samples a second on a fixed grid of the clock,
+        held between (None: one per control step), the noise's standard deviations (N, N*m per
+        axis) and the resolution the values are rounded to (N, N*m; 0: not rounded). The
+        defaults are the twin's sensor as built."""
+        if rate_hz is not None and not rate_hz > 0.0:
+            raise ValueError(f"rate_hz must be > 0 or None, got {rate_hz!r}")
+        for name, value in (("force_noise", force_noise), ("torque_noise", torque_noise),
+                            ("force_resolution", force_resolution),
+                            ("torque_resolution", torque_resolution)):
+            if not value >= 0.0:
+                raise ValueError(f"{name} must be >= 0, got {value!r}")
+        self._period = 0.0 if rate_hz is None else 1.0 / rate_hz
+        self._next = -np.inf
+        self._sigma = np.array([force_noise] * 3 + [torque_noise] * 3)
+        self._resolution = np.array([force_resolution] * 3 + [torque_resolution] * 3)
 
     def true_load(self) -> NDArray[np.float64]:
         """The noiseless, offset-free load of the tool on the sensor now (N, N*m; tool frame).
@@ -90,12 +123,23 @@ class SimForceTorqueSensor:
         return self._true
 
     def sample(self) -> None:
-        """Take one reading (called by the world after each control step)."""
+        """Called by the world after each control step: the load now, and a new reading when
+        the stream's next sample is due (every step unless :meth:`configure` set a rate)."""
         self._true = self.true_load()
+        now = self._world.clock.now()
+        if self._period > 0.0:
+            if now < self._next - 1e-9:
+                return  # between two samples of the stream: the newest is held
+            # The next sample on the grid of the period (a step covers at most one at 100 Hz).
+            self._next = (math.floor(now / self._period + 1e-6) + 1) * self._period
         reading = self._true + self._offset + self._sigma * self._world.rng.standard_normal(6)
+        if self._resolution.any():
+            res = self._resolution
+            reading = np.where(res > 0.0, np.round(reading / np.where(res > 0, res, 1.0)) * res,
+                               reading)
         self._newest = reading
         self._recent.append(reading)
-        self._stamp = self._world.clock.now()
+        self._stamp = now
 
     def wrench(self) -> NDArray[np.float64]:
         """Newest ``[Fx, Fy, Fz, Tx, Ty, Tz]`` (N, N*m) in the tool frame, bias removed."""

@@ -7,12 +7,16 @@ ends in the same state), so :class:`PivotWatch` also watches every control step 
 the Grasp has closed to the end of the lift: whether the inner finger stayed in the hole, the
 longest time no finger touched the part, the kind of grasp at the end and how many camera frames
 were taken after the Grasp began. :meth:`PivotWatch.verdict` combines them.
+
+:class:`ForceWatch` measures, over the same control steps, what the twin's forces did: the peak
+force at the wrist in each phase, the grip the fingers' motors applied during the Tilt, and how
+far the Grasp's close moved the part on the floor.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -20,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from sim.part_body import PartBody, hull_vertices
+from sim.world import matrix_from_quaternion
 
 
 class JudgeFailure(StrEnum):
@@ -297,6 +302,117 @@ class PivotWatch:
         if frames:
             return JudgeFailure.CAMERA_USED, f"{frames} camera frame(s) used after the Grasp began"
         return None
+
+
+#: The pivot's phases a trial reports forces for, in order.
+PIVOT_PHASES = ("grasp", "tilt", "align", "lift")
+
+
+class ForceWatch:
+    """The forces the twin applied and how the part moved, phase by phase, read from the
+    simulated state after every control step (the steps :class:`PivotWatch` sees), never from
+    what the skills commanded or read.
+
+    * **Wrist** (:meth:`peaks`): the force at the wrist sensor's joint as PyBullet computes it
+      (the reaction :meth:`sim.ft_sensor.SimForceTorqueSensor.true_load` reads, before the
+      sensor's noise and power-up offset), less the tool's own weight: that weight is the force
+      read at rest when the watch is made (nothing touched) and is turned with the tool since.
+      What remains is the force the part, the floor and the tool's accelerations put on the
+      wrist; its peak magnitude (N) in each phase.
+    * **Grip** (:meth:`grip_force`): the force each finger's motor applied in the last physics
+      step (PyBullet's applied joint motor force, ``getJointState(...)[3]``), N per finger,
+      positive closing: the grip the gripper actually exerts -- the commanded force only while
+      the motor saturates against the part, less when its position target is near (the Tilt's
+      squeeze) and negative while it opens (the Tilt's ease). The mean of the two fingers is
+      kept for every control step of the Tilt.
+    * **Part** (:meth:`mark`, :meth:`moved_mm`): the part frame's centre in the floor plane at
+      named moments. Entering a phase marks ``"<previous phase> end"``; :meth:`stop` marks the
+      end of the last one.
+    """
+
+    def __init__(
+        self,
+        world,  # type: ignore[no-untyped-def]
+        robot_body: int,
+        ft_joint: int,
+        finger_joints: tuple[int, ...],
+        part_body: PartBody,
+        grip_phase: str = "tilt",
+    ) -> None:
+        self.world, self.p = world, world.p
+        self.robot_body, self.ft_joint, self.finger_joints = robot_body, ft_joint, finger_joints
+        self.part_body, self.grip_phase = part_body, grip_phase
+        self.phase: str | None = None
+        self.peak: dict[str, float] = {}  #: phase -> N, largest wrist force magnitude
+        self.grip: list[float] = []  #: N per finger, each control step of ``grip_phase``
+        self.marks: dict[str, np.ndarray] = {}  #: name -> the part's (x, y), m
+        # The tool's own weight, as a world vector: the sensor frame's reading at rest, turned.
+        self._weight = self._rotation() @ self._force()
+        world.after_step(self._sample)
+
+    @classmethod
+    def for_robot(cls, world, robot: Any, part_body: PartBody) -> ForceWatch:  # type: ignore[no-untyped-def]
+        """The watch of a :class:`sim.robot.SimRobot` (its ``ft_joint`` and two fingers), made
+        while the tool rests touching nothing."""
+        fingers = tuple(robot.gripper.finger_link(n) for n in ("finger_a", "finger_b"))
+        return cls(world, robot.body_id, robot.joint_index["ft_joint"], fingers, part_body)
+
+    def _force(self) -> np.ndarray:
+        """The load of the tool on the sensor (N, sensor frame): PyBullet's reaction of the
+        parent on the child at ``ft_joint``, negated (as ``true_load`` has it)."""
+        return -np.asarray(self.p.getJointState(self.robot_body, self.ft_joint)[2][:3], float)
+
+    def _rotation(self) -> np.ndarray:
+        state = self.p.getLinkState(self.robot_body, self.ft_joint)
+        return matrix_from_quaternion(state[5])
+
+    def wrist_force(self) -> np.ndarray:
+        """The force (N, sensor frame) on the wrist now, the tool's own weight taken out."""
+        return self._force() - self._rotation().T @ self._weight
+
+    def enter(self, phase: str) -> None:
+        """Measure into ``phase`` from now on (marks the part where the previous one ended)."""
+        if self.phase is not None:
+            self.mark(f"{self.phase} end")
+        self.phase = phase
+        self.peak.setdefault(phase, 0.0)
+
+    def stop(self) -> None:
+        if self.phase is not None:
+            self.mark(f"{self.phase} end")
+        self.phase = None
+
+    def mark(self, name: str) -> None:
+        """Remember where the part's centre is now (the first mark of a name stays)."""
+        if name not in self.marks:
+            self.marks[name] = np.asarray(self.part_body.frame()[0][:2], float).copy()
+
+    def _sample(self) -> None:
+        phase = self.phase
+        if phase is None:
+            return
+        magnitude = float(np.linalg.norm(self.wrist_force()))
+        if magnitude > self.peak[phase]:
+            self.peak[phase] = magnitude
+        if phase == self.grip_phase:
+            states = self.p.getJointStates(self.robot_body, self.finger_joints)
+            # The fingers' joints open towards +q: a closing motor force is negative.
+            self.grip.append(-sum(float(s[3]) for s in states) / len(states))
+
+    # --- what was measured -----------------------------------------------------------------
+    def peaks(self, phases: Sequence[str] = PIVOT_PHASES) -> dict[str, float | None]:
+        """N, the peak wrist force of each phase (None: the trial never reached it)."""
+        return {ph: (round(self.peak[ph], 2) if ph in self.peak else None) for ph in phases}
+
+    def grip_force(self) -> float | None:
+        """N per finger, the median over ``grip_phase`` (None: never reached)."""
+        return round(float(np.median(self.grip)), 2) if self.grip else None
+
+    def moved_mm(self, start: str, end: str) -> float | None:
+        """mm the part's centre moved in the floor plane from mark ``start`` to ``end``."""
+        if start not in self.marks or end not in self.marks:
+            return None
+        return round(1e3 * float(np.linalg.norm(self.marks[end] - self.marks[start])), 2)
 
 
 def judge(

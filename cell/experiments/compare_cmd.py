@@ -2,12 +2,18 @@
 
 ::
 
-    cell compare --part NAME --trials N --seed S [--json FILE]
+    cell compare --part NAME --trials N --seed S [--json FILE] [--nominal]
+        [--config FILE] [--set KEY.PATH=VALUE]...
 
 Trial ``i`` uses seed ``S + i`` for both methods, so both meet the same perturbed part (true pose,
-frictions, mass). The pivot runs as ``cell pivot --nominal`` runs it (:func:`run_trial`: the
-skills get the nominal pose, not the camera's -- the comparison is of manipulation); the
-baseline is :func:`cell.experiments.regrasp_run.run_regrasp_trial`. Both are judged by
+frictions, mass). The pivot runs as ``cell pivot`` runs it (:func:`run_trial`); the baseline is
+:func:`cell.experiments.regrasp_run.run_regrasp_trial`. Both get the part's pose the same way:
+by default from the twin's wrist camera (the Look skill, before the first grasp; its time counts
+in the tact time of both), with ``--nominal`` the nominal pose; the JSON's ``pose_source`` says
+which (``camera`` or ``nominal``). ``--config`` and ``--set`` apply a cell configuration as
+``cell pivot`` does (the regrasp runs with skills.pivot's parameters; there is no regrasp
+section). The pivot's per-trial entries carry ``cell pivot``'s keys, ``grip_force_n``,
+``peak_force_n`` and ``shove_mm`` included (null in the regrasp's). Both are judged by
 :func:`sim.judge.judge` after the lift and measured by the same :class:`GripperProbe`: tact time
 (first motion to the end of the lift of the hole grasp, simulated seconds) and the volume swept
 by the gripper's collision geometry (5 mm voxels, cm^3). Means and medians are over successful
@@ -24,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from cell.errors import UserError
-from cell.experiments.pivot_cmd import add_config_argument
+from cell.experiments.pivot_cmd import add_config_argument, add_ideal_argument
 from cell.output import write_json
 
 GOAL_RATIO = 0.70  #: pivot tact / regrasp tact the project aims at (at least 30 % faster)
@@ -34,9 +40,10 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "compare",
         help="pivot versus the regrasp baseline: success, tact time, swept volume",
-        description="Run N seeded trials of the pivot (nominal pose) and of the regrasp baseline "
+        description="Run N seeded trials of the pivot and of the regrasp baseline "
         "(pinch, turn upright in the air, set down, Align) on the same perturbed part in the "
-        "twin, judge both from the simulated state, and report success, tact time and the "
+        "twin (the same draws of the cell's uncertainty, as `cell pivot` draws them; --ideal "
+        "without), judge both from the simulated state, and report success, tact time and the "
         "volume swept by the gripper.",
     )
     p.add_argument("--part", required=True, help="part name from the catalogue")
@@ -48,7 +55,13 @@ def add_parser(sub: Any) -> None:
         help="cell layout YAML (default: the default layout)",
     )
     p.add_argument("--catalogue", type=Path, default=None, help="part catalogue YAML")
+    p.add_argument(
+        "--nominal",
+        action="store_true",
+        help="give both methods the part's nominal pose instead of looking with the wrist camera",
+    )
     add_config_argument(p)
+    add_ideal_argument(p)
     p.set_defaults(func=cmd_compare)
 
 
@@ -117,7 +130,8 @@ def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, An
     return {
         "part": setup.part.name,
         "seeds": seeds,
-        "pose_source": "nominal",
+        "pose_source": "camera" if setup.perceive else "nominal",
+        "ideal": setup.uncertainty.is_ideal,
         "methods": {"pivot": pivot, "regrasp": regrasp},
         "tact_ratio_pivot_over_regrasp": {"mean": ratio_mean, "median": ratio_median},
         "goal_ratio": GOAL_RATIO,
@@ -127,7 +141,8 @@ def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, An
         ),
         "measurement": {
             "tact": "simulated s from the first control step executing a command to the end of "
-            "the step where the arm last reported a motion done (the hole grasp's lift)",
+            "the step where the arm last reported a motion done (the hole grasp's lift); with "
+            "pose_source camera the look comes first and counts",
             "swept_volume": "union over control steps of the gripper's collision shapes (FT300 "
             "cylinder, gripper body box, two finger boxes) on a 5 mm world voxel grid, voxel "
             "centres inside; re-sampled when a shape moved 1 mm",
@@ -184,7 +199,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from skills.pivot import PivotParams
 
     ns = pivot_args(
-        args.part, args.trials, args.catalogue, args.cell, nominal=True, config=args.config
+        args.part, args.trials, args.catalogue, args.cell, nominal=args.nominal,
+        config=args.config, sets=args.set, ideal=getattr(args, "ideal", False),
     )
     try:
         setup, _plan, _forced = build_setup(ns)

@@ -3,16 +3,44 @@
 Contract (scripts rely on it)::
 
     cell pivot --part NAME --trials N --seed S [--mu-ground X] [--record FILE.gif] --json FILE
+        [--config FILE] [--set KEY.PATH=VALUE]...
 
 ``--record FILE.gif`` also writes ``FILE_trace.png``, the first trial's contact trace. Each
 ``per_trial`` entry carries the stricter verdict in ``success`` and what it was built from
 (``inner_in_hole_all_along``, ``longest_free_s``, ``final_grasp``, ``camera_frames_steering``,
-``recovered``), ``phase_times_s`` and ``l_a_trace``.
+``recovered``), ``phase_times_s`` and ``l_a_trace``, and what the twin's forces did, measured
+from the simulated state by :class:`sim.judge.ForceWatch` (never from the plan):
+
+* ``grip_force_n``: N per finger the gripper's motors applied while the pivot held the part:
+  PyBullet's applied joint motor force of the two finger joints (``getJointState(...)[3]``,
+  positive closing), their mean each control step of the Tilt, the median over the Tilt; null
+  when the trial never reached the Tilt;
+* ``peak_force_n``: ``{"grasp", "tilt", "align", "lift"}``: the peak force magnitude at the
+  wrist in each phase, N: the wrist sensor joint's reaction as PyBullet computes it (the
+  ground truth the sim sensor reads before its noise and power-up offset), less the tool's own
+  weight (read at rest before the trial, turned with the tool); null for a phase never reached;
+* ``shove_mm``: how far the Grasp's close moved the part: its centre in the floor plane when the
+  "close onto H" step starts against when the Grasp ends (mm); null when the close never began.
+
+The top level's ``pose_source`` says where the Grasp's pose came from: ``camera`` (default: the
+twin's wrist camera and the Look skill) or ``nominal`` (``--nominal``).
+
+Every trial draws a real cell's uncertainty from its seed (:mod:`sim.uncertainty`): each
+``per_trial`` entry's ``draws`` says what (plain numbers named with their units), the top
+level's ``ideal`` whether ``--ideal`` turned it off.
+
+``--config FILE`` runs the trials with a cell configuration, loaded, validated and ``--set``
+exactly as ``cell sim`` does it: every section a trial has a use for (skills.pivot,
+skills.perceive, skills.reposition, the safety force and torque limits, sim.mu_ground,
+cell.control_hz, cell.layout, cell.catalogue; see ``--help`` for the sections it has none for).
+``--set KEY.PATH=VALUE`` (repeatable) changes one key on top of the file, or of the defaults
+without one.
 
 Trial ``i`` runs with seed ``S + i``; the same seed gives the same trial. Everything the user
 gives is checked before anything is simulated: an unknown part, a part the planner declines
 (hole narrower than the finger, deformable, ...), a cell YAML that fails validation or puts the
-pick out of the arm's reach all end with one line naming the file, key and reason, exit 2.
+pick out of the arm's reach, a bad ``--set`` key or value all end with one line naming the file
+(or the ``--set``), key and reason, exit 2.
 """
 
 from __future__ import annotations
@@ -22,6 +50,8 @@ import dataclasses
 import math
 import multiprocessing
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -45,9 +75,15 @@ def add_parser(sub: Any) -> None:
     p = sub.add_parser(
         "pivot",
         help="randomized Grasp/Tilt/Align trials of one part in the PyBullet twin",
-        description="Run N perturbed pivot trials of a catalogue part in the simulated cell "
-        "(position +-3 mm, yaw +-3 deg, frictions +-20 %, mass +-10 %), judged from the "
-        "simulated state, and write the success rate with its Wilson 95 % interval as JSON.",
+        description="Run N perturbed pivot trials of a catalogue part in the simulated cell, "
+        "judged from the simulated state, and write the success rate with its Wilson 95 % "
+        "interval as JSON. Each trial draws from its seed the part's position (+-3 mm) and yaw "
+        "(+-3 deg) and a real cell's uncertainty: the camera's hand-eye error (+-1 mm, +-0.5 "
+        "deg per axis), the bin floor's height (+-1.5 mm), the part's outer diameter, hole and "
+        "length (+-0.3 mm each) and mass (+-10 %), the pad frictions mu_S, mu_H (0.2-1.0) and "
+        "the floor's mu_G (0.25-0.6), the FT300's noise (its 100 Hz stream, 0.01 N "
+        "resolution), and the arm's command lag (1-3 control periods); each trial's draws are "
+        "in its JSON entry ('draws'). --ideal turns the uncertainty off.",
     )
     p.add_argument("--part", required=True, help="part name from the catalogue")
     p.add_argument("--trials", type=int, default=30, help="number of trials (30)")
@@ -56,7 +92,8 @@ def add_parser(sub: Any) -> None:
         "--mu-ground",
         type=float,
         default=None,
-        help="part-floor friction coefficient, used exactly (not perturbed); default 0.4 +-20 %%",
+        help="part-floor friction coefficient, used exactly (not drawn); default drawn from "
+        "0.25-0.6 (0.4 +-20 %% with --ideal)",
     )
     p.add_argument("--record", type=Path, default=None, help="GIF of the first trial")
     p.add_argument("--json", type=Path, required=True, help="where to write the results")
@@ -82,6 +119,7 @@ def add_parser(sub: Any) -> None:
         help="nominal: the part near its nominal pose (+-3 mm, +-3 deg); random: anywhere on "
         "the bin floor, any yaw, either end towards the robot, up against the walls",
     )
+    add_ideal_argument(p)
     p.add_argument(
         "--force",
         action="store_true",
@@ -96,6 +134,17 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_pivot)
 
 
+def add_ideal_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--ideal",
+        action="store_true",
+        help="for debugging only: turn the real cell's uncertainty off (no hand-eye error, "
+        "floor height or part tolerances, the twin's old sensor sampled every control step, no "
+        "command lag; frictions +-20 %% about the planner's, mass +-10 %%); the JSON says "
+        "\"ideal\": true",
+    )
+
+
 def _progress(bar: Any, done: int, ok: int, wall: float) -> None:
     bar.update(done, f"ok {ok}  {wall / max(1, done):.1f} s/trial")
 
@@ -108,41 +157,109 @@ def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
 
 
 def add_config_argument(p: argparse.ArgumentParser) -> None:
+    """``--config FILE`` and ``--set KEY.PATH=VALUE`` (as ``cell sim`` has them)."""
+    from cell.overrides import add_set_argument
+
     p.add_argument(
         "--config",
         type=Path,
         default=None,
-        help="cell configuration YAML whose skills.pivot section and safety limits the skills "
-        "run with (default: the skills' defaults and the safety section's)",
+        help="cell configuration YAML (as `cell sim --config`) the trials run with: "
+        "skills.pivot (Grasp, Tilt, Align, the recovery, and compare's regrasp), "
+        "skills.perceive (the look), skills.reposition (the drag), safety.ft_abort_force_n and "
+        "ft_abort_torque_nm (every motion's guard), sim.mu_ground (part-floor friction, used "
+        "exactly; a --mu-ground wins), cell.control_hz (the trial's control rate; the physics "
+        "step stays <= 4 ms), cell.layout (--layout wins) and cell.catalogue (--catalogue "
+        "wins); these four only where the file or a --set gives them. The rest has no meaning "
+        "for a trial and is not used: cell.name and backend (always the twin), sim.seed (--seed "
+        "seeds the trials), sim.yaw_spread_deg and realtime, bin, workflow, the other skills "
+        "sections (slot, pack_in_box, put_back, go_home), safety's timeouts and settle times "
+        "(a tree's), devices, log, faults, emulate and tree. Default: every section's defaults",
     )
+    add_set_argument(p)
 
 
-def pivot_overrides(config_path: Path | None) -> dict[str, Any]:
-    """The :class:`PivotParams` fields a configuration changes: its ``skills.pivot`` keys, and
-    its ``safety`` force and torque as the guard of every motion (as a tree node would give)."""
-    from cell.config import CellConfig, load_config, skill_settings
+@dataclass(frozen=True)
+class TrialConfig:
+    """What a cell configuration (``--config`` and ``--set``) gives the trials; None where it
+    gives nothing (the trial's own default)."""
+
+    params: dict[str, Any] = field(default_factory=dict)  #: :class:`PivotParams` overrides
+    look: Any = None  #: :class:`skills.perception.look.LookParams`
+    reposition: Any = None  #: :class:`skills.reposition.RepositionParams`
+    mu_ground: float | None = None  #: sim.mu_ground, where given
+    control_hz: float | None = None  #: cell.control_hz, where given
+    layout: Any = None  #: :class:`drivers.layout.CellLayout` of cell.layout, where given
+    catalogue: Path | None = None  #: cell.catalogue (relative to the file), where given
+
+
+def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialConfig:
+    """Read, ``--set`` and validate a configuration as ``cell sim`` does (None and no ``sets``:
+    nothing given), then take what a trial uses from it (see :func:`add_config_argument`).
+
+    Skill sections and the safety limits apply as a tree node would apply them; sim.mu_ground,
+    cell.control_hz, cell.layout and cell.catalogue only where the file or a ``--set`` gives
+    them (a default is not a choice: the trial keeps its own, e.g. the perturbed floor
+    friction). Any problem is a :class:`UserError` in one line naming the file and line or the
+    ``--set``, and the key."""
+    if config_path is None and not sets:
+        return TrialConfig()
+    from cell.assemble import _layout
+    from cell.config import skill_settings, validate_document
+    from cell.overrides import apply_sets
     from skills.params import apply_config, with_limits
-    from trees.yaml_lines import ConfigError
+    from trees.yaml_lines import ConfigError, LinedDocument, load_yaml
 
     try:
-        config = load_config(config_path)[0] if config_path is not None else CellConfig()
+        doc = load_yaml(config_path) if config_path is not None else LinedDocument("--set", {})
+        doc = apply_sets(doc, sets)
+        config = validate_document(doc)
+        layout = _layout(config, doc) if config.cell.layout else None
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     base = PivotParams(l_a=0.5, alpha=0.3)
     safety = config.safety
     settings = skill_settings(config)
     # With a cell's configuration, Align takes the hole grasp that cell's stations expect.
-    fixed = settings["pivot_fixed"] if config_path is not None else {}
-    tuned = with_limits(
-        apply_config(dataclasses.replace(base, **fixed), settings["pivot"]),
-        safety.ft_abort_force_n,
-        safety.ft_abort_torque_nm,
+    cell_given = config_path is not None or "slot" in config.skills.model_fields_set
+    fixed = settings["pivot_fixed"] if cell_given else {}
+
+    def limited(params: Any) -> Any:
+        return with_limits(params, safety.ft_abort_force_n, safety.ft_abort_torque_nm)
+
+    tuned = limited(apply_config(dataclasses.replace(base, **fixed), settings["pivot"]))
+    catalogue = None
+    if "catalogue" in config.cell.model_fields_set and config.cell.catalogue is not None:
+        catalogue = Path(config.cell.catalogue)
+        if config_path is not None and not catalogue.is_absolute():
+            catalogue = config_path.resolve().parent / catalogue
+    return TrialConfig(
+        params={
+            f.name: getattr(tuned, f.name)
+            for f in dataclasses.fields(tuned)
+            if getattr(tuned, f.name) != getattr(base, f.name)
+        },
+        look=limited(settings["perceive"]),
+        reposition=limited(settings["reposition"]),
+        mu_ground=config.sim.mu_ground if "mu_ground" in config.sim.model_fields_set else None,
+        control_hz=config.cell.control_hz if "control_hz" in config.cell.model_fields_set else None,
+        layout=layout,
+        catalogue=catalogue,
     )
-    return {
-        f.name: getattr(tuned, f.name)
-        for f in dataclasses.fields(tuned)
-        if getattr(tuned, f.name) != getattr(base, f.name)
-    }
+
+
+def pivot_overrides(config_path: Path | None, sets: Sequence[str] = ()) -> dict[str, Any]:
+    """The :class:`PivotParams` fields a configuration changes: its ``skills.pivot`` keys, and
+    its ``safety`` force and torque as the guard of every motion (as a tree node would give)."""
+    return trial_config(config_path, sets).params
+
+
+def with_control_rate(physics: Any, control_hz: float) -> Any:
+    """``physics`` ticking the skills at ``control_hz``, its physics step no longer than the
+    default's (substeps = ceil(default physics rate / control_hz))."""
+    rate = type(physics)().control_hz * type(physics)().substeps
+    substeps = max(1, math.ceil(rate / control_hz - 1e-9))
+    return dataclasses.replace(physics, control_hz=control_hz, substeps=substeps)
 
 
 def pivot_args(
@@ -152,12 +269,15 @@ def pivot_args(
     cell: Path | None,
     nominal: bool,
     config: Path | None = None,
+    sets: Sequence[str] = (),
+    ideal: bool = False,
 ) -> argparse.Namespace:
     """The arguments ``cell pivot`` would get for one part, so other commands (sweep, compare)
     reuse its checks and setup unchanged: one source of truth for what a trial is."""
     return argparse.Namespace(
         part=part, trials=trials, jobs=1, mu_ground=None, record=None, catalogue=catalogue,
         cell=cell, nominal=nominal, force=False, la=None, alpha=None, config=config,
+        set=list(sets), ideal=ideal,
     )
 
 
@@ -174,9 +294,13 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         raise PivotInputError(f"--mu-ground: must be a finite number >= 0, got {args.mu_ground}")
     if args.record is not None and args.record.suffix.lower() != ".gif":
         raise PivotInputError(f"--record: {args.record}: the animation is written as a .gif")
-    catalogue = load_catalogue(args.catalogue)
+    given = trial_config(getattr(args, "config", None), getattr(args, "set", None) or ())
+    catalogue = load_catalogue(args.catalogue if args.catalogue is not None else given.catalogue)
     part = catalogue.get(args.part)
-    layout = CellLayout.from_yaml(args.cell) if args.cell is not None else CellLayout()
+    if args.cell is not None:
+        layout = CellLayout.from_yaml(args.cell)
+    else:
+        layout = given.layout if given.layout is not None else CellLayout()
     frictions = Frictions()
     gripper = Gripper()
     plan = plan_pivot(part, gripper, frictions)
@@ -219,17 +343,35 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         plan=plan,
         frictions=frictions,
         layout=layout,
-        params=pivot_overrides(getattr(args, "config", None)),
+        params=given.params,
+        look=given.look,
+        reposition=given.reposition,
     )
-    if args.mu_ground is not None:
-        setup = dataclasses.replace(setup, mu_ground=args.mu_ground)
+    mu_ground = args.mu_ground if args.mu_ground is not None else given.mu_ground
+    if mu_ground is not None:
+        setup = dataclasses.replace(setup, mu_ground=mu_ground)
+    if given.control_hz is not None:
+        setup = dataclasses.replace(
+            setup, physics=with_control_rate(setup.physics, given.control_hz)
+        )
     if args.nominal:
         setup = dataclasses.replace(setup, perceive=False)
+    if getattr(args, "ideal", False):
+        from sim.uncertainty import Uncertainty
+
+        pert = setup.perturbation
+        setup = dataclasses.replace(setup, uncertainty=Uncertainty.ideal(pert.friction, pert.mass))
     if getattr(args, "pose", "nominal") == "random":
         setup = dataclasses.replace(setup, pose="random")
     reason = setup.reach_problem() if setup.pose == "nominal" else None
     if reason is not None:
-        source = str(args.cell) if args.cell is not None else "the default cell layout"
+        if args.cell is not None:
+            source = str(args.cell)
+        elif given.layout is not None:
+            config = getattr(args, "config", None)
+            source = f"{config}: cell.layout" if config is not None else "--set cell.layout"
+        else:
+            source = "the default cell layout"
         raise PivotInputError(f"{source}: bin_center: {reason}")
     return setup, plan, forced
 
@@ -281,8 +423,9 @@ def cmd_pivot(args: argparse.Namespace) -> int:
         {
             "seed": args.seed,
             "forced": forced,
-            "pose_source": "nominal" if args.nominal else "wrist camera",
-            "mu_ground": args.mu_ground,
+            "pose_source": "nominal" if args.nominal else "camera",
+            "ideal": setup.uncertainty.is_ideal,
+            "mu_ground": setup.mu_ground,
             "plan": plan.to_json(),
             "physics": setup.physics_json(),
             "wall_time_s": wall,

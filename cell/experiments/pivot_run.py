@@ -1,11 +1,18 @@
 """Pivot trials in the twin: spawn a part, run Grasp -> Tilt -> Align, judge from the physics.
 
-Each trial perturbs the world away from what the skills are told (position +-3 mm, yaw +-3 deg,
-frictions +-20 %, mass +-10 %): the skills get the part's *nominal* pose (or what the wrist
-camera saw before the Grasp) and the planner's ``(l_a, alpha)``, never the true pose. The
+Each trial perturbs the world away from what the skills are told: the part's position +-3 mm and
+yaw +-3 deg, and a real cell's uncertainty (:mod:`sim.uncertainty`: hand-eye error, floor
+height, part tolerances, mass, frictions, the FT300's rate, resolution and noise, the arm's
+command lag; ``TrialSetup.uncertainty``, ``Uncertainty.ideal()`` for the twin without them:
+frictions +-20 %, mass +-10 %). The skills get the part's *nominal* pose (or what the wrist
+camera saw before the Grasp), the catalogue part, the configured floor and camera mount, and
+the planner's ``(l_a, alpha)``, never the true pose. The
 outcome comes from the simulated state: :func:`sim.judge.judge` after the lift, and
 :class:`sim.judge.PivotWatch` every control step from the closed Grasp to the end of the lift
-(finger in the hole all along, no long free interval, a hole grasp at the end, no camera frame).
+(finger in the hole all along, no long free interval, a hole grasp at the end, no camera frame),
+and :class:`sim.judge.ForceWatch` measures what the twin's forces did over the same steps (the
+grip the fingers applied in the Tilt, the peak wrist force of each phase, how far the Grasp's
+close shoved the part): ``grip_force_n``, ``peak_force_n`` and ``shove_mm`` of a result.
 
 When the in-hand Align fails, the recovery (:class:`skills.pivot.PickFromAbove`: let go, look,
 pick from above) may still save the part; the trial then counts as ``recovered``, not a success.
@@ -30,15 +37,16 @@ from drivers.parts import Part
 from drivers.pose import Pose
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
-from sim.judge import PivotWatch, WatchSample, judge
+from sim.judge import ForceWatch, PivotWatch, WatchSample, judge
 from sim.part_body import lying_pose, spawn_part
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_WIDTH
 from sim.scenes import random_floor_pose
+from sim.uncertainty import Draws, Uncertainty
 from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
-from skills.perception.look import Look
+from skills.perception.look import Look, LookParams
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
 from skills.pivot.clearance import EndChoice, bin_walls, choose_end
 from skills.reposition import Reposition, RepositionParams, plan_reposition
@@ -47,7 +55,9 @@ from skills.status import Failure, Status, StepResult
 
 @dataclass(frozen=True)
 class Perturbation:
-    """Half-widths of the uniform trial perturbations."""
+    """Half-widths of the uniform trial perturbations of the pose; ``friction`` and ``mass``
+    are the spreads :meth:`sim.uncertainty.Uncertainty.ideal` keeps (``--ideal``), where the
+    uncertainty model does not draw them."""
 
     position: float = 0.003  # m
     yaw: float = math.radians(3.0)  # rad
@@ -79,6 +89,13 @@ class TrialSetup:
     #: part fits, up against the walls, any yaw, either end towards the robot.
     pose: str = "nominal"
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
+    #: what the real cell does not know exactly, drawn per trial (:mod:`sim.uncertainty`);
+    #: ``Uncertainty.ideal()`` turns it off (``--ideal``)
+    uncertainty: Uncertainty = field(default_factory=Uncertainty)
+    #: the look's and the drag's parameters (``skills.perceive``, ``skills.reposition`` and the
+    #: safety limits of a configuration; None: the skills' defaults)
+    look: LookParams | None = None
+    reposition: RepositionParams | None = None
 
     def frame(self) -> PivotFrame:
         """The pivot frame the skills are given: the part's nominal pose."""
@@ -172,6 +189,19 @@ class TrialResult:
     other_end: bool = False
     #: no end cleared where the part lay: it was dragged first (counted apart, not the pivot)
     repositioned: bool = False
+    #: N per finger the gripper's motors applied during the Tilt, the median over its control
+    #: steps (PyBullet's applied joint motor force; None: no Tilt) -- :class:`ForceWatch`
+    grip_force_n: float | None = None
+    #: N, the peak force at the wrist in each phase (the sensor joint's noise- and offset-free
+    #: reaction less the tool's weight; None: the phase was never reached) -- :class:`ForceWatch`
+    peak_force_n: dict[str, float | None] = field(
+        default_factory=lambda: dict.fromkeys(("grasp", "tilt", "align", "lift"))
+    )
+    #: what the trial drew of the cell's uncertainty (:meth:`sim.uncertainty.Draws.to_json`)
+    draws: dict[str, float] = field(default_factory=dict)
+    #: mm the Grasp's close moved the part's centre in the floor plane, from the start of its
+    #: "close onto H" step to the Grasp's end (None: the close never began)
+    shove_mm: float | None = None
 
     @property
     def failure_key(self) -> str:
@@ -197,6 +227,8 @@ class TrialWorld:
     frictions: dict[str, float]
     mass: float
     wall0: float
+    draws: Draws | None = None  #: the trial's uncertainty draws (:mod:`sim.uncertainty`)
+    floor_z: float = 0.0  #: m, the true bin floor's height (the layout's, off by the draw)
 
 
 def bin_obstacles(layout: CellLayout) -> list:
@@ -216,16 +248,13 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     wall0 = time.perf_counter()
     rng = np.random.default_rng(seed)
     pert = setup.perturbation
-
-    def jitter(value: float, rel: float) -> float:
-        return value * (1.0 + rng.uniform(-rel, rel))
-
-    mu_s = jitter(setup.frictions.mu_s, pert.friction)
-    mu_h = jitter(setup.frictions.mu_h, pert.friction)
-    mu_g = jitter(setup.frictions.mu_g, pert.friction)
+    # The cell's uncertainty (frictions, mass, hand-eye, floor height, tolerances, FT300, lag),
+    # then the pose: a seed's pose is the same with the uncertainty model and without it.
+    draws = setup.uncertainty.draw(rng, setup.frictions, setup.physics.control_hz)
     if setup.mu_ground is not None:
-        mu_g = setup.mu_ground
-    true_part = dataclasses.replace(setup.part, mass=jitter(setup.part.mass, pert.mass))
+        draws = dataclasses.replace(draws, mu_g=setup.mu_ground)
+    mu_s, mu_h, mu_g = draws.mu_s, draws.mu_h, draws.mu_g
+    true_part = draws.true_part(setup.part)
     if setup.pose == "random":
         x, y, yaw = random_floor_pose(setup.layout, true_part, rng)
     else:
@@ -236,11 +265,19 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
 
     world = SimWorld(seed=seed, settings=setup.physics)
     try:
-        cell = build_cell(world, setup.layout, floor_friction=mu_g)
+        cell = build_cell(world, setup.layout, floor_friction=mu_g, z_offset=draws.floor_dz_m)
         robot = SimRobot(world)
+        robot.arm.set_command_lag(draws.lag_steps)
+        robot.ft.configure(
+            draws.ft_rate_hz, draws.ft_force_noise_n, draws.ft_torque_noise_nm,
+            draws.ft_force_resolution_n, draws.ft_torque_resolution_nm,
+        )
         # finger_a (tool +x) is the outer finger on S; finger_b goes into the hole (H).
         robot.gripper.set_finger_friction(mu_s, mu_h)
-        body = spawn_part(world, true_part, lying_pose(true_part, x, y, yaw), lateral_friction=1.0)
+        floor = setup.layout.bin_floor_z + draws.floor_dz_m  # the true floor
+        body = spawn_part(
+            world, true_part, lying_pose(true_part, x, y, yaw, floor), lateral_friction=1.0
+        )
         for _ in range(int(0.3 / world.settings.control_dt)):  # let the part settle
             world.step()
         robot.ft.bias()
@@ -250,6 +287,7 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
             world,
             lambda: robot.world_pose(robot.arm.tool_pose()),
             tool_T_camera=setup.layout.tool_T_camera(),  # the configured (calibrated) mount
+            mount_error=draws.mount_error(),  # where the camera really is against it
         )
         dev = Devices(robot.arm, robot.gripper, robot.ft, world.clock, camera)
     except Exception:
@@ -266,6 +304,8 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
         {"S": mu_s, "H": mu_h, "G": mu_g},
         true_part.mass,
         wall0,
+        draws,
+        floor,
     )
 
 
@@ -292,6 +332,7 @@ def judge_trial(
         robot.body_id,
         {n: robot.gripper.finger_link(n) for n in ("finger_a", "finger_b")},
         tips,
+        floor_z=tw.floor_z,
     )
     success = failure is None and verdict.success
     if failure is not None:
@@ -311,6 +352,7 @@ def judge_trial(
         "true_pose": tw.true_pose,
         "frictions": tw.frictions,
         "mass": tw.mass,
+        "draws": tw.draws.to_json() if tw.draws is not None else {},
     }
 
 
@@ -341,6 +383,7 @@ def run_trial(
         inner="finger_b",
         outer="finger_a",
     )
+    forces = ForceWatch.for_robot(world, robot, tw.body)  # made at rest: the tool's weight
     try:
         failure: StepResult | None = None
         phase_name = "done"
@@ -360,6 +403,7 @@ def run_trial(
                 setup.layout.bin_interior(),
                 (setup.layout.bin_center[0], setup.layout.bin_center[1]),
                 near,
+                setup.look,
             )
             result = run_skill("look", look, world, robot, t_end, on_frame, frame_every)
             if result is not None or look.result is None:
@@ -387,13 +431,13 @@ def run_trial(
         if failure is None and not choice.clearance.clear:
             # No end clears where the part lies: drag it to where one does, look again.
             move = plan_reposition(
-                frame, setup.part, params, RepositionParams(), walls, [],
+                frame, setup.part, params, setup.reposition or RepositionParams(), walls, [],
                 setup.layout.bin_interior(), width, reach=ur5_reach,
             )
             if move is not None:
                 early, repositioned = "reposition", True
                 t_end += setup.max_time
-                skill = Reposition(move, setup.part, dev)
+                skill = Reposition(move, setup.part, dev, setup.reposition)
                 failure = run_skill("reposition", skill, world, robot, t_end, on_frame, frame_every)
                 frame = move.target
                 if failure is None and setup.perceive:
@@ -419,6 +463,11 @@ def run_trial(
         def align_phase() -> None:
             if getattr(align, "lifting", False) and watch.phase != "lift":
                 watch.enter("lift")
+                forces.enter("lift")
+
+        def close_began() -> None:
+            if getattr(grasp, "sequence", None) and grasp.sequence.current == Grasp.close_step:
+                forces.mark("close")
 
         phases = [("grasp", grasp), ("tilt", tilt), ("align", align)]
         for phase_name, skill in phases if failure is None else []:
@@ -426,6 +475,7 @@ def run_trial(
                 watch.grasp_began()
             else:
                 watch.enter(phase_name)
+            forces.enter(phase_name)
             failure = run_skill(
                 phase_name,
                 skill,
@@ -434,7 +484,7 @@ def run_trial(
                 t_end,
                 on_frame,
                 frame_every,
-                align_phase if skill is align else None,
+                align_phase if skill is align else close_began if skill is grasp else None,
             )
             if failure is not None:
                 break
@@ -444,12 +494,14 @@ def run_trial(
             # The in-hand Align failed: the old way (let go, look, pick from above) may still
             # save the part, counted apart.
             watch.enter("recovery")
+            forces.enter("recovery")
             recovery = PickFromAbove(lambda: tilt.frame, setup.part, params, dev)
             t_rec = world.clock.now() + setup.max_time
             if run_skill("recovery", recovery, world, robot, t_rec, on_frame, frame_every) is None:
                 recovered_by = failure
                 failure = None
         watch.stop()
+        forces.stop()
         fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
         end_ok = bool(fields["success"])
         strict = watch.failure_with_code()
@@ -480,6 +532,9 @@ def run_trial(
             clearance_mm=round(1e3 * choice.clearance.distance, 1),
             other_end=other_end,
             repositioned=repositioned,
+            grip_force_n=forces.grip_force(),
+            peak_force_n=forces.peaks(),
+            shove_mm=forces.moved_mm("close", "grasp end"),
         )
     finally:
         world.close()

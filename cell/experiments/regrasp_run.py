@@ -4,7 +4,8 @@ volume swept by the gripper.
 :func:`run_regrasp_trial` is :func:`cell.experiments.pivot_run.run_trial` with the baseline in
 place of the pivot: the same :class:`TrialSetup`, the same seeded perturbation drawn in the same
 order (so a seed gives both methods the same true pose, frictions and mass), the same finger
-frictions, the same nominal pose given to the skills, the same 0.3 s hold before the same judge
+frictions, the same pose given to the skills (what the wrist camera's Look saw, or the nominal
+pose when ``setup.perceive`` is off), the same 0.3 s hold before the same judge
 (:func:`sim.judge.judge`) looks at the simulated state. Physics decides: nothing is welded or
 moved by hand.
 
@@ -36,6 +37,7 @@ from numpy.typing import NDArray
 from cell.experiments.pivot_run import (
     TrialResult,
     TrialSetup,
+    TrialWorld,
     judge_trial,
     open_trial_world,
     run_skill,
@@ -46,7 +48,8 @@ from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH
 from sim.world import SimWorld
-from skills.pivot import PickFromAbove
+from skills.perception.look import Look
+from skills.pivot import PickFromAbove, PivotFrame
 from skills.regrasp import Regrasp, RegraspOptions
 from skills.status import StepResult
 
@@ -237,14 +240,22 @@ def run_regrasp_trial(
     """One perturbed regrasp trial (Regrasp, then Align), judged from the simulated state.
 
     The perturbation is drawn exactly as :func:`cell.experiments.pivot_run.run_trial` draws it, in
-    the same order from ``numpy.random.default_rng(seed)``; the skills get the nominal pose (the
-    comparison is of manipulation, not perception: ``setup.perceive`` is ignored).
+    the same order from ``numpy.random.default_rng(seed)``; the skills get the pose the wrist
+    camera's Look reports near the nominal one (as the pivot's trial looks), or the nominal pose
+    when ``setup.perceive`` is off.
     """
     tw = open_trial_world(setup, seed)
     world, robot, params, dev = tw.world, tw.robot, tw.params, tw.dev
     try:
-        t_end = world.clock.now() + setup.max_time
+        t_end = world.clock.now() + setup.max_time + (4.0 if setup.perceive else 0.0)
         frame = setup.frame()
+        seen: dict[str, float] = {}
+        if setup.perceive:
+            looked = look(setup, tw, frame, t_end, on_frame, frame_every, seen)
+            if isinstance(looked, StepResult):
+                fields = judge_trial(tw, seed, looked, "look", on_frame, frame_every)
+                return RegraspResult(**fields, perceived_pose=None)
+            frame = looked
         regrasp = Regrasp(frame, setup.part, params, dev, options)
         if options is None or options.place_xy is None:
             place = place_for_wrist(setup, regrasp)
@@ -264,9 +275,41 @@ def run_regrasp_trial(
         else:
             phase_name = "done"
         fields = judge_trial(tw, seed, failure, phase_name, on_frame, frame_every)
-        return RegraspResult(**fields, perceived_pose=None, grip_offset=regrasp.grip_offset)
+        return RegraspResult(
+            **fields, perceived_pose=seen or None, grip_offset=regrasp.grip_offset
+        )
     finally:
         world.close()
+
+
+def look(
+    setup: TrialSetup,
+    tw: TrialWorld,
+    frame: PivotFrame,
+    t_end: float,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None,
+    frame_every: int,
+    seen: dict[str, float],
+) -> PivotFrame | StepResult:
+    """The wrist camera's look near the nominal pose, as the pivot's trial looks: ``frame`` moved
+    to what it saw (``seen`` gets x, y, yaw), or the look's failure."""
+    look = Look(
+        tw.dev,
+        [setup.part],
+        setup.layout.bin_interior(),
+        (setup.layout.bin_center[0], setup.layout.bin_center[1]),
+        setup.nominal_center(),
+        setup.look,
+    )
+    result = run_skill("look", look, tw.world, tw.robot, t_end, on_frame, frame_every)
+    if result is not None:
+        return result
+    if look.result is None:
+        return frame
+    d = look.result
+    seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
+    centre = np.array([d.center[0], d.center[1], 0.5 * setup.part.outer])
+    return dataclasses.replace(frame, center=centre, yaw=d.yaw)
 
 
 __all__ = [

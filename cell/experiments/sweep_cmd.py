@@ -3,18 +3,23 @@
 Contract (scripts rely on it)::
 
     cell sweep --part NAME... --trials N [--workers K] [--address ADDR] --out DIR
+        [--config FILE] [--set KEY.PATH=VALUE]...
 
 Why Ray: the same command runs on this machine (a local Ray instance it starts and stops itself,
 nothing to set up) and on an existing Ray cluster (``--address``), so a sweep too large for one
 box needs no other code. Each trial is one task running
 :func:`cell.experiments.pivot_run.run_trial` with seed ``S + i`` for trial ``i`` of every part,
 exactly as ``cell pivot`` seeds them: a seed fixes a trial, so the sweep's outcomes equal a
-serial run's whatever the order the tasks finish in.
+serial run's whatever the order the tasks finish in. ``--config`` and ``--set`` apply a cell
+configuration to every trial exactly as ``cell pivot`` does
+(:func:`cell.experiments.pivot_cmd.trial_config`), and each ``per_trial`` entry carries
+``cell pivot``'s keys (``grip_force_n``, ``peak_force_n``, ``shove_mm`` included).
 
 Parts the planner declines are not run; they appear in the table as refused, with the reason.
 Everything the user gives is checked before Ray starts (unknown part, bad ``--trials``, a cell
-layout out of reach); an address that cannot be reached ends with one line naming it, exit 2,
-after at most :data:`CONNECT_TIMEOUT_S` seconds.
+layout out of reach, a configuration or ``--set`` that fails validation); an address that cannot
+be reached ends with one line naming it, exit 2, after at most :data:`CONNECT_TIMEOUT_S`
+seconds.
 """
 
 from __future__ import annotations
@@ -107,6 +112,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--catalogue", type=Path, default=None, metavar="FILE", help="part catalogue YAML"
     )
+    from cell.experiments.pivot_cmd import add_config_argument, add_ideal_argument
+
+    add_config_argument(p)
+    add_ideal_argument(p)
     p.set_defaults(func=cmd_sweep)
 
 
@@ -128,12 +137,16 @@ class PartSweep:
 def _pivot_namespace(args: argparse.Namespace, part: str) -> argparse.Namespace:
     from cell.experiments.pivot_cmd import pivot_args
 
-    return pivot_args(part, args.trials, args.catalogue, args.cell, args.nominal)
+    return pivot_args(
+        part, args.trials, args.catalogue, args.cell, args.nominal,
+        config=getattr(args, "config", None), sets=getattr(args, "set", None) or (),
+        ideal=getattr(args, "ideal", False),
+    )
 
 
 def prepare(args: argparse.Namespace) -> list[PartSweep]:
     """Everything checked, nothing simulated, Ray not started: one :class:`PartSweep` per part."""
-    from cell.experiments.pivot_cmd import PivotInputError, build_setup
+    from cell.experiments.pivot_cmd import PivotInputError, build_setup, trial_config
 
     if args.trials < 1:
         raise UserError(f"--trials: must be >= 1, got {args.trials}")
@@ -146,7 +159,8 @@ def prepare(args: argparse.Namespace) -> list[PartSweep]:
         if name in seen:
             raise UserError(f"--part: {name} is given twice")
         seen.add(name)
-    catalogue = load_catalogue(args.catalogue)
+    given = trial_config(getattr(args, "config", None), getattr(args, "set", None) or ())
+    catalogue = load_catalogue(args.catalogue if args.catalogue is not None else given.catalogue)
     rows: list[PartSweep] = []
     for name in args.part:
         part = catalogue.get(name)  # ValueError naming the catalogue for an unknown part
@@ -551,15 +565,21 @@ def write_outputs(
     """table.md, table.csv, sweep.json and success.png in ``out``."""
     records = table_rows(rows, args.trials)
     pose = "nominal pose" if args.nominal else "wrist camera"
+    ideal = bool(getattr(args, "ideal", False))
+    drawn = (
+        "frictions 0.2/0.4/0.4 +-20 % (--ideal)" if ideal
+        else "the cell's uncertainty drawn per trial (sim/uncertainty.py)"
+    )
     header = (
         f"Sweep: {args.trials} trials per part, seeds {args.seed}..{args.seed + args.trials - 1}, "
-        f"{pose}, frictions 0.2/0.4/0.4 +-20 %; {cluster}; {wall:.0f} s wall. "
+        f"{pose}, {drawn}; {cluster}; {wall:.0f} s wall. "
         "Paper: Table 3 (real arm, 10 trials); its Wilson interval computed from k/N."
     )
     payload = {
         "trials": args.trials,
         "seed": args.seed,
         "pose_source": pose,
+        "ideal": ideal,
         "ray": cluster,
         "wall_time_s": wall,
         "parts": [

@@ -145,3 +145,160 @@ def test_bad_options_are_refused(extra, word, tmp_path: Path, capsys, no_simulat
         ["pivot", "--part", "bushing", *extra, "--json", str(tmp_path / "r")], capsys
     )
     assert code == 2 and word in err, err
+
+
+# --- --config and --set: the whole configuration reaches the trials --------------------------
+def _fake_result(setup, seed: int):
+    """A trial's result without simulating it (what the command does with the setup is tested,
+    not the physics)."""
+    from cell.experiments.pivot_run import TrialResult
+
+    return TrialResult(
+        seed=seed, success=True, failure=None, phase="done", tilt_deg=0.0, height_m=0.05,
+        sim_time=1.0, wall_time=0.1, true_pose={"x": 0.0, "y": 0.0, "yaw": 0.0},
+        frictions={"S": 0.2, "H": 0.4, "G": setup.mu_ground or 0.4}, mass=0.05,
+    )
+
+
+@pytest.fixture
+def setups(monkeypatch: pytest.MonkeyPatch) -> list:
+    """The setups the trials get; no trial is simulated."""
+    seen: list = []
+
+    def spy(setup, seed, **kw):
+        seen.append(setup)
+        return _fake_result(setup, seed)
+
+    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
+    return seen
+
+
+def test_set_reaches_the_trials_pivot_params(tmp_path: Path, capsys, setups) -> None:
+    from skills.pivot import PivotParams
+
+    out_json = tmp_path / "r.json"
+    argv = ["pivot", "--part", "bushing", "--trials", "1", "--json", str(out_json)]
+    code, _, err = run_cli([*argv, "--set", "skills.pivot.approach_speed_m_s=0.07"], capsys)
+    assert code == 0, err
+    params = PivotParams(l_a=0.9, alpha=0.3, **setups[0].params)
+    assert params.approach_speed == 0.07
+    assert PivotParams(l_a=0.9, alpha=0.3).approach_speed != 0.07  # the test can fail
+    # On top of a file: the --set wins over the file's value, the file's other keys stay.
+    path = _cell(tmp_path, {"skills": {"pivot": {"approach_speed_m_s": 0.1,
+                                                 "tilt_speed_m_s": 0.02}}})
+    code, _, err = run_cli(
+        [*argv, "--config", str(path), "--set", "skills.pivot.approach_speed_m_s=0.07",
+         "--set", "safety.ft_abort_force_n=60"],
+        capsys,
+    )
+    assert code == 0, err
+    over = setups[1].params
+    assert over["approach_speed"] == 0.07 and over["tilt_speed"] == 0.02
+    assert over["guard"].max_force == 60.0
+
+
+@pytest.mark.parametrize(
+    ("sets", "words"),
+    [
+        (["skills.pivot.no_such_key=1"], ["--set skills.pivot.no_such_key=1",
+                                          "skills.pivot.no_such_key: unknown key"]),
+        (["skills.pivot.approach_speed_m_s=fast"], ["skills.pivot.approach_speed_m_s",
+                                                    "expected a number"]),
+        (["sim.mu_ground=-1"], ["sim.mu_ground", "greater than 0"]),
+        (["cell.layout.bin_wall_height=high"], ["cell.layout.bin_wall_height"]),
+        (["safety"], ["--set safety", "expected KEY.PATH=VALUE"]),
+    ],
+)
+def test_a_bad_set_exits_2_in_one_line_and_writes_nothing(
+    sets: list[str], words: list[str], tmp_path: Path, capsys, no_simulation
+) -> None:
+    out_json = tmp_path / "r.json"
+    argv = ["pivot", "--part", "bushing", "--json", str(out_json)]
+    code, out, err = run_cli([*argv, *(a for s in sets for a in ("--set", s))], capsys)
+    assert code == 2
+    assert err.startswith("cell pivot: error: ") and all(w in err for w in words), err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not out_json.exists() and not no_simulation
+
+
+def test_config_applies_mu_ground_and_the_sections_a_trial_uses(
+    tmp_path: Path, capsys, monkeypatch
+) -> None:
+    """sim.mu_ground reaches the simulated floor; skills.perceive, skills.reposition, the safety
+    limits, cell.control_hz and cell.layout reach the trial's setup."""
+    seen = []
+    real = cell.experiments.pivot_run.run_trial
+
+    def spy(setup, seed, **kw):
+        seen.append(setup)
+        return real(setup, seed, **kw)
+
+    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
+    path = _cell(
+        tmp_path,
+        {
+            "cell": {"control_hz": 100, "layout": {"bin_inner_size": [0.50, 0.44]}},
+            "sim": {"mu_ground": 0.55},
+            "safety": {"ft_abort_force_n": 70},
+            "skills": {"perceive": {"speed_m_s": 0.4},
+                       "reposition": {"drag_speed_m_s": 0.05}},
+            "workflow": {"cycles": 3},  # no meaning for a trial: accepted, not used
+        },
+    )
+    out_json = tmp_path / "r.json"
+    argv = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "11", "--nominal"]
+    code, _, err = run_cli([*argv, "--config", str(path), "--json", str(out_json)], capsys)
+    assert code == 0, err
+    setup = seen[0]
+    assert setup.mu_ground == 0.55
+    assert setup.look.speed == 0.4 and setup.look.guard.max_force == 70.0
+    assert setup.reposition.drag_speed == 0.05
+    assert setup.params["guard"].max_force == 70.0
+    assert tuple(setup.layout.bin_inner_size) == (0.50, 0.44)
+    assert setup.physics.control_hz == 100.0 and setup.physics.physics_dt <= 1 / 250 + 1e-12
+    data = json.loads(out_json.read_text())
+    assert data["per_trial"][0]["frictions"]["G"] == 0.55  # the simulated floor's friction
+    assert data["mu_ground"] == 0.55 and data["physics"]["control_hz"] == 100.0
+    # --mu-ground on the command line wins over the file.
+    code, _, err = run_cli(
+        [*argv, "--config", str(path), "--mu-ground", "0.3", "--json", str(out_json)], capsys
+    )
+    assert code == 0, err
+    assert seen[1].mu_ground == 0.3
+
+
+def test_a_config_without_mu_ground_keeps_the_perturbed_floor(
+    tmp_path: Path, capsys, setups
+) -> None:
+    path = _cell(tmp_path, {"skills": {"pivot": {"tilt_speed_m_s": 0.02}}})
+    argv = ["pivot", "--part", "bushing", "--trials", "1", "--json", str(tmp_path / "r.json")]
+    code, _, err = run_cli([*argv, "--config", str(path)], capsys)
+    assert code == 0, err
+    assert setups[0].mu_ground is None and setups[0].physics.control_hz == 125.0
+
+
+def test_per_trial_forces_and_shove_from_the_simulated_state(tmp_path: Path, capsys) -> None:
+    """grip_force_n, peak_force_n and shove_mm on one trial: measured, present, physical."""
+    from skills.pivot import PivotParams
+
+    out_json = tmp_path / "r.json"
+    argv = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "5"]
+    code, _, err = run_cli([*argv, "--json", str(out_json)], capsys)
+    assert code == 0, err
+    data = json.loads(out_json.read_text())
+    assert data["pose_source"] == "camera"
+    trial = data["per_trial"][0]
+    reached = {ph for ph, t in trial["phase_times_s"].items() if t > 0}
+    assert {"grasp", "tilt"} <= reached, trial["failure"]
+    peaks = trial["peak_force_n"]
+    assert set(peaks) == {"grasp", "tilt", "align", "lift"}
+    for phase, peak in peaks.items():
+        assert (peak is None) == (phase not in reached), (phase, peak)
+    defaults = PivotParams(l_a=0.9, alpha=0.3)
+    # The Grasp felt S with touch_force and pressed it: the wrist saw at least that, and no
+    # more than a multiple of the guard's limit.
+    assert defaults.touch_force <= peaks["grasp"] < 2 * defaults.guard.max_force
+    # The motors' force is capped by the commanded grip: between nothing and that.
+    assert 0.5 < trial["grip_force_n"] <= defaults.grip_force + 0.5
+    # The close moved the part a little (never centimetres), and it was measured.
+    assert isinstance(trial["shove_mm"], float) and 0.0 <= trial["shove_mm"] < 10.0

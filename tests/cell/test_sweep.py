@@ -143,6 +143,11 @@ def no_ray(monkeypatch: pytest.MonkeyPatch) -> None:
         (["--trials", "2", "--part", "teapot"], "unknown part 'teapot'"),
         (["--trials", "2", "--address", "ray://head:10001"], "ray[client]"),
         (["--trials", "2", "--address", "head"], "--address head: expected host:port"),
+        (
+            ["--trials", "2", "--set", "skills.pivot.no_such_key=1"],
+            "--set skills.pivot.no_such_key=1: skills.pivot.no_such_key: unknown key",
+        ),
+        (["--trials", "2", "--set", "sim.mu_ground=abc"], "sim.mu_ground: expected a number"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(
@@ -153,6 +158,23 @@ def test_bad_input_is_one_line_exit_2(
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("cell sweep: error: ") and words in err
     assert not (tmp_path / "o").exists()
+
+
+def test_config_and_set_reach_every_parts_setup(tmp_path: Path, no_ray: None) -> None:
+    """--config and --set give each part's trials the configuration, as `cell pivot` does."""
+    from cell.cli import build_parser
+
+    path = tmp_path / "cell.yaml"
+    path.write_text("sim: {mu_ground: 0.6}\nskills:\n  perceive: {speed_m_s: 0.4}\n")
+    argv = ["sweep", "--part", "bushing", "wiring_duct", "--trials", "1", "--out", str(tmp_path)]
+    args = build_parser().parse_args(
+        [*argv, "--config", str(path), "--set", "skills.pivot.approach_speed_m_s=0.07"]
+    )
+    rows = cell.experiments.sweep_cmd.prepare(args)
+    assert [row.name for row in rows] == ["bushing", "wiring_duct"]
+    for row in rows:
+        assert row.setup is not None and row.setup.mu_ground == 0.6
+        assert row.setup.params["approach_speed"] == 0.07 and row.setup.look.speed == 0.4
 
 
 def test_trials_is_required(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
