@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 from cell.catalogue import load_catalogue
 from cell.errors import UserError
 from cell.output import write_json
+from drivers.gripper_spec import default_gripper
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
@@ -424,6 +425,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "forced": forced,
             "pose_source": "nominal" if args.nominal else "camera",
+            "gripper": default_gripper().name,
             "ideal": setup.uncertainty.is_ideal,
             "mu_ground": setup.mu_ground,
             "plan": plan.to_json(),
