@@ -18,9 +18,10 @@ import numpy as np
 from py_trees.behaviour import Behaviour
 
 from cell.catalogue import load_catalogue
-from cell.config import CellConfig, skill_settings
+from cell.config import CellConfig, check_tree_actuators, gripper_of, skill_settings
 from cell.reach import ur5_reach
 from cell.runner import Backend, CellState
+from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
 from drivers.parts import Gripper, Part
 from drivers.pose import Pose
@@ -50,6 +51,7 @@ class Prepared:
     ctx: CellContext
     root: Behaviour
     state: CellState
+    gripper: GripperSpec  #: the configured gripper's description
 
 
 def _layout(config: CellConfig, doc: LinedDocument) -> CellLayout:
@@ -147,7 +149,12 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             f"unknown part {name!r}; known parts: {', '.join(catalogue.parts)}",
         )
     part = catalogue.parts[name]
-    gripper = Gripper()  # the planner's model: the skills' clearance and finger too
+    spec = gripper_of(config, doc)
+    # the planner's model of the configured gripper: the skills' clearance and finger too
+    gripper = Gripper(
+        name=spec.name, finger_width=spec.pad_width, stroke=spec.stroke,
+        finger_length=spec.pad_length, finger_thickness=spec.pad_thickness,
+    )
     plan = plan_pivot(part, gripper, Frictions())
     if not plan.pivotable:
         raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")
@@ -184,9 +191,10 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         skill_params=settings,
         catalogue=[part],
     )
-    spec, tree_doc, path = resolve_tree_spec(config.tree, doc, DATA_DIR)
+    tree_spec, tree_doc, path = resolve_tree_spec(config.tree, doc, DATA_DIR)
+    check_tree_actuators(tree_spec, tree_doc, tuple(path), spec)
     root = build_root(
-        spec,
+        tree_spec,
         tree_doc,
         path,
         ctx,
@@ -196,7 +204,9 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
             "max_torque_nm": s.ft_abort_torque_nm,
         },
     )
-    return Prepared(config, doc, layout, part, [part], plan, params, geometry, ctx, root, state)
+    return Prepared(
+        config, doc, layout, part, [part], plan, params, geometry, ctx, root, state, spec
+    )
 
 
 def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> Any:
@@ -213,6 +223,7 @@ def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> A
         yaw_spread=math.radians(sim.yaw_spread_deg),
         mu_ground=sim.mu_ground,
         machining_time=config.workflow.machining_time_s,
+        gripper=prep.gripper,
     )
     try:
         return SimCellBackend(prep.layout, prep.part, options, resume=resume)

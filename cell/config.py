@@ -26,6 +26,7 @@ from pydantic import (
     model_validator,
 )
 
+from drivers.gripper_spec import DEFAULT_GRIPPER, GripperSpec, GripperSpecError, load_gripper
 from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from skills.params import apply_config, config_keys
 from trees.context import SECTION_DOCS, SKILL_SECTIONS
@@ -410,6 +411,12 @@ class CellConfig(_Section):
     log: LogSection = Field(default_factory=LogSection)
     faults: FaultsSection = Field(default_factory=FaultsSection)
     emulate: EmulateSection = Field(default_factory=EmulateSection)
+    gripper: str = Field(
+        DEFAULT_GRIPPER,
+        description="the gripper's description: a shipped name (robotiq_2f85, gentle_wire) or "
+        "the path of a description .yaml relative to this file; the twin, the emulator and the "
+        "driver use it, and every gripper force and speed of the skills must lie in its ranges",
+    )
     tree: dict[str, Any] = Field(
         default_factory=lambda: {"file": "trees/bushing_machining.yaml"},
         description="the behaviour tree: a node spec, or {file: PATH} relative to this file "
@@ -488,7 +495,88 @@ def validate_document(doc: LinedDocument) -> CellConfig:
     for key in ("ft_abort_force_n", "ft_abort_torque_nm"):
         if not math.isfinite(getattr(config.safety, key)):
             raise doc.error(("safety", key), "must be finite")
+    check_actuators(config, doc, gripper_of(config, doc))
     return config
+
+
+def _base_dir(doc: LinedDocument) -> Path:
+    """Where the configuration's relative paths start: its file's folder (else here)."""
+    source = Path(doc.source)
+    return source.resolve().parent if source.is_file() else Path.cwd()
+
+
+def gripper_of(config: CellConfig, doc: LinedDocument) -> GripperSpec:
+    """The configured gripper's description; :class:`ConfigError` at ``gripper`` if it cannot
+    be read."""
+    try:
+        return load_gripper(config.gripper, _base_dir(doc))
+    except GripperSpecError as exc:
+        where = f"its key {exc.key}: " if exc.key else ""
+        raise doc.error(("gripper",), f"{where}{exc.reason}") from None
+
+
+#: What each actuator tag of a skill parameter (:func:`skills.params.si`) must lie within:
+#: the description's range, its unit, and the name a person knows it by.
+_ACTUATOR_RANGES = {
+    "grip_force": (lambda g: (g.force_min, g.force_max), "N", "grip force per finger"),
+    "finger_speed": (lambda g: (g.speed_min, g.speed_max), "m/s", "finger speed"),
+}
+
+
+def check_actuators(config: CellConfig, doc: LinedDocument, gripper: GripperSpec) -> None:
+    """Refuse every skill value that commands the gripper outside what the unit can do.
+
+    Why here: every command that reads a configuration validates it through this module, so a
+    force or speed the gripper cannot make stops the run before a twin or a device opens. A
+    real unit would clamp it (a 2F-85 asked for 2 N grips with 20 N) while the configuration and
+    the log said otherwise; a refusal says so instead."""
+    for name, cls in SKILL_SECTIONS.items():
+        section = getattr(config.skills, name)
+        for key in config_keys(cls):
+            if key.actuator is not None:
+                reason = actuator_problem(key, float(getattr(section, key.key)), gripper)
+                if reason:
+                    raise doc.error(("skills", name, key.key), reason)
+
+
+def actuator_problem(key: Any, configured: float, gripper: GripperSpec) -> str | None:
+    """Why ``configured`` (as the YAML has it) for ``key`` (a :class:`skills.params.ConfigKey`
+    with an actuator tag) is beyond ``gripper``; None when it is within."""
+    bounds, _unit, what = _ACTUATOR_RANGES[key.actuator]
+    low, high = bounds(gripper)
+    value = configured * key.scale
+    if low - 1e-9 <= value <= high + 1e-9:
+        return None
+    shown = key.shown
+    return (
+        f"{shown(value):g} is outside the {what} of the gripper {gripper.name!r}, "
+        f"{shown(low):g}..{shown(high):g} {key.shown_unit} (the unit would not do what is "
+        "asked); set it in that range or name another gripper description (key 'gripper')"
+    )
+
+
+def check_tree_actuators(spec: Any, doc: LinedDocument, path: tuple[Any, ...],
+                         gripper: GripperSpec) -> None:
+    """The same refusal for a tree node's own overrides of a skill's gripper values."""
+    from trees.registry import REGISTRY
+
+    if isinstance(spec, list):
+        for i, child in enumerate(spec):
+            check_tree_actuators(child, doc, (*path, i), gripper)
+        return
+    if not isinstance(spec, dict):
+        return
+    node = REGISTRY.get(spec.get("type")) if isinstance(spec.get("type"), str) else None
+    section = node.section if node is not None else None
+    if section is not None:
+        for key in config_keys(SKILL_SECTIONS[section]):
+            if key.actuator is not None and isinstance(spec.get(key.key), (int, float)):
+                reason = actuator_problem(key, float(spec[key.key]), gripper)
+                if reason:
+                    raise doc.error((*path, key.key), reason)
+    for name, value in spec.items():
+        if isinstance(value, (dict, list)):
+            check_tree_actuators(value, doc, (*path, name), gripper)
 
 
 def skill_settings(

@@ -238,38 +238,10 @@ def _refuse(prep: Any, opened: dict[str, Any], why: str) -> ConfigError:
 
 
 #: The skills' gripper forces (N per finger), as configuration keys: what `cell run` commands.
-GRIPPER_FORCE_KEYS = (
-    ("pivot", "grip_force_n"),
-    ("pivot", "hold_force_n"),
-    ("slot", "hold_force_n"),
-    ("reposition", "grip_force_n"),
-)
-
-
-def check_gripper_forces(prep: Any) -> None:
-    """Refuse a gripper force the 2F-85 cannot apply, before any device is opened.
-
-    Why: the 2F-85's force setting spans 20-235 N (rFR 0 is its weakest grip, not zero force),
-    and the driver clamps what it is asked into that span, so a force below 20 N would be
-    applied as 20 N while the configuration and the log said otherwise. The twin's gripper
-    can grip more gently: the pivot was tuned there at 2 N, which no 2F-85 can do."""
-    from drivers.robotiq_gripper.registers import FORCE_MAX, FORCE_MIN
-
-    for section, key in GRIPPER_FORCE_KEYS:
-        value = float(getattr(getattr(prep.config.skills, section), key))
-        if not FORCE_MIN <= value <= FORCE_MAX:
-            path = ("skills", section, key)
-            raise ConfigError(
-                prep.doc.source, prep.doc.line_of(path), ".".join(path),
-                f"{value:g} N is outside the 2F-85's grip force, {FORCE_MIN:g}-{FORCE_MAX:g} N "
-                f"(it would apply {min(max(value, FORCE_MIN), FORCE_MAX):g} N); set it in that "
-                "range (docs/emulator.md: what the weakest grip does to the pivot)",
-            )
-
-
 def open_hardware(prep: Any) -> HardwareBackend:
-    """Connect and check every device before anything moves; refuse with the reasons."""
-    check_gripper_forces(prep)
+    """Connect and check every device before anything moves; refuse with the reasons. (The
+    configuration's gripper values were checked against the gripper's description when it was
+    loaded.)"""
     config = prep.config
     # The drivers' reader threads (FT300 stream, gripper poll, camera feed) wake on their line
     # and then wait for the interpreter; with the default 5 ms switch interval, beside the tick
@@ -322,12 +294,15 @@ def open_hardware(prep: Any) -> HardwareBackend:
         opened["ft"].bias()
     except (DeviceError, RuntimeError) as exc:
         raise _refuse(prep, opened, f"zeroing the wrist sensor: {exc}") from None
+    # The driver works in the configured description's widths and tip travel.
+    if hasattr(opened["gripper"], "spec"):
+        opened["gripper"].spec = prep.gripper
     devices = Devices(opened["arm"], opened["gripper"], opened["ft"], clock, opened["camera"])
     machine = TimedMachine(clock, config.workflow.machining_time_s)
     return HardwareBackend(devices, machine, opened)
 
 
 __all__ = [
-    "GRIPPER_FORCE_KEYS", "HardwareBackend", "check_gripper_forces", "check_hardware",
+    "HardwareBackend", "check_hardware",
     "format_table", "open_hardware",
 ]

@@ -19,6 +19,7 @@ import numpy as np
 
 from drivers.devices import Devices
 from drivers.events import EventKind, SlotState
+from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
 from drivers.parts import Frictions, Part
@@ -44,6 +45,8 @@ class TwinOptions:
     #: "rows": lying along the radial direction where the pivot reaches (:func:`spawn_spots`);
     #: "random": tipped in as a person would (:func:`sim.scenes.dropped_bin_fill`).
     fill: str = "rows"
+    #: the gripper's description (None: the shipped 2F-85)
+    gripper: GripperSpec | None = None
 
 
 def spawn_spots(
@@ -111,7 +114,7 @@ class SimCellBackend:
         self.world = world = SimWorld(seed=options.seed, settings=options.physics)
         try:
             self.cell = build_cell(world, layout, floor_friction=options.mu_ground)
-            self.robot = robot = SimRobot(world)
+            self.robot = robot = SimRobot(world, gripper=options.gripper)
             robot.gripper.set_finger_friction(options.frictions.mu_s, options.frictions.mu_h)
             self.bodies: list[PartBody] = []
             self._fill(options.parts_in_bin, rng, resume)

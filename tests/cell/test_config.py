@@ -178,6 +178,7 @@ def test_schema_covers_every_section_and_the_registry_is_documented() -> None:
     s = schema()
     assert set(s["properties"]) == {
         "cell",
+        "gripper",
         "sim",
         "devices",
         "workflow",
@@ -271,3 +272,46 @@ def test_cli_schema_is_json(tmp_path) -> None:
     r = _cell("schema", cwd=tmp_path)
     assert r.returncode == 0
     assert "workflow" in json.loads(r.stdout)["properties"]
+
+
+def test_a_gripper_value_beyond_the_unit_is_refused_at_load(tmp_path) -> None:
+    # The 2F-85 grips with 20 N at least and moves its fingers at 20-150 mm/s.
+    err = _error("skills:\n  pivot:\n    grip_force_n: 2\n", tmp_path)
+    assert err.key == "skills.pivot.grip_force_n" and err.line == 3
+    assert "20..235 N" in err.reason and "robotiq_2f85" in err.reason
+    err = _error("skills:\n  slot:\n    hold_force_n: 300\n", tmp_path)
+    assert err.key == "skills.slot.hold_force_n"
+    err = _error("skills:\n  pivot:\n    close_speed_m_s: 0.005\n", tmp_path)
+    assert err.key == "skills.pivot.close_speed_m_s" and "0.02..0.15 m/s" in err.reason
+    # a gentler gripper's description admits the gentle grip
+    config, _ = config_from_text("gripper: gentle_wire\nskills:\n  pivot:\n    grip_force_n: 2\n")
+    assert config.gripper == "gentle_wire"
+    err = _error("gripper: no_such_gripper\n", tmp_path)
+    assert err.key == "gripper" and "unknown gripper" in err.reason
+
+
+def test_a_description_file_is_read_relative_to_the_configuration(tmp_path) -> None:
+    src = Path(__file__).resolve().parents[2] / "drivers" / "data" / "grippers"
+    text = (src / "robotiq_2f85.yaml").read_text().replace("[20.0, 235.0]", "[5.0, 235.0]")
+    text = text.replace("name: robotiq_2f85", "name: soft_2f85")
+    (tmp_path / "soft.yaml").write_text(text)
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text("gripper: soft.yaml\nskills:\n  pivot:\n    grip_force_n: 10\n")
+    config, _ = load_config(cfg)  # 10 N is within this description's 5..235 N
+    assert config.gripper == "soft.yaml"
+    (tmp_path / "bad.yaml").write_text(text.replace("stroke_m: 0.085", "stroke_m: -1"))
+    cfg.write_text("gripper: bad.yaml\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(cfg)
+    assert info.value.key == "gripper" and "stroke" in info.value.reason
+
+
+def test_a_tree_node_asking_the_gripper_too_little_is_refused(tmp_path) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(
+        "tree:\n  type: sequence\n  children:\n    - {type: tilt, grip_force_n: 5}\n"
+    )
+    config, doc = load_config(cfg)
+    with pytest.raises(ConfigError) as info:
+        prepare(config, doc)
+    assert info.value.key.endswith("grip_force_n") and "20..235 N" in info.value.reason

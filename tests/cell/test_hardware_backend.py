@@ -76,7 +76,7 @@ def test_a_grip_force_the_2f85_cannot_apply_is_refused_before_any_device_opens(
     with pytest.raises(ConfigError) as err:
         hardware.open_hardware(_prep(text))
     assert err.value.key == "skills.pivot.grip_force_n" and err.value.line == 4
-    assert "20-235 N" in err.value.reason and "apply 20 N" in err.value.reason
+    assert "20..235 N" in err.value.reason and "would not do what is asked" in err.value.reason
     assert opened == []
 
 
