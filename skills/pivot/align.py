@@ -24,6 +24,7 @@ Only the wrist sensor, the gripper and the arm's own pose steer it: no camera fr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 
@@ -109,6 +110,12 @@ class HoleGraspSkill:
         self.sequence.halt()
 
 
+#: The pads may press on the part while the tool turns about the rim or slides down beside the
+#: wall; past a few newtons along the closing line the TCP gives way rather than shove the
+#: standing part.
+ALONG_CLOSING = Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, limit=0.004)
+
+
 class Align(HoleGraspSkill):
     """The in-hand Align as a sequence of named, guarded, tickable steps: turn about the rim,
     narrow around the wall, slide into the hole, pinch the wall, lift (module doc)."""
@@ -135,13 +142,20 @@ class Align(HoleGraspSkill):
         outer, inner = pinched_span(part, dev.gripper.finger_width)
         self._narrow_to = (outer - inner) + 2.0 * params.wall_gap
         self.turn = self._turn_about_rim()
-        p, g = params, params.guard
+        self.slide = CompliantPath(
+            "slide into the hole", dev, params.descent_guard, self._slide_path,
+            lambda path: float(np.linalg.norm(path(1.0).position - path(0.0).position)),
+            0.5 * params.approach_speed, params.acceleration,
+            # as far as the jaws leave room: the two wall gaps
+            dataclasses.replace(ALONG_CLOSING, limit=2.0 * params.wall_gap),
+        )
+        g = params.guard
         self.sequence = Sequence(
             "align",
             [
                 self.turn.motion(),
                 self._jaws_move("narrow around the wall", self._narrow),
-                dev.move("slide into the hole", p.descent_guard, self._insert),
+                self.slide.motion(),
                 self._jaws_move(self.pinch_step, self._pinch),
                 dev.move(self.lift_step, g, self._lift),
             ],
@@ -159,9 +173,7 @@ class Align(HoleGraspSkill):
             lambda _: abs(self.turn_angle),
             p.align_speed,
             4.0 * p.align_speed,
-            # The pad may press on the rim while the tool turns; past a few newtons along the
-            # closing line the TCP gives way rather than shove the standing part.
-            Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, limit=0.004),
+            ALONG_CLOSING,
         )
 
     def _jaws_move(self, name: str, command: Callable[[], None]) -> GuardedMotion:
@@ -204,7 +216,11 @@ class Align(HoleGraspSkill):
         self.dev.arm.servo(Pose(position, self._rotation))
         return self._still()
 
-    def _insert(self) -> None:
+    def _slide_path(self) -> Callable[[float], Pose]:
+        """Straight down from where the tool is until the fingertips are ``wall_depth`` below
+        the rim (or ``floor_clearance`` above the floor), compliant along the closing line: a
+        part left leaning by the turn meets the outer pad on its way down, and the TCP gives way
+        rather than drag the wall along (a 2F-85's pads grip it with 20 N and more)."""
         p, part = self.params, self.part
         tool = self.dev.arm.tool_pose()
         assert self._frame is not None
@@ -212,9 +228,9 @@ class Align(HoleGraspSkill):
         tip_z = float(tool.position[2] + reach * tool.rotation[2, 2])
         floor = self._frame.floor_z
         goal = max(floor + part.length - p.wall_depth, floor + p.floor_clearance)
-        depth = max(0.0, tip_z - goal)
-        target = tool.position - depth * np.array([0.0, 0.0, 1.0])
-        self.dev.arm.move_to(Pose(target, tool.rotation), 0.5 * p.approach_speed, p.acceleration)
+        depth = max(1e-6, tip_z - goal)
+        down = np.array([0.0, 0.0, -depth])
+        return lambda s: Pose(tool.position + s * down, tool.rotation)
 
     def _pinch(self) -> None:
         self._hold_pad_here()
