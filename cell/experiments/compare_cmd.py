@@ -32,7 +32,6 @@ from typing import Any
 from cell.errors import UserError
 from cell.experiments.pivot_cmd import add_config_argument, add_ideal_argument
 from cell.output import write_json
-from drivers.gripper_spec import default_gripper
 
 GOAL_RATIO = 0.70  #: pivot tact / regrasp tact the project aims at (at least 30 % faster)
 
@@ -132,8 +131,8 @@ def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, An
         "part": setup.part.name,
         "seeds": seeds,
         "pose_source": "camera" if setup.perceive else "nominal",
-        "gripper": default_gripper().name,
-            "ideal": setup.uncertainty.is_ideal,
+        "gripper": setup.gripper.name,
+        "ideal": setup.uncertainty.is_ideal,
         "methods": {"pivot": pivot, "regrasp": regrasp},
         "tact_ratio_pivot_over_regrasp": {"mean": ratio_mean, "median": ratio_median},
         "goal_ratio": GOAL_RATIO,

@@ -192,6 +192,7 @@ class TrialConfig:
     control_hz: float | None = None  #: cell.control_hz, where given
     layout: Any = None  #: :class:`drivers.layout.CellLayout` of cell.layout, where given
     catalogue: Path | None = None  #: cell.catalogue (relative to the file), where given
+    gripper: Any = None  #: :class:`drivers.gripper_spec.GripperSpec` of ``gripper``, where given
 
 
 def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialConfig:
@@ -206,7 +207,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
     if config_path is None and not sets:
         return TrialConfig()
     from cell.assemble import _layout
-    from cell.config import skill_settings, validate_document
+    from cell.config import gripper_of, skill_settings, validate_document
     from cell.overrides import apply_sets
     from skills.params import apply_config, with_limits
     from trees.yaml_lines import ConfigError, LinedDocument, load_yaml
@@ -216,6 +217,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
         doc = apply_sets(doc, sets)
         config = validate_document(doc)
         layout = _layout(config, doc) if config.cell.layout else None
+        gripper = gripper_of(config, doc) if "gripper" in config.model_fields_set else None
     except ConfigError as exc:
         raise UserError(str(exc)) from None
     base = PivotParams(l_a=0.5, alpha=0.3)
@@ -246,6 +248,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
         control_hz=config.cell.control_hz if "control_hz" in config.cell.model_fields_set else None,
         layout=layout,
         catalogue=catalogue,
+        gripper=gripper,
     )
 
 
@@ -303,7 +306,12 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     else:
         layout = given.layout if given.layout is not None else CellLayout()
     frictions = Frictions()
-    gripper = Gripper()
+    spec = given.gripper if given.gripper is not None else default_gripper()
+    # the planner's model of that gripper
+    gripper = Gripper(
+        name=spec.name, finger_width=spec.pad_width, stroke=spec.stroke,
+        finger_length=spec.pad_length, finger_thickness=spec.pad_thickness,
+    )
     plan = plan_pivot(part, gripper, frictions)
     forced = False
     if not plan.pivotable:
@@ -347,6 +355,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         params=given.params,
         look=given.look,
         reposition=given.reposition,
+        gripper=spec,
     )
     mu_ground = args.mu_ground if args.mu_ground is not None else given.mu_ground
     if mu_ground is not None:
@@ -425,7 +434,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
             "seed": args.seed,
             "forced": forced,
             "pose_source": "nominal" if args.nominal else "camera",
-            "gripper": default_gripper().name,
+            "gripper": setup.gripper.name,
             "ideal": setup.uncertainty.is_ideal,
             "mu_ground": setup.mu_ground,
             "plan": plan.to_json(),

@@ -32,6 +32,7 @@ import numpy as np
 from cell.experiments.stats import wilson_interval
 from cell.reach import ur5_reach
 from drivers.devices import Devices
+from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
 from drivers.parts import Part
 from drivers.pose import Pose
@@ -96,6 +97,9 @@ class TrialSetup:
     #: safety limits of a configuration; None: the skills' defaults)
     look: LookParams | None = None
     reposition: RepositionParams | None = None
+    #: the gripper's description the twin's gripper is built from (``gripper`` of a
+    #: configuration; the shipped 2F-85 by default)
+    gripper: GripperSpec = field(default_factory=default_gripper)
 
     def frame(self) -> PivotFrame:
         """The pivot frame the skills are given: the part's nominal pose."""
@@ -266,7 +270,7 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     world = SimWorld(seed=seed, settings=setup.physics)
     try:
         cell = build_cell(world, setup.layout, floor_friction=mu_g, z_offset=draws.floor_dz_m)
-        robot = SimRobot(world)
+        robot = SimRobot(world, gripper=setup.gripper)
         robot.arm.set_command_lag(draws.lag_steps)
         robot.ft.configure(
             draws.ft_rate_hz, draws.ft_force_noise_n, draws.ft_torque_noise_nm,

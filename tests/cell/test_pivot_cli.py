@@ -308,3 +308,18 @@ def test_per_trial_forces_and_shove_from_the_simulated_state(tmp_path: Path, cap
     assert 0.5 < trial["grip_force_n"] <= defaults.grip_force + 0.5
     # The close moved the part a little (never centimetres), and it was measured.
     assert isinstance(trial["shove_mm"], float) and 0.0 <= trial["shove_mm"] < 10.0
+
+
+def test_a_configured_gripper_description_is_the_one_the_trials_run(tmp_path: Path, capsys) -> None:
+    out_json = tmp_path / "r.json"
+    args = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "11", "--set",
+            "gripper=gentle_wire", "--set", "skills.pivot.grip_force_n=2", "--json", str(out_json)]
+    code, _, err = run_cli(args, capsys)
+    assert code == 0, err
+    data = json.loads(out_json.read_text())
+    assert data["gripper"] == "gentle_wire"
+    # the 2F-85 refuses the same grip at load, before any trial
+    args = ["pivot", "--part", "bushing", "--trials", "1", "--set",
+            "skills.pivot.grip_force_n=2", "--json", str(tmp_path / "s.json")]
+    code, _, err = run_cli(args, capsys)
+    assert code == 2 and "20..235 N" in err and not (tmp_path / "s.json").exists()
