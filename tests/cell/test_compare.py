@@ -154,13 +154,13 @@ def test_pose_source_is_the_camera_unless_nominal(
 
 def test_config_and_set_reach_both_methods(tmp_path: Path, capsys, methods: list) -> None:
     path = tmp_path / "cell.yaml"
-    path.write_text("sim: {mu_ground: 0.6}\nskills:\n  pivot: {tilt_speed_m_s: 0.02}\n")
+    path.write_text("sim: {mu_ground: 0.6}\nskills:\n  pivot: {tilt_speed_m_s: 0.015}\n")
     argv = ["compare", "--part", "bushing", "--trials", "1", "--config", str(path)]
     code, _, err = run_cli([*argv, "--set", "skills.pivot.approach_speed_m_s=0.07"], capsys)
     assert code == 0, err
     for _, setup in methods:
         assert setup.mu_ground == 0.6
-        assert setup.params["tilt_speed"] == 0.02 and setup.params["approach_speed"] == 0.07
+        assert setup.params["tilt_speed"] == 0.015 and setup.params["approach_speed"] == 0.07
 
 
 def test_a_bad_set_exits_2_in_one_line_and_writes_nothing(

@@ -93,7 +93,7 @@ def test_the_skill_stops_at_the_limit_the_yaml_gives(limit: int, aborts: bool) -
 
 def test_the_skills_section_reaches_the_skill_and_a_node_overrides_it(tmp_path) -> None:
     text = HEAD + """skills:
-  pivot: {tilt_speed_m_s: 0.02, tilt_past_tip_deg: 6, descent_max_force_n: 18}
+  pivot: {tilt_speed_m_s: 0.015, tilt_past_tip_deg: 6, descent_max_force_n: 18}
   slot: {grip_depth_m: 0.025}
   pack_in_box: {push_speed_m_s: 0.005}
   go_home: {joint_speed_deg_s: 30}
@@ -106,12 +106,12 @@ tree:
     - {type: go_home}
 """
     prep = _prep(text, tmp_path)
-    assert prep.ctx.params.tilt_speed == 0.02
+    assert prep.ctx.params.tilt_speed == 0.015
     assert prep.ctx.params.tilt_past_tip == pytest.approx(math.radians(6))
     tilt = _leaf(prep, lv.TiltBehaviour).settings()
     assert tilt.tilt_speed == 0.005  # the node's own
     align = _leaf(prep, lv.AlignBehaviour).settings()
-    assert align.tilt_speed == 0.02 and align.descent_guard.max_force == 18.0
+    assert align.tilt_speed == 0.015 and align.descent_guard.max_force == 18.0
     # one hole grasp for the whole cell: the slot's depth is Align's and the packing's
     assert align.wall_depth == 0.025
     pack = _leaf(prep, lv.PackInBoxBehaviour).settings()
@@ -148,12 +148,12 @@ def test_a_node_override_is_checked_against_its_skills_range(tmp_path) -> None:
 def test_types_and_schema_show_each_key_with_unit_range_and_default() -> None:
     text = describe_types()
     line = next(ln for ln in text.splitlines() if ln.strip().startswith("tilt_speed_m_s"))
-    assert "[0.001, 0.1]" in line and "m/s" in line and "default 0.01" in line
+    assert "[0.001, 0.1]" in line and "m/s" in line and "default 0.02" in line
     assert "tilt_past_tip_deg" in text and "default 4" in text
     props = schema()["$defs"]
     pivot = next(v for k, v in props.items() if k.startswith("SkillsPivot"))
     speed = pivot["properties"]["tilt_speed_m_s"]
-    assert (speed["default"], speed["minimum"], speed["maximum"]) == (0.01, 0.001, 0.1)
+    assert (speed["default"], speed["minimum"], speed["maximum"]) == (0.02, 0.001, 0.1)
 
 
 def test_cli_bad_skill_value_exits_2_without_traceback(tmp_path, capsys) -> None:
@@ -170,9 +170,9 @@ def test_the_experiments_take_the_skills_from_a_configuration(tmp_path, capsys) 
     from cell.experiments.pivot_cmd import pivot_overrides
 
     path = tmp_path / "cell.yaml"
-    path.write_text("skills:\n  pivot: {tilt_speed_m_s: 0.02}\nsafety: {ft_abort_force_n: 70}\n")
+    path.write_text("skills:\n  pivot: {tilt_speed_m_s: 0.015}\nsafety: {ft_abort_force_n: 70}\n")
     over = pivot_overrides(path)
-    assert over["tilt_speed"] == 0.02 and over["guard"].max_force == 70.0
+    assert over["tilt_speed"] == 0.015 and over["guard"].max_force == 70.0
     assert pivot_overrides(None) == {}  # the defaults: nothing changed
     path.write_text("skills:\n  pivot: {tilt_speed_m_s: 2}\n")
     code = main(["pivot", "--part", "bushing", "--config", str(path), "--json", "x.json"])

@@ -191,7 +191,7 @@ def test_set_reaches_the_trials_pivot_params(tmp_path: Path, capsys, setups) -> 
     assert PivotParams(l_a=0.9, alpha=0.3).approach_speed != 0.07  # the test can fail
     # On top of a file: the --set wins over the file's value, the file's other keys stay.
     path = _cell(tmp_path, {"skills": {"pivot": {"approach_speed_m_s": 0.1,
-                                                 "tilt_speed_m_s": 0.02}}})
+                                                 "tilt_speed_m_s": 0.015}}})
     code, _, err = run_cli(
         [*argv, "--config", str(path), "--set", "skills.pivot.approach_speed_m_s=0.07",
          "--set", "safety.ft_abort_force_n=60"],
@@ -199,7 +199,7 @@ def test_set_reaches_the_trials_pivot_params(tmp_path: Path, capsys, setups) -> 
     )
     assert code == 0, err
     over = setups[1].params
-    assert over["approach_speed"] == 0.07 and over["tilt_speed"] == 0.02
+    assert over["approach_speed"] == 0.07 and over["tilt_speed"] == 0.015
     assert over["guard"].max_force == 60.0
 
 
@@ -276,7 +276,7 @@ def test_config_applies_mu_ground_and_the_sections_a_trial_uses(
 def test_a_config_without_mu_ground_keeps_the_perturbed_floor(
     tmp_path: Path, capsys, setups
 ) -> None:
-    path = _cell(tmp_path, {"skills": {"pivot": {"tilt_speed_m_s": 0.02}}})
+    path = _cell(tmp_path, {"skills": {"pivot": {"tilt_speed_m_s": 0.015}}})
     argv = ["pivot", "--part", "bushing", "--trials", "1", "--json", str(tmp_path / "r.json")]
     code, _, err = run_cli([*argv, "--config", str(path)], capsys)
     assert code == 0, err
