@@ -151,10 +151,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     part = catalogue.parts[name]
     spec = gripper_of(config, doc)
     # the planner's model of the configured gripper: the skills' clearance and finger too
-    gripper = Gripper(
-        name=spec.name, finger_width=spec.pad_width, stroke=spec.stroke,
-        finger_length=spec.pad_length, finger_thickness=spec.pad_thickness,
-    )
+    gripper = Gripper.from_spec(spec)
     plan = plan_pivot(part, gripper, Frictions())
     if not plan.pivotable:
         raise doc.error(("workflow", "part"), f"the {name} is not pivotable: {plan.reason}")

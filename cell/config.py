@@ -516,10 +516,10 @@ def gripper_of(config: CellConfig, doc: LinedDocument) -> GripperSpec:
 
 
 #: What each actuator tag of a skill parameter (:func:`skills.params.si`) must lie within:
-#: the description's range, its unit, and the name a person knows it by.
+#: the description's range (SI), and the name a person knows it by.
 _ACTUATOR_RANGES = {
-    "grip_force": (lambda g: (g.force_min, g.force_max), "N", "grip force per finger"),
-    "finger_speed": (lambda g: (g.speed_min, g.speed_max), "m/s", "finger speed"),
+    "grip_force": (lambda g: (g.force_min, g.force_max), "grip force per finger"),
+    "finger_speed": (lambda g: (g.speed_min, g.speed_max), "finger speed"),
 }
 
 
@@ -542,7 +542,7 @@ def check_actuators(config: CellConfig, doc: LinedDocument, gripper: GripperSpec
 def actuator_problem(key: Any, configured: float, gripper: GripperSpec) -> str | None:
     """Why ``configured`` (as the YAML has it) for ``key`` (a :class:`skills.params.ConfigKey`
     with an actuator tag) is beyond ``gripper``; None when it is within."""
-    bounds, _unit, what = _ACTUATOR_RANGES[key.actuator]
+    bounds, what = _ACTUATOR_RANGES[key.actuator]
     low, high = bounds(gripper)
     value = configured * key.scale
     if low - 1e-9 <= value <= high + 1e-9:

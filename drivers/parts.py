@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from drivers.gripper_spec import GripperSpec
 from drivers.tool import FINGER_LENGTH
 
 HOLE_SHAPES = ("circle", "rectangle")
@@ -217,6 +218,15 @@ class Gripper:
             raise ValueError(f"{owner}: clearance must be >= 0, got {self.clearance!r}")
         if self.clearance >= self.stroke:
             raise ValueError(f"{owner}: clearance {self.clearance:g} m leaves no usable stroke")
+
+    @classmethod
+    def from_spec(cls, spec: GripperSpec) -> Gripper:
+        """The planner's model of a gripper description: its pads and stroke (the clearance is
+        the approach's, not the unit's)."""
+        return cls(
+            name=spec.name, finger_width=spec.pad_width, stroke=spec.stroke,
+            finger_length=spec.pad_length, finger_thickness=spec.pad_thickness,
+        )
 
 
 __all__ = [

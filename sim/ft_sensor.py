@@ -55,7 +55,7 @@ class SimForceTorqueSensor:
         self._world = world
         self._p = world.p
         self._body = body_id
-        self._joint = joint_index
+        self.joint = joint_index  #: the sensor's joint (its child link is the tool's first)
         self._p.enableJointForceTorqueSensor(body_id, joint_index, True)
         # The child's centre of mass in the joint frame (the child link frame): the simulator
         # reports the reaction torque about it.
@@ -110,7 +110,7 @@ class SimForceTorqueSensor:
 
         For tests and the twin's own controllers; skills use :meth:`wrench`.
         """
-        fx, fy, fz, tx, ty, tz = self._p.getJointState(self._body, self._joint)[2]
+        fx, fy, fz, tx, ty, tz = self._p.getJointState(self._body, self.joint)[2]
         cx, cy, cz = self._com_xyz
         # Negate (parent-on-child -> tool-on-sensor) and move the torque from the child's COM
         # to the joint origin, T_o = T_c + r_c x F, written out (numpy.cross is slow here).

@@ -313,10 +313,11 @@ class ForceWatch:
     simulated state after every control step (the steps :class:`PivotWatch` sees), never from
     what the skills commanded or read.
 
-    * **Wrist** (:meth:`peaks`): the force at the wrist sensor's joint as PyBullet computes it
-      (the reaction :meth:`sim.ft_sensor.SimForceTorqueSensor.true_load` reads, before the
-      sensor's noise and power-up offset), less the tool's own weight: that weight is the force
-      read at rest when the watch is made (nothing touched) and is turned with the tool since.
+    * **Wrist** (:meth:`peaks`): the load on the twin's wrist sensor before its stream, noise
+      and power-up offset (:meth:`sim.ft_sensor.SimForceTorqueSensor.sampled_true_load`, read
+      once per control step by the sensor itself), less the tool's own weight: that weight is
+      the force read at rest when the watch is made (nothing touched) and is turned with the
+      tool since.
       What remains is the force the part, the floor and the tool's accelerations put on the
       wrist; its peak magnitude (N) in each phase.
     * **Grip** (:meth:`grip_force`): the force each finger's motor applied in the last physics
@@ -334,13 +335,13 @@ class ForceWatch:
         self,
         world,  # type: ignore[no-untyped-def]
         robot_body: int,
-        ft_joint: int,
+        ft: Any,
         finger_joints: tuple[int, ...],
         part_body: PartBody,
         grip_phase: str = "tilt",
     ) -> None:
         self.world, self.p = world, world.p
-        self.robot_body, self.ft_joint, self.finger_joints = robot_body, ft_joint, finger_joints
+        self.robot_body, self.ft, self.finger_joints = robot_body, ft, finger_joints
         self.part_body, self.grip_phase = part_body, grip_phase
         self.phase: str | None = None
         self.peak: dict[str, float] = {}  #: phase -> N, largest wrist force magnitude
@@ -352,18 +353,18 @@ class ForceWatch:
 
     @classmethod
     def for_robot(cls, world, robot: Any, part_body: PartBody) -> ForceWatch:  # type: ignore[no-untyped-def]
-        """The watch of a :class:`sim.robot.SimRobot` (its ``ft_joint`` and two fingers), made
-        while the tool rests touching nothing."""
+        """The watch of a :class:`sim.robot.SimRobot` (its wrist sensor and two fingers), made
+        while the tool rests touching nothing (after the sensor's first sample)."""
         fingers = tuple(robot.gripper.finger_link(n) for n in ("finger_a", "finger_b"))
-        return cls(world, robot.body_id, robot.joint_index["ft_joint"], fingers, part_body)
+        return cls(world, robot.body_id, robot.ft, fingers, part_body)
 
     def _force(self) -> np.ndarray:
-        """The load of the tool on the sensor (N, sensor frame): PyBullet's reaction of the
-        parent on the child at ``ft_joint``, negated (as ``true_load`` has it)."""
-        return -np.asarray(self.p.getJointState(self.robot_body, self.ft_joint)[2][:3], float)
+        """The load of the tool on the sensor (N, sensor frame), noise- and offset-free, as the
+        sensor sampled it this control step (its hook runs before this watch's)."""
+        return np.asarray(self.ft.sampled_true_load()[:3], float)
 
     def _rotation(self) -> np.ndarray:
-        state = self.p.getLinkState(self.robot_body, self.ft_joint)
+        state = self.p.getLinkState(self.robot_body, self.ft.joint)
         return matrix_from_quaternion(state[5])
 
     def wrist_force(self) -> np.ndarray:

@@ -308,10 +308,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     frictions = Frictions()
     spec = given.gripper if given.gripper is not None else default_gripper()
     # the planner's model of that gripper
-    gripper = Gripper(
-        name=spec.name, finger_width=spec.pad_width, stroke=spec.stroke,
-        finger_length=spec.pad_length, finger_thickness=spec.pad_thickness,
-    )
+    gripper = Gripper.from_spec(spec)
     plan = plan_pivot(part, gripper, frictions)
     forced = False
     if not plan.pivotable:

@@ -400,29 +400,11 @@ def run_trial(
             frame = dataclasses.replace(
                 frame, center=np.array([t["x"], t["y"], 0.5 * setup.part.outer]), yaw=t["yaw"]
             )
-        def look_near(near: tuple[float, float]) -> tuple[StepResult | None, PivotFrame | None]:
-            look = Look(
-                dev,
-                [setup.part],
-                setup.layout.bin_interior(),
-                (setup.layout.bin_center[0], setup.layout.bin_center[1]),
-                near,
-                setup.look,
-            )
-            result = run_skill("look", look, world, robot, t_end, on_frame, frame_every)
-            if result is not None or look.result is None:
-                return result, None
-            d = look.result
-            seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
-            return None, dataclasses.replace(
-                frame,
-                center=np.array([d.center[0], d.center[1], 0.5 * setup.part.outer]),
-                yaw=d.yaw,
-            )
-
         early = "look"  #: the phase a failure before the Grasp is counted in
         if setup.perceive:
-            failure, looked = look_near(setup.nominal_center())
+            failure, looked = look_near(
+                setup, tw, frame, setup.nominal_center(), t_end, on_frame, frame_every, seen
+            )
             frame = looked or frame
         walls = bin_obstacles(setup.layout)
         width = dev.gripper.finger_width
@@ -447,7 +429,9 @@ def run_trial(
                 if failure is None and setup.perceive:
                     early = "look"
                     target_xy = (float(move.target.center[0]), float(move.target.center[1]))
-                    failure, looked = look_near(target_xy)
+                    failure, looked = look_near(
+                        setup, tw, frame, target_xy, t_end, on_frame, frame_every, seen
+                    )
                     frame = looked or frame
                 choice = choose(frame)
         other_end = choice.frame is not frame
@@ -542,6 +526,36 @@ def run_trial(
         )
     finally:
         world.close()
+
+
+def look_near(
+    setup: TrialSetup,
+    tw: TrialWorld,
+    frame: PivotFrame,
+    near: tuple[float, float],
+    t_end: float,
+    on_frame: Callable[[SimWorld, SimRobot], None] | None,
+    frame_every: int,
+    seen: dict[str, float],
+) -> tuple[StepResult | None, PivotFrame | None]:
+    """The wrist camera's look for the part near ``near`` (the pivot's and the regrasp's trials
+    alike): the look's failure, or ``frame`` moved to what it saw (``seen`` gets x, y, yaw);
+    (None, None) when it saw nothing."""
+    look = Look(
+        tw.dev,
+        [setup.part],
+        setup.layout.bin_interior(),
+        (setup.layout.bin_center[0], setup.layout.bin_center[1]),
+        near,
+        setup.look,
+    )
+    result = run_skill("look", look, tw.world, tw.robot, t_end, on_frame, frame_every)
+    if result is not None or look.result is None:
+        return result, None
+    d = look.result
+    seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
+    centre = np.array([d.center[0], d.center[1], 0.5 * setup.part.outer])
+    return None, dataclasses.replace(frame, center=centre, yaw=d.yaw)
 
 
 def run_skill(  # type: ignore[no-untyped-def]

@@ -37,8 +37,8 @@ from numpy.typing import NDArray
 from cell.experiments.pivot_run import (
     TrialResult,
     TrialSetup,
-    TrialWorld,
     judge_trial,
+    look_near,
     open_trial_world,
     run_skill,
 )
@@ -48,8 +48,7 @@ from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH
 from sim.world import SimWorld
-from skills.perception.look import Look
-from skills.pivot import PickFromAbove, PivotFrame
+from skills.pivot import PickFromAbove
 from skills.regrasp import Regrasp, RegraspOptions
 from skills.status import StepResult
 
@@ -251,11 +250,13 @@ def run_regrasp_trial(
         frame = setup.frame()
         seen: dict[str, float] = {}
         if setup.perceive:
-            looked = look(setup, tw, frame, t_end, on_frame, frame_every, seen)
-            if isinstance(looked, StepResult):
-                fields = judge_trial(tw, seed, looked, "look", on_frame, frame_every)
+            failed, looked = look_near(
+                setup, tw, frame, setup.nominal_center(), t_end, on_frame, frame_every, seen
+            )
+            if failed is not None:
+                fields = judge_trial(tw, seed, failed, "look", on_frame, frame_every)
                 return RegraspResult(**fields, perceived_pose=None)
-            frame = looked
+            frame = looked or frame
         regrasp = Regrasp(frame, setup.part, params, dev, options)
         if options is None or options.place_xy is None:
             place = place_for_wrist(setup, regrasp)
@@ -280,36 +281,6 @@ def run_regrasp_trial(
         )
     finally:
         world.close()
-
-
-def look(
-    setup: TrialSetup,
-    tw: TrialWorld,
-    frame: PivotFrame,
-    t_end: float,
-    on_frame: Callable[[SimWorld, SimRobot], None] | None,
-    frame_every: int,
-    seen: dict[str, float],
-) -> PivotFrame | StepResult:
-    """The wrist camera's look near the nominal pose, as the pivot's trial looks: ``frame`` moved
-    to what it saw (``seen`` gets x, y, yaw), or the look's failure."""
-    look = Look(
-        tw.dev,
-        [setup.part],
-        setup.layout.bin_interior(),
-        (setup.layout.bin_center[0], setup.layout.bin_center[1]),
-        setup.nominal_center(),
-        setup.look,
-    )
-    result = run_skill("look", look, tw.world, tw.robot, t_end, on_frame, frame_every)
-    if result is not None:
-        return result
-    if look.result is None:
-        return frame
-    d = look.result
-    seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
-    centre = np.array([d.center[0], d.center[1], 0.5 * setup.part.outer])
-    return dataclasses.replace(frame, center=centre, yaw=d.yaw)
 
 
 __all__ = [

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 from cell.catalogue import load_catalogue
 from cell.errors import UserError
 from cell.experiments.stats import wilson_interval
+from drivers.gripper_spec import default_gripper
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, plan_pivot
@@ -164,7 +165,7 @@ def prepare(args: argparse.Namespace) -> list[PartSweep]:
     rows: list[PartSweep] = []
     for name in args.part:
         part = catalogue.get(name)  # ValueError naming the catalogue for an unknown part
-        plan = plan_pivot(part, Gripper(), Frictions())
+        plan = plan_pivot(part, Gripper.from_spec(given.gripper or default_gripper()), Frictions())
         row = PartSweep(name=name, plan=plan, paper=dict(part.reference))
         if plan.pivotable:
             try:

@@ -318,6 +318,10 @@ def test_a_configured_gripper_description_is_the_one_the_trials_run(tmp_path: Pa
     assert code == 0, err
     data = json.loads(out_json.read_text())
     assert data["gripper"] == "gentle_wire"
+    # the twin's fingers are that gripper's: the Tilt's grip stays within the 2 N it can apply
+    # (a 2F-85 applies 20 N at least; its Tilt's median grip is 7-10 N)
+    grip = data["per_trial"][0]["grip_force_n"]
+    assert grip is not None and grip <= 2.0 + 0.5, grip
     # the 2F-85 refuses the same grip at load, before any trial
     args = ["pivot", "--part", "bushing", "--trials", "1", "--set",
             "skills.pivot.grip_force_n=2", "--json", str(tmp_path / "s.json")]
