@@ -96,6 +96,14 @@ def add_parser(sub: Any) -> None:
         help="part-floor friction coefficient, used exactly (not drawn); default drawn from "
         "0.25-0.6 (0.4 +-20 %% with --ideal)",
     )
+    p.add_argument(
+        "--mu-pad",
+        type=float,
+        default=None,
+        help="pad-part friction at S and H, used exactly (not drawn); default drawn from "
+        "0.2-1.0. With --mu-ground 0 it tests the paper's claim that G needs stiction where "
+        "its Eq. 8 says so (docs/pivot_in_hand.md)",
+    )
     p.add_argument("--record", type=Path, default=None, help="GIF of the first trial")
     p.add_argument("--json", type=Path, required=True, help="where to write the results")
     p.add_argument(
@@ -296,6 +304,9 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         raise PivotInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.mu_ground is not None and not (math.isfinite(args.mu_ground) and args.mu_ground >= 0):
         raise PivotInputError(f"--mu-ground: must be a finite number >= 0, got {args.mu_ground}")
+    mu_pad = getattr(args, "mu_pad", None)
+    if mu_pad is not None and not (math.isfinite(mu_pad) and mu_pad >= 0):
+        raise PivotInputError(f"--mu-pad: must be a finite number >= 0, got {mu_pad}")
     if args.record is not None and args.record.suffix.lower() != ".gif":
         raise PivotInputError(f"--record: {args.record}: the animation is written as a .gif")
     given = trial_config(getattr(args, "config", None), getattr(args, "set", None) or ())
@@ -357,6 +368,8 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     mu_ground = args.mu_ground if args.mu_ground is not None else given.mu_ground
     if mu_ground is not None:
         setup = dataclasses.replace(setup, mu_ground=mu_ground)
+    if getattr(args, "mu_pad", None) is not None:
+        setup = dataclasses.replace(setup, mu_pad=args.mu_pad)
     if given.control_hz is not None:
         setup = dataclasses.replace(
             setup, physics=with_control_rate(setup.physics, given.control_hz)
@@ -434,6 +447,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
             "gripper": setup.gripper.name,
             "ideal": setup.uncertainty.is_ideal,
             "mu_ground": setup.mu_ground,
+            "mu_pad": setup.mu_pad,
             "plan": plan.to_json(),
             "physics": setup.physics_json(),
             "wall_time_s": wall,

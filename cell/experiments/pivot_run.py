@@ -85,6 +85,7 @@ class TrialSetup:
 
     layout: CellLayout = field(default_factory=CellLayout)
     mu_ground: float | None = None  # part-floor friction, exact (None: frictions.mu_g +- 20 %)
+    mu_pad: float | None = None  # pad-part friction at S and H, exact (None: drawn)
     perceive: bool = True  # the pick starts from the wrist camera's view, not the nominal pose
     #: "nominal": near the nominal pose, perturbed; "random": anywhere on the bin floor where the
     #: part fits, up against the walls, any yaw, either end towards the robot.
@@ -257,6 +258,8 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     draws = setup.uncertainty.draw(rng, setup.frictions, setup.physics.control_hz)
     if setup.mu_ground is not None:
         draws = dataclasses.replace(draws, mu_g=setup.mu_ground)
+    if setup.mu_pad is not None:
+        draws = dataclasses.replace(draws, mu_s=setup.mu_pad, mu_h=setup.mu_pad)
     mu_s, mu_h, mu_g = draws.mu_s, draws.mu_h, draws.mu_g
     true_part = draws.true_part(setup.part)
     if setup.pose == "random":

@@ -77,6 +77,18 @@ def test_mu_ground_is_used_exactly(tmp_path: Path, capsys, monkeypatch) -> None:
     assert json.loads(out_json.read_text())["per_trial"][0]["frictions"]["G"] == 0.7
 
 
+def test_mu_pad_is_used_exactly_at_s_and_h(tmp_path: Path, capsys) -> None:
+    out_json = tmp_path / "r.json"
+    args = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "11", "--mu-pad", "0.3"]
+    code, _, err = run_cli([*args, "--json", str(out_json)], capsys)
+    assert code == 0, err
+    report = json.loads(out_json.read_text())
+    assert report["mu_pad"] == 0.3
+    trial = report["per_trial"][0]
+    assert trial["frictions"]["S"] == trial["frictions"]["H"] == 0.3
+    assert trial["draws"]["mu_s"] == trial["draws"]["mu_h"] == 0.3
+
+
 @pytest.mark.parametrize(
     ("part", "words"),
     [
@@ -142,6 +154,7 @@ def test_bad_cell_yaml_is_refused_naming_file_and_key(
     [
         (["--trials", "0"], "--trials"),
         (["--mu-ground", "-1"], "--mu-ground"),
+        (["--mu-pad", "nan"], "--mu-pad"),
         (["--record", "x.mp4"], "--record"),
         (["--la", "0.5"], "--la/--alpha"),
     ],
