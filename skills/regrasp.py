@@ -168,10 +168,14 @@ class Regrasp:
         self._pre = Pose(self.grasp.position - params.approach_distance * rot[:, 2], rot)
         self._carry = self._plan_carry(tcp_h)
         self.placed: Pose | None = None  #: the TCP's pose when the floor was felt
+        # The floor is felt by the rise against the motion (``contact_force`` above the start's
+        # reading, the held part and the turned tool's own weight in it); the guard is the
+        # motions' own. The slide's low guard read absolutely would count the tool's weight,
+        # turned 90 deg across the sensor with the part, as contact force.
         self._contact = ContactMove(
             "set down on the floor",
             dev,
-            params.descent_guard,
+            params.guard,
             lambda: self._carry.down,
             0.5 * params.approach_speed,
             params.acceleration,
