@@ -1,4 +1,4 @@
-"""The twin's wrist force-torque sensor: PyBullet's reaction at ``ft_joint``, FT300-like.
+"""The twin's wrist force-torque sensor at ``ft_joint``, FT300-like.
 
 Sign and frame convention (the :class:`drivers.ft_sensor.ForceTorqueSensor` contract, "the load
 the tool puts on the sensor"):
@@ -14,12 +14,16 @@ the tool puts on the sensor"):
   environment applies to the tool (quasi-statically); the force the tool applies to the
   environment is its negative.
 
-The simulation gives the reaction wrench of the parent on the child at ``ft_joint`` in the joint
-frame, its torque taken about the child link's centre of mass; :meth:`SimForceTorqueSensor.sample`
-negates it and moves the torque to the joint origin. That reaction is exact with the tool hanging
-straight down; turned sideways it is off by up to about 0.15 N and 0.03 N*m (about 1 % of the
-tool's weight, varying with the orientation; a PyBullet effect, with or without joint motors),
-which a bias at the working orientation removes.
+The load is computed by Newton-Euler on the links below the sensor (puck, gripper, carriages,
+pads): their weight, every contact force on them (PyBullet's contact points, normal and both
+friction directions) and their mass times the tool's acceleration (the sensor link's velocity
+differenced over a control step; the pads' own small motions and their motors' numerical jitter
+left out), torques about the joint origin; the links' rotational inertia is left out (the tool
+turns slowly). PyBullet's own joint reaction (``enableJointForceTorqueSensor``) is not
+used: in the cell's slot feed it read a bushing hanging in the hole grasp (1.53 N) as
+0.6-0.9 N, and a part left in the slot lost only 0.4 N of the reading (the check failed a feed
+that had worked) -- what the pads' lift joints carry on their motors and limits does not all
+reach it. The contact forces on the tool's links are what the pads carry, wherever it goes.
 
 Realism: by default one sample per control step (125 Hz), Gaussian noise of 0.1 N and 0.003
 N*m per axis, and a constant random offset of a few newtons that :meth:`bias` removes, as on the
@@ -55,14 +59,19 @@ class SimForceTorqueSensor:
         self._world = world
         self._p = world.p
         self._body = body_id
-        self.joint = joint_index  #: the sensor's joint (its child link is the tool's first)
-        self._p.enableJointForceTorqueSensor(body_id, joint_index, True)
-        # The child's centre of mass in the joint frame (the child link frame): the simulator
-        # reports the reaction torque about it.
-        self._com = np.asarray(self._p.getDynamicsInfo(body_id, joint_index)[3], float)
-        # As plain floats for true_load(), which runs every control step: the same double
-        # arithmetic as numpy scalars, at a fraction of their per-operation cost.
-        self._com_xyz = (float(self._com[0]), float(self._com[1]), float(self._com[2]))
+        self.joint = joint_index  #: the sensor's joint (its child link: the tool's first)
+        # The links below the sensor: its child (a link's index is its joint's) and every
+        # link after it in the chain (the tool is the chain's end: puck, gripper, pads, TCP).
+        self._links = list(range(joint_index, self._p.getNumJoints(body_id)))
+        self._link_set = frozenset(self._links)
+        self._masses = np.array(
+            [self._p.getDynamicsInfo(body_id, link)[0] for link in self._links], float
+        )
+        self._gravity = np.array([0.0, 0.0, -world.settings.gravity])
+        self._last_v: NDArray[np.float64] | None = None  #: the links' velocities last step
+        self._last_t = 0.0
+        self._cached: NDArray[np.float64] | None = None  #: the load at ``_cached_t``
+        self._cached_t = -np.inf
         rng = world.rng
         self._offset = np.concatenate(
             [
@@ -108,15 +117,43 @@ class SimForceTorqueSensor:
     def true_load(self) -> NDArray[np.float64]:
         """The noiseless, offset-free load of the tool on the sensor now (N, N*m; tool frame).
 
-        For tests and the twin's own controllers; skills use :meth:`wrench`.
+        Newton-Euler on the links below the sensor (module doc): their weight, the contact
+        forces on them, less their mass times the tool's acceleration (the sensor link's
+        velocity differenced over a control step); torques about the joint origin. For tests
+        and the twin's own controllers; skills use :meth:`wrench`.
         """
-        fx, fy, fz, tx, ty, tz = self._p.getJointState(self._body, self.joint)[2]
-        cx, cy, cz = self._com_xyz
-        # Negate (parent-on-child -> tool-on-sensor) and move the torque from the child's COM
-        # to the joint origin, T_o = T_c + r_c x F, written out (numpy.cross is slow here).
-        return -np.array(
-            [fx, fy, fz, tx + cy * fz - cz * fy, ty + cz * fx - cx * fz, tz + cx * fy - cy * fx]
+        now = self._world.clock.now()
+        if self._cached is not None and now == self._cached_t:
+            return self._cached.copy()  # once per step: a second difference would be over 0 s
+        p, body = self._p, self._body
+        states = p.getLinkStates(body, self._links, computeLinkVelocity=1)
+        dt = now - self._last_t if self._last_v is not None else 0.0
+        origin = np.asarray(states[0][4], float)
+        rotation = np.asarray(p.getMatrixFromQuaternion(states[0][5]), float).reshape(3, 3)
+        coms = np.array([st[0] for st in states], float)
+        # The tool's acceleration is the sensor link's: the pads' carriages ride their motors,
+        # whose numerical jitter (not a motion) would otherwise read as tens of newtons.
+        velocity = np.asarray(states[0][6], float)
+        acceleration = (
+            (velocity - self._last_v) / dt if dt > 0.0 and self._last_v is not None
+            else np.zeros(3)
         )
+        self._last_v, self._last_t = velocity, now
+        forces = self._masses[:, None] * (self._gravity - acceleration)[None, :]
+        force = forces.sum(axis=0)
+        torque = np.cross(coms - origin, forces).sum(axis=0)
+        for c in p.getContactPoints(bodyA=body):
+            if c[2] == body or c[3] not in self._link_set:
+                continue
+            # On A: the normal force along the normal on B (it points towards A), friction
+            # against its directions (PyBullet's convention, checked against a hanging part).
+            f = (c[9] * np.asarray(c[7], float) - c[10] * np.asarray(c[11], float)
+                 - c[12] * np.asarray(c[13], float))
+            force += f
+            torque += np.cross(np.asarray(c[5], float) - origin, f)
+        self._cached = np.concatenate([rotation.T @ force, rotation.T @ torque])
+        self._cached_t = now
+        return self._cached.copy()
 
     def sampled_true_load(self) -> NDArray[np.float64]:
         """The noiseless load (N, N*m; tool frame) at the newest sample, without a new query."""

@@ -24,7 +24,8 @@ def world_force(dev: Devices) -> NDArray[np.float64]:
 class ForcePush:
     """A push by hybrid force-position control: the arm's force mode presses ``force`` (N) along
     ``direction`` (a base-frame axis, e.g. ``(1, 0, 0)``) at most ``speed`` (m/s) and holds
-    position on every other axis; it ends on the *measured* contact -- the TCP has stood still
+    position on every other axis but the ``free`` ones, where it presses nothing and gives way to
+    what pushes it; it ends on the *measured* contact -- the TCP has stood still
     (slower than ``still_speed``) for ``settle`` s while the force against it is at least
     ``contact_ratio`` of ``force`` -- or, having gone ``reach`` m with nothing felt, without one.
 
@@ -33,6 +34,10 @@ class ForcePush:
     ends pressed against its neighbour with the configured force instead of at a guessed
     target. The commanded force is added to the one read at the start (the held part's weight
     and the sensor's offset), so only the environment's reaction counts.
+
+    A ``free`` axis is for a push into a round neighbour met off its centre line: held there, the
+    push would shove the neighbour sideways along the contact's slope; free, the pushed part
+    slides along it instead, towards the line through both centres.
     """
 
     def __init__(
@@ -47,12 +52,17 @@ class ForcePush:
         settle: float = 0.15,
         still_speed: float = 0.002,
         contact_ratio: float = 0.7,
+        free: tuple[int, ...] = (),
     ) -> None:
+        """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``."""
         d = np.asarray(direction, float)
         axis = int(np.argmax(np.abs(d)))
         if np.count_nonzero(d) != 1:
             raise ValueError(f"a force push runs along one base axis, got {direction}")
         self.dev, self.axis, self.sign = dev, axis, float(np.sign(d[axis]))
+        if axis in free or any(a not in (0, 1, 2) for a in free):
+            raise ValueError(f"free axes must be other base axes than the push's, got {free}")
+        self.free = tuple(free)
         self.force, self.speed, self.settle = force, speed, settle
         self.still_speed, self.contact_ratio = still_speed, contact_ratio
         self._reach = reach if callable(reach) else (lambda r=float(reach): r)
@@ -83,6 +93,11 @@ class ForcePush:
         wrench[self.axis] = float(-self._ref[self.axis]) + self.sign * self.force
         limits = [0.0] * 6
         limits[self.axis] = self.speed
+        for axis in self.free:
+            # Nothing pressed beyond what was read at the start: only a contact moves it.
+            selection[axis] = True
+            wrench[axis] = float(-self._ref[axis])
+            limits[axis] = self.speed
         arm.force_mode(selection, wrench, limits)
 
     def _finished(self) -> bool:

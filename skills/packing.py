@@ -159,17 +159,25 @@ class PackInBox(SequenceSkill):
             p.contact_force,
         )
 
-        def push(name: str, direction: tuple[float, float, float], reach: float) -> ForcePush:
+        def push(
+            name: str, direction: tuple[float, float, float], reach: float, free: tuple[int, ...]
+        ) -> ForcePush:
             return ForcePush(
                 name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
-                settle=p.contact_settle, still_speed=p.still_speed,
+                settle=p.contact_settle, still_speed=p.still_speed, free=free,
             )
 
-        self.floor = push("push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot)
-        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach)
-        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach)
+        self.floor = push(
+            "push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot, ()
+        )
+        # The +x pushes give way along y: the part is set down ``offset`` short along -y too, so
+        # it meets a round neighbour on +x below its centre line, and held in y it would shove
+        # the whole row off the +y wall (the twin measured 3.5 mm); free, it slides up along
+        # the neighbour instead.
+        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,))
+        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach, ())
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
-        self.push_x_again = push("push +x again", (1.0, 0.0, 0.0), p.back_off + 0.002)
+        self.push_x_again = push("push +x again", (1.0, 0.0, 0.0), p.back_off + 0.002, (1,))
 
     # --- the phases --------------------------------------------------------------------------
     def _over_place_steps(self) -> list[GuardedMotion]:

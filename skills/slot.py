@@ -108,12 +108,10 @@ class SlotParams:
     )
     view_search: float = si(0.03, "m", 0.0, 0.2, "the part may stand off the slot's centre")
     use_camera: bool = True  #: PickFromSlot finds the rim with the camera (if there is one)
-    #: 0.3: a part that came out with the gripper loses nothing, one left in the slot all of
-    #: its weight; the twin's wrist reads only 40-60 % of a part hanging in the 2F-85's grasp
-    #: (its reaction leaves out what the pads' lift joints carry, sim/gripper.py), so half the
-    #: weight failed parts that were in the slot.
+    #: A part that came out with the gripper loses nothing, one left in the slot all of its
+    #: weight; half tells them apart with the FT300's noise far below a part's weight.
     weight_check: float = si(
-        0.3, "1", 0.0, 1.0,
+        0.5, "1", 0.0, 1.0,
         "fraction of the part's weight the wrench must lose (feed) or gain (pick); 0: no check",
     )
     guard: Guard = field(default_factory=Guard)

@@ -46,8 +46,6 @@ def test_tool_weight_pulls_along_plus_tool_z_when_pointing_down(
     """The load the tool puts on the sensor: hanging straight down it is +m g along tool z."""
     settle(world)
     load = robot.ft.true_load()
-    # 0.15 % over m g: the fingers' lift joints, held by their motors, leave PyBullet's reaction
-    # a few hundredths of a newton off (a bias at the working pose removes it)
     assert load[2] == pytest.approx(TOOL_MASS * G, rel=2e-3)
     assert np.allclose(load[[0, 1, 3, 4, 5]], 0.0, atol=1e-2)
 
@@ -56,8 +54,6 @@ def test_torque_is_about_the_sensor_origin(world: SimWorld, robot: SimRobot) -> 
     """Tool horizontal: the weight's moment about the flange is m g times the tool's centre of
     mass distance along tool z.
 
-    PyBullet's reaction is off by up to about 0.15 N and 0.03 N*m here (1 % of the tool's
-    weight, depending on the orientation, with or without motors); reported as a limitation.
     The torque about the child's centre of mass instead of the flange would be 0.23 N*m off.
     """
     q = robot.arm.home_joints.copy()
@@ -125,3 +121,21 @@ def test_same_seed_same_readings() -> None:
             settle(world, 10)
             readings.append(robot.ft.wrench())
     assert np.array_equal(readings[0], readings[1])
+
+
+def test_a_part_hanging_in_the_hole_grasp_reads_its_whole_weight() -> None:
+    """What the pads carry reaches the sensor: the part hangs on the pads, the pads on their
+    lift joints (the linkage's travel) and closing joints, and the sum of the contact forces on
+    the tool's links must come out as the part's weight (the slot's and the box's weight checks
+    rest on it)."""
+    from tests.skills.twin import BIN_SPOTS, make_twin, take_hole_grasp
+
+    tw = make_twin(7)
+    try:
+        assert take_hole_grasp(tw, BIN_SPOTS[0]) is None
+        tw.settle(0.5)
+        load = tw.robot.ft.true_load()
+        part_weight = tw.part.mass * G
+        assert load[2] - TOOL_MASS * G == pytest.approx(part_weight, rel=0.1)
+    finally:
+        tw.close()

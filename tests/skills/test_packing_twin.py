@@ -68,5 +68,6 @@ def test_the_second_part_is_packed_against_the_first_within_2_mm(packed: dict) -
     second = v.parts[1]
     assert 1 in v.parts[0].neighbour_gaps and second.neighbour_gaps[0] <= 0.002
     assert second.wall_gaps["+y"] <= 0.002
-    # the first part was not pushed out of its corner by the second
+    # the first part was not pushed out of its corner by the second, along either wall
     assert v.parts[0].wall_gaps["+x"] <= 0.002
+    assert v.parts[0].wall_gaps["+y"] <= 0.002

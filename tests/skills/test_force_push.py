@@ -1,0 +1,45 @@
+"""ForcePush's command to the arm's force mode: the push's axis presses, a free axis gives way
+with nothing pressed, every other axis is held (fake devices, no physics)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from skills.force import ForcePush
+from skills.motion import Guard
+from skills.packing import PackInBox
+from tests.skills.test_slot_packing_fakes import PART, PLACE, dev, devices, push_back
+
+
+def test_a_free_axis_is_compliant_with_only_the_starting_reading_commanded() -> None:
+    d = devices()
+    push_back(d, (0.3, -0.4, -1.5))  # the held part's weight and the sensor's offset
+    push = ForcePush("push +x", dev(d), Guard(), (1, 0, 0), 6.0, 0.01, 0.01, free=(1,))
+    push.motion.tick()
+    selection, wrench, limits = d["arm"].force
+    assert selection.tolist() == [True, True, False, False, False, False]
+    # the tool applies minus the force on it: the reference, plus the push along +x only
+    assert wrench[0] == pytest.approx(-0.3 + 6.0) and wrench[1] == pytest.approx(0.4)
+    assert limits[0] == limits[1] == 0.01 and not limits[2:].any()
+
+
+def test_without_free_axes_the_push_holds_every_other_axis() -> None:
+    d = devices()
+    push = ForcePush("push +y", dev(d), Guard(), (0, 1, 0), 6.0, 0.01, 0.01)
+    push.motion.tick()
+    selection, _, _ = d["arm"].force
+    assert selection.tolist() == [False, True, False, False, False, False]
+
+
+@pytest.mark.parametrize("free", [(0,), (3,)])
+def test_a_free_axis_must_be_another_base_axis(free: tuple[int, ...]) -> None:
+    with pytest.raises(ValueError, match="free axes"):
+        ForcePush("push +x", dev(devices()), Guard(), (1, 0, 0), 6.0, 0.01, 0.01, free=free)
+
+
+def test_packing_pushes_along_x_give_way_along_y_and_the_y_push_holds_x() -> None:
+    pack = PackInBox(PLACE, PART, dev(devices()))
+    assert pack.push_x.free == (1,) and pack.push_x_again.free == (1,)
+    assert pack.push_y.free == () and pack.floor.free == ()
+    assert np.allclose(pack.place_xy, PLACE[:2])
