@@ -4,9 +4,9 @@ takes the hole grasp on the standing part exactly as it does after the pivot's T
 
 Why a baseline: the paper's claim for the pivot is that it reaches the hole grasp with less
 motion than picking the part, turning it and regrasping it. The comparison is fair only if the
-baseline runs under the same limits -- the pivot's ``approach_speed``, its ``travel_speed`` for
-moves through free space and for carrying (as the pivot's own free moves), ``acceleration``,
-guards -- and ends in the same hole grasp taken by the same :class:`Align`.
+baseline runs under the same limits -- the pivot's ``approach_speed`` (and twice it for moves
+through free space and for carrying, as the pivot's own free moves), ``acceleration``, guards
+-- and ends in the same hole grasp taken by the same :class:`Align`.
 
 Geometry (the lying part's :class:`PivotFrame`: axis ``u`` towards the open end, ``normal =
 up x u``):
@@ -254,7 +254,7 @@ class Regrasp:
             dev.move(
                 "above the part",
                 g,
-                lambda: arm.move_to(self._pre, p.travel_speed, p.acceleration),
+                lambda: arm.move_to(self._pre, 2 * p.approach_speed, p.acceleration),
             ),
             dev.move(
                 "down beside the wall",
@@ -303,7 +303,7 @@ class Regrasp:
         waypoints = [c.lifted, c.turned, c.above_floor]
         if self.options.place_xy is not None:
             waypoints.insert(1, c.carried)
-        self.dev.arm.move_path(waypoints, p.travel_speed, p.acceleration)
+        self.dev.arm.move_path(waypoints, 2 * p.approach_speed, p.acceleration)
 
     def _floor_felt(self) -> str | None:
         if not self._contact.contact:
@@ -324,7 +324,7 @@ class Regrasp:
         z = tool.rotation[:, 2]
         reach = max(float(np.hypot(z[0], z[1])), 0.3)
         back = Pose(tool.position - (b + p.tip_offset + o.back_off) / reach * z, tool.rotation)
-        arm.move_path([back, self._hand_over()], p.travel_speed, p.acceleration)
+        arm.move_path([back, self._hand_over()], 2 * p.approach_speed, p.acceleration)
 
     def _hand_over(self) -> Pose:
         """Where the back-off ends: fingers down, turned as Align turns them, ``approach_distance``

@@ -117,7 +117,7 @@ class Grasp:
         above = pre.position + p.approach_height * self.frame.up
         tool = arm.tool_pose()
         above[2] = max(above[2], float(tool.position[2]))
-        arm.move_path([Pose(above, pre.rotation), pre], p.travel_speed, p.acceleration)
+        arm.move_path([Pose(above, pre.rotation), pre], 2 * p.approach_speed, p.acceleration)
 
     # --- the close ---------------------------------------------------------------------------
     def _close(self) -> None:

@@ -72,11 +72,6 @@ class PivotParams:
     )
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP on approaches")
-    travel_speed: float = si(
-        0.25, "m/s", 0.01, 1.0,
-        "of the TCP through free space: to above the part, over the standing part, the "
-        "regrasp's carry",
-    )
     #: 0.02: with the 2F-85's 20 N grasp the Tilt holds the part at twice the 0.01 m/s a 2 N
     #: grasp needed (tuning seeds 500-509: the same successes, the Tilt in half the time; at
     #: 0.03 the light wiring duct fell from 6 to 2 of 10)

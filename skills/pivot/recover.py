@@ -125,7 +125,7 @@ class PickFromAbove(HoleGraspSkill):
         cam = camera.tool_T_camera().position
         # Optical centre straight above the predicted axis, view_height above the rim.
         target = np.array([*self.predicted_axis, self._rim_z() + p.view_height]) - rot @ cam
-        self.dev.arm.move_to(Pose(target, rot), p.travel_speed, p.acceleration)
+        self.dev.arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
 
     def _locate(self, frame: Frame, world_T_camera: Pose) -> UprightPart | None:
         camera = self.dev.camera
@@ -153,7 +153,7 @@ class PickFromAbove(HoleGraspSkill):
     def _over_wall(self) -> None:
         p = self.params
         target = np.array([*self._wall_xy(), self._rim_z() + p.clear_height + p.tip_offset])
-        self.dev.arm.move_to(Pose(target, self._rotation()), p.travel_speed, p.acceleration)
+        self.dev.arm.move_to(Pose(target, self._rotation()), 2 * p.approach_speed, p.acceleration)
 
     def _narrow(self) -> None:
         self.dev.gripper.open(self._outer - self._inner + 2.0 * self.params.wall_gap)
