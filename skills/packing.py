@@ -170,10 +170,11 @@ class PackInBox(SequenceSkill):
         self.floor = push(
             "push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot, ()
         )
-        # The +x pushes give way along y: the part is set down ``offset`` short along -y too, so
-        # it meets a round neighbour on +x below its centre line, and held in y it would shove
-        # the whole row off the +y wall (the twin measured 3.5 mm); free, it slides up along
-        # the neighbour instead.
+        # The +x pushes give way along y. Held in y, the part (set down ``offset`` short along
+        # -y too) met its round neighbour below the centre line and shoved the row off the +y
+        # wall (the twin measured 3.5 mm); free, it slides along y off the neighbour instead.
+        # A row of the twin's 12-sided parts squeezed against the +x wall still buckles off the
+        # +y wall now and then (docs/pivot_in_hand.md, cell sim).
         self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,))
         self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach, ())
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
