@@ -12,7 +12,10 @@ outer wall. Align:
 2. turns the tool about C, about the pivot plane's normal, until the fingers point straight
    down: the inner finger swings down into the hole along the inner wall, the outer one away
    from the outer wall (the part stands on its base meanwhile; the inner finger keeps it);
-3. narrows the jaws around the wall, the TCP following so that the inner pad stays at C;
+3. closes on the wall with the TCP still: the pad that meets it first slides the standing part
+   across until the other pad takes it, so the wall ends centred between the pads wherever the
+   part stood (the jaws must stall on it: else there is no wall between the fingers); then opens
+   by twice ``wall_gap`` with the inner pad held on the inner wall, the outer pad off the outer;
 4. slides down along the inner wall until the fingertips are ``wall_depth`` below the rim (the
    depth the slot feeding expects; a low force limit: a finger landing on something stops the
    arm);
@@ -118,7 +121,8 @@ ALONG_CLOSING = Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, 
 
 class Align(HoleGraspSkill):
     """The in-hand Align as a sequence of named, guarded, tickable steps: turn about the rim,
-    narrow around the wall, slide into the hole, pinch the wall, lift (module doc)."""
+    close on the wall, ease off the outer wall, slide into the hole, pinch the wall, lift (module
+    doc)."""
 
     name = "align"
     lift_step = "lift"  #: name of the last step, run once the hole grasp is taken
@@ -140,12 +144,12 @@ class Align(HoleGraspSkill):
         #: the jaws' moves end 0.2 s after the fingers stop (reset as each starts)
         self._still = Settled(dev.gripper, dev.clock, 0.2)
         outer, inner = pinched_span(part, dev.gripper.finger_width)
-        self._narrow_to = (outer - inner) + 2.0 * params.wall_gap
+        self._wall_width = outer - inner  #: m across the wall between the pads' faces
         self.turn = self._turn_about_rim()
         self.slide = CompliantPath(
             "slide into the hole", dev, params.descent_guard, self._slide_path,
             lambda path: float(np.linalg.norm(path(1.0).position - path(0.0).position)),
-            0.5 * params.approach_speed, params.acceleration,
+            params.approach_speed, params.acceleration,
             # as far as the jaws leave room: the two wall gaps
             dataclasses.replace(ALONG_CLOSING, limit=2.0 * params.wall_gap),
         )
@@ -154,7 +158,8 @@ class Align(HoleGraspSkill):
             "align",
             [
                 self.turn.motion(),
-                self._jaws_move("narrow around the wall", self._narrow),
+                self._centre_step("close on the wall", self._close_on_wall),
+                self._jaws_move("ease off the outer wall", self._ease_around_wall),
                 self.slide.motion(),
                 self._jaws_move(self.pinch_step, self._pinch),
                 dev.move(self.lift_step, g, self._lift),
@@ -204,10 +209,46 @@ class Align(HoleGraspSkill):
         self._pad = tool.position - 0.5 * self.dev.gripper.width() * self._x
         self._still.reset()
 
-    def _narrow(self) -> None:
-        self._hold_pad_here()
+    def _centre_step(self, name: str, command: Callable[[], None]) -> GuardedMotion:
+        """A jaw motion with the TCP held still: the jaws close symmetrically about it, and
+        they must stall on the wall."""
+        dev = self.dev
+        return GuardedMotion(
+            name, command, self._jaws_still, dev.arm, dev.ft, dev.clock, self.params.guard,
+            self._no_wall, Failure.MISSED,
+        )
+
+    def _jaws_still(self) -> bool:
+        return self._still()
+
+    def _no_wall(self) -> str | None:
+        """Asked while the jaws close: once still, they must have stalled on the wall."""
+        gripper = self.dev.gripper
+        if gripper.moving() or gripper.object_detected():
+            return None
+        if gripper.width() > self._wall_width - self.params.width_tolerance:
+            return None  # still closing towards it (the stall is reported once it settles)
+        return (
+            f"the jaws closed to {1e3 * gripper.width():.1f} mm without meeting the wall "
+            f"({1e3 * self._wall_width:.1f} mm): no wall between the fingers"
+        )
+
+    def _close_on_wall(self) -> None:
+        """Close on the wall with the TCP still: the pad that meets it first slides the standing
+        part across until the other pad takes it, so the wall ends centred between the pads
+        wherever the part stood -- a parallel gripper's own centring, felt by its stall."""
+        self._still.reset()
         p = self.params
-        self.dev.gripper.close(p.grip_force, p.narrow_speed, self._narrow_to)
+        self.dev.gripper.close(
+            p.grip_force, p.narrow_speed, max(0.0, self._wall_width - p.width_tolerance)
+        )
+
+    def _ease_around_wall(self) -> None:
+        """Open ``2 wall_gap`` with the inner pad held on the inner wall (the TCP follows half
+        the opening): the outer pad stands off the outer wall, the inner one keeps touching."""
+        self._hold_pad_here()
+        gripper = self.dev.gripper
+        gripper.open(gripper.width() + 2.0 * self.params.wall_gap, self.params.narrow_speed)
 
     def _follow_pad(self) -> bool:
         """Keep the inner pad where it is while the jaws move (the TCP follows half the

@@ -44,6 +44,22 @@ def dev(d: dict) -> Devices:
     return Devices(d["arm"], d["gripper"], d["ft"], d["clock"])
 
 
+def index(align: Align, name: str) -> int:
+    """The position of the step named ``name`` in the Align's sequence."""
+    return [step.name for step in align.sequence.steps].index(name)
+
+
+def nothing_at_the_pinch(d: dict, align: Align):  # type: ignore[no-untyped-def]
+    """An on_tick that leaves the wall to the close on it and nothing to the pinch."""
+    pinch = index(align, align.pinch_step)
+
+    def on_tick(i: int) -> None:
+        if align.sequence.index >= pinch:
+            d["gripper"].object_width = None
+
+    return on_tick
+
+
 def record_servo(d: dict, align: Align | None = None) -> list:
     """Every streamed target, with the step in progress and the jaw opening when it was sent."""
     targets: list = []
@@ -70,7 +86,7 @@ def test_align_turns_fingers_down_pinches_the_wall_below_the_rim_and_lifts() -> 
     assert abs(pose.rotation[:, 0] @ FRAME.normal) < 1e-9  # ... in the pivot plane
     assert d["gripper"].object_detected()
     # down along the inner wall, streamed (compliant along the closing line), then the lift
-    slides = [t for t, step, _ in targets if step == 2]
+    slides = [t for t, step, _ in targets if step == index(align, "slide into the hole")]
     assert len(slides) > 10
     assert all(np.allclose(t.position[:2], slides[0].position[:2]) for t in slides)
     slide = slides[-1]
@@ -103,28 +119,36 @@ def test_the_turn_keeps_the_rim_contact_fixed_in_the_tool_and_in_the_world() -> 
     assert abs(align.turn_angle) == pytest.approx(math.acos(float(z0 @ DOWN)))
 
 
-def test_narrowing_and_pinching_keep_the_inner_pad_on_the_wall() -> None:
+def test_the_jaws_centre_on_the_wall_then_ease_and_pinch_with_the_inner_pad_kept() -> None:
     d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
     targets = record_servo(d, align)
     result, _ = run(align, d)
     assert result.status is Status.SUCCESS
-    following = [(t, w) for t, step, w in targets if step in (1, 3)]  # narrow, pinch
-    widths = {round(w, 9) for _, w in following}
-    # the jaws went from the grasp's opening to the wall plus a gap a side, then to the pinch
-    outer, inner = pinched_span(PART, FakeGripper.finger_width)
-    narrowed = (outer - inner) + 2 * PARAMS.wall_gap
-    assert {round(OPENING, 9), round(narrowed, 9), 0.003} <= widths
-    # the TCP followed half the closing: the inner pad's face stayed where it was while the
-    # jaws moved, and the slide between the two went straight down along the wall
-    for step in (1, 3):
+    close, ease = index(align, "close on the wall"), index(align, "ease off the outer wall")
+    pinch = index(align, align.pinch_step)
+    # the close on the wall moves no arm: the jaws close symmetrically about a still TCP
+    assert not [t for t, step, _ in targets if step == close]
+    assert close + 1 == ease and not [c for c in d["arm"].commands if c[0] != "path"]
+    # then the jaws open twice the wall gap from where they stalled, and pinch
+    widths = {round(w, 9) for _, step, w in targets if step in (ease, pinch)}
+    assert {0.003, round(0.003 + 2 * PARAMS.wall_gap, 9)} <= widths
+    # the ease and the pinch keep the inner pad's face where it was while the jaws moved
+    for step in (ease, pinch):
         pads = [t.position - 0.5 * w * t.rotation[:, 0] for t, s, w in targets if s == step]
         assert len(pads) > 1
         for pad in pads:
             assert np.allclose(pad, pads[0], atol=1e-9)
-    pads = [t.position - 0.5 * w * t.rotation[:, 0] for t, w in following]
-    assert np.allclose(pads[-1][:2], pads[0][:2], atol=1e-9)
-    assert pads[-1][2] < pads[0][2] - 0.01
+
+
+def test_jaws_that_close_past_the_wall_fail_as_a_miss_before_the_slide() -> None:
+    d = devices(object_width=None)
+    align = Align(FRAME, PART, PARAMS, dev(d))
+    result, _ = run(align, d)
+    assert result.status is Status.FAILURE and result.code is Failure.MISSED
+    assert "no wall between the fingers" in result.message
+    assert align.sequence.index == index(align, "close on the wall")
+    assert not [c for c in d["arm"].commands if c[0] == "path"]  # no lift
 
 
 def test_a_grip_deeper_than_the_part_allows_stops_floor_clearance_above_the_floor() -> None:
@@ -134,29 +158,29 @@ def test_a_grip_deeper_than_the_part_allows_stops_floor_clearance_above_the_floo
     targets = record_servo(d, align)
     result, _ = run(align, d)
     assert result.status is Status.SUCCESS
-    slide = [t for t, step, _ in targets if step == 2][-1]
+    slide = [t for t, step, _ in targets if step == index(align, "slide into the hole")][-1]
     tips = slide.position[2] - params.tip_offset
     assert tips == pytest.approx(FRAME.floor_z + params.floor_clearance)
 
 
 def test_a_pinch_on_nothing_fails_before_the_lift_and_the_arm_is_not_lifted() -> None:
-    d = devices(object_width=None)
+    d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
     targets = record_servo(d, align)
-    result, _ = run(align, d)
+    result, _ = run(align, d, on_tick=nothing_at_the_pinch(d, align))
     assert result.status is Status.FAILURE
     assert not [c for c in d["arm"].commands if c[0] == "path"]  # the lift never commanded
-    slide = [t for t, step, _ in targets if step == 2][-1]
+    slide = [t for t, step, _ in targets if step == index(align, "slide into the hole")][-1]
     assert d["arm"].pose.position[2] == pytest.approx(slide.position[2])
 
 
 def test_the_pinch_is_checked_by_its_name_when_steps_are_inserted_before_it() -> None:
-    d = devices(object_width=None)
+    d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
     g = PARAMS.guard
     extra = [wait(f"pause {k}", dev(d), g, 0.01) for k in range(3)]
     align.sequence.steps[1:1] = extra  # the pinch moves three places on
-    result, _ = run(align, d)
+    result, _ = run(align, d, on_tick=nothing_at_the_pinch(d, align))
     assert result.status is Status.FAILURE and result.code is Failure.MISSED
     assert align.sequence.current == align.lift_step  # failed after the pinch, before the lift
     assert not [c for c in d["arm"].commands if c[0] == "path"]  # no lift commanded
@@ -165,17 +189,20 @@ def test_the_pinch_is_checked_by_its_name_when_steps_are_inserted_before_it() ->
 def test_a_pad_landing_on_the_rim_trips_the_descent_guard_and_stops_the_arm() -> None:
     d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
-    slide = align.sequence.steps[2]
+    slide_at = index(align, "slide into the hole")
+    slide = align.sequence.steps[slide_at]
     general = align.sequence.steps[0].guard
     assert slide.guard.max_force < general.max_force  # the descent is guarded more tightly
     push = 0.5 * (slide.guard.max_force + general.max_force)
 
     def on_tick(i: int) -> None:
-        d["ft"].value = np.array([0, 0, push if align.sequence.index == 2 else 0.0, 0, 0, 0])
+        d["ft"].value = np.array(
+            [0, 0, push if align.sequence.index == slide_at else 0.0, 0, 0, 0]
+        )
 
     result, _ = run(align, d, on_tick=on_tick)
     assert result.status is Status.FAILURE
-    assert align.sequence.index == 2
+    assert align.sequence.index == slide_at
     assert d["arm"].stops >= 1 and d["arm"].state is MotionState.STOPPED
     assert not [c for c in d["arm"].commands if c[0] == "path"]  # no lift
 
@@ -183,7 +210,8 @@ def test_a_pad_landing_on_the_rim_trips_the_descent_guard_and_stops_the_arm() ->
 def test_the_same_push_during_the_turn_is_within_its_guard() -> None:
     d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
-    slide, turn = align.sequence.steps[2], align.sequence.steps[0]
+    slide = align.sequence.steps[index(align, "slide into the hole")]
+    turn = align.sequence.steps[0]
     push = 0.5 * (slide.guard.max_force + turn.guard.max_force)
 
     def on_tick(i: int) -> None:  # along tool y: no give, so the turn is unchanged
@@ -232,9 +260,12 @@ def test_halt_mid_slide_stops_the_arm() -> None:
         d["arm"].tick()
         d["gripper"].tick()
         d["clock"].t += d["clock"].dt
-        if align.sequence.index == 2 and align.slide.progress > 0.1:
+        if align.sequence.index == index(align, "slide into the hole") and (
+            align.slide.progress > 0.1
+        ):
             break
-    assert align.sequence.index == 2 and align.slide.progress < 1.0
+    assert align.sequence.index == index(align, "slide into the hole")
+    assert align.slide.progress < 1.0
     stops = d["arm"].stops
     align.halt()
     assert d["arm"].stops == stops + 1 and d["arm"].state is MotionState.STOPPED
