@@ -123,7 +123,8 @@ class PivotParams:
         0.0005, "m", 0.0, 0.005, "the turn's centre lies inside the rim (keeps the contact)"
     )
     narrow_speed: float = si(
-        0.05, "m/s", 0.001, 0.15, "of each finger narrowing the jaws", actuator="finger_speed"
+        0.05, "m/s", 0.001, 0.15, "of each finger closing on the wall and easing off it (Align)",
+        actuator="finger_speed",
     )
     clear_height: float = si(0.03, "m", 0.0, 0.2, "above the rim for moves over the part")
     view_height: float = si(
