@@ -68,7 +68,7 @@ class SimForceTorqueSensor:
             [self._p.getDynamicsInfo(body_id, link)[0] for link in self._links], float
         )
         self._gravity = np.array([0.0, 0.0, -world.settings.gravity])
-        self._last_v: NDArray[np.float64] | None = None  #: the links' velocities last step
+        self._last_v: NDArray[np.float64] | None = None  #: the sensor link's velocity last step
         self._last_t = 0.0
         self._cached: NDArray[np.float64] | None = None  #: the load at ``_cached_t``
         self._cached_t = -np.inf

@@ -36,8 +36,8 @@ class ForcePush:
     and the sensor's offset), so only the environment's reaction counts.
 
     A ``free`` axis is for a push into a round neighbour met off its centre line: held there, the
-    push would shove the neighbour sideways along the contact's slope; free, the pushed part
-    slides along it instead, towards the line through both centres.
+    pushed part shoves the neighbour sideways along the contact's slope; free, the pushed part
+    itself gives way along that axis.
     """
 
     def __init__(

@@ -368,8 +368,8 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     mu_ground = args.mu_ground if args.mu_ground is not None else given.mu_ground
     if mu_ground is not None:
         setup = dataclasses.replace(setup, mu_ground=mu_ground)
-    if getattr(args, "mu_pad", None) is not None:
-        setup = dataclasses.replace(setup, mu_pad=args.mu_pad)
+    if mu_pad is not None:
+        setup = dataclasses.replace(setup, mu_pad=mu_pad)
     if given.control_hz is not None:
         setup = dataclasses.replace(
             setup, physics=with_control_rate(setup.physics, given.control_hz)

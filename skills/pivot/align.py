@@ -8,7 +8,7 @@ outer wall. Align:
 
 1. places the turn's centre C at the rim contact: on the inner pad's face (from the tool pose and
    the jaw opening, i.e. the fingers' own kinematics) where it crosses the inner wall that the
-   Tilt's located pivot predicts, ``align_press`` into the wall so the pad keeps touching it;
+   Tilt's located pivot predicts;
 2. turns the tool about C, about the pivot plane's normal, until the fingers point straight
    down: the inner finger swings down into the hole along the inner wall, the outer one away
    from the outer wall (the part stands on its base meanwhile; the inner finger keeps it);
@@ -214,12 +214,9 @@ class Align(HoleGraspSkill):
         they must stall on the wall."""
         dev = self.dev
         return GuardedMotion(
-            name, command, self._jaws_still, dev.arm, dev.ft, dev.clock, self.params.guard,
+            name, command, self._still, dev.arm, dev.ft, dev.clock, self.params.guard,
             self._no_wall, Failure.MISSED,
         )
-
-    def _jaws_still(self) -> bool:
-        return self._still()
 
     def _no_wall(self) -> str | None:
         """Asked while the jaws close: once still, they must have stalled on the wall."""
@@ -227,7 +224,7 @@ class Align(HoleGraspSkill):
         if gripper.moving() or gripper.object_detected():
             return None
         if gripper.width() > self._wall_width - self.params.width_tolerance:
-            return None  # still closing towards it (the stall is reported once it settles)
+            return None  # stopped short of where they were sent: something held them there
         return (
             f"the jaws closed to {1e3 * gripper.width():.1f} mm without meeting the wall "
             f"({1e3 * self._wall_width:.1f} mm): no wall between the fingers"

@@ -119,9 +119,6 @@ class PivotParams:
     align_speed: float = si(
         1.0, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
     )
-    align_press: float = si(
-        0.0005, "m", 0.0, 0.005, "the turn's centre lies inside the rim (keeps the contact)"
-    )
     narrow_speed: float = si(
         0.05, "m/s", 0.001, 0.15, "of each finger closing on the wall and easing off it (Align)",
         actuator="finger_speed",
