@@ -8,6 +8,7 @@ the driver tests connect the real ``ur_rtde`` to it.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import threading
@@ -36,10 +37,14 @@ class URAloneProcess:
         ctx = mp.get_context("fork")
         self._pipe, child = ctx.Pipe()
         self.host = host or loopback_host()
-        self._proc = ctx.Process(target=_child, args=(child, self.host, settings), daemon=True)
+        self._child_end = child
+        self._proc = ctx.Process(
+            target=_child, args=(child, self._pipe, self.host, settings), daemon=True
+        )
 
     def start(self) -> URAloneProcess:
         self._proc.start()
+        self._child_end.close()  # the child's alone now: its death reads as EOF here
         reply = self._call(("ready",), timeout=60.0)
         if isinstance(reply, Exception):
             self._proc.join(timeout=2.0)
@@ -84,10 +89,14 @@ class URAloneProcess:
         self.stop()
 
 
-def _child(pipe: Any, host: str, settings: dict[str, Any]) -> None:
+def _child(pipe: Any, parent_end: Any, host: str, settings: dict[str, Any]) -> None:
     from sim.robot import SimRobot
     from sim.world import PhysicsSettings, SimWorld
 
+    # The fork's copy of the parent's end closed, a parent that dies (even by a signal, which
+    # runs no clean-up) reads as EOF below and the emulator ends with it: left running, it held
+    # the parent's stdout and stderr open, and whoever waited on those waited for ever.
+    parent_end.close()
     pipe.recv()
     try:
         s = ControllerSettings(**settings)
@@ -110,7 +119,10 @@ def _child(pipe: Any, host: str, settings: dict[str, Any]) -> None:
     thread.start()
     pipe.send(True)
     while True:
-        message = pipe.recv()
+        try:
+            message = pipe.recv()
+        except (EOFError, OSError):  # the parent is gone
+            message = ("stop",)
         kind = message[0]
         if kind == "status":
             with lock:
@@ -134,5 +146,6 @@ def _child(pipe: Any, host: str, settings: dict[str, Any]) -> None:
             thread.join(timeout=2.0)
             servers.stop()
             world.close()
-            pipe.send(None)
+            with contextlib.suppress(OSError):
+                pipe.send(None)
             return

@@ -192,16 +192,42 @@ def test_a_process_that_lost_the_link_ends_at_once_with_its_status_and_output() 
     # close() abandons the dead interfaces and end_process skips their destructors. Leaving
     # them to the interpreter's exit instead aborted the process (terminate called, exit 134)
     # while a reconnect attempt was inside ur_rtde; disconnecting them took seconds.
+    #
+    # ur_rtde itself now and then dies by SIGSEGV right after the pull, before the driver sees
+    # the loss: its control interface's receive thread and the command that met the closed
+    # socket both run its reconnect() at once (1 child in the order of 100, on a loaded
+    # machine). Nothing of this project's runs then; such a child is run again, at most twice.
+    import signal
     import subprocess
     import sys
     from pathlib import Path
 
     bench = Path(__file__).resolve().parents[3] / "bench" / "link_loss_exit.py"
-    proc = subprocess.run([sys.executable, str(bench), "--child", "abandon"],
-                          capture_output=True, text=True, timeout=60, cwd=bench.parents[1])
+    for _ in range(3):
+        proc = subprocess.run([sys.executable, str(bench), "--child", "abandon"],
+                              capture_output=True, text=True, timeout=60, cwd=bench.parents[1])
+        if proc.returncode != -signal.SIGSEGV or "PULLED" in proc.stdout:
+            break
     assert proc.returncode == 1, proc.stderr[-2000:]
     assert "terminate called" not in proc.stderr
     assert "PULLED" in proc.stdout  # written before the end, and flushed
+
+
+def test_the_standalone_emulator_ends_with_a_parent_killed_by_a_signal() -> None:
+    # A parent that dies without clean-up (ur_rtde's SIGSEGV above, a SIGKILL) must not leave
+    # the emulator running: it holds the parent's stdout and stderr, and a caller waiting on
+    # them would wait for ever.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import os, signal; from sim.emulate.ur_standalone import URAloneProcess; "
+            "URAloneProcess().start(); print('UP', flush=True); "
+            "os.kill(os.getpid(), signal.SIGKILL)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).resolve().parents[3])
+    assert "UP" in proc.stdout, proc.stderr[-2000:]
+    assert proc.returncode == -9
 
 
 VANISHED = r"""
