@@ -16,6 +16,7 @@ device. Ctrl-C / SIGTERM during a run stop the arm, flush the log, save the stat
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -260,23 +261,27 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
 
         parse_address(args.monitor)  # a bad address is refused before anything opens
     check_config_outputs(prep.config)  # before the journal, the twin or a device is opened
+    # Nothing on disk changes until every check has passed: the journal is read, the twin or
+    # the devices and the monitor's port are opened, and only then are the journal and the
+    # logs written (a refused start keeps the run a --resume continues).
     try:
-        resume = _open_journal(prep, command, bool(getattr(args, "resume", False)))
+        plan = _plan_journal(prep, command, bool(getattr(args, "resume", False)))
     except _NothingToDo as done:
         print(str(done))
         return 0
     try:
-        backend = open_backend(prep, seed=seed, resume=resume)
+        backend = open_backend(prep, seed=seed, resume=plan.state)
     except ConfigError as exc:
-        if prep.state.journal is not None:
-            prep.state.journal.close()
         return report_config_error(exc, command)
     config = prep.config
     cycles = prep.ctx.limits.cycles
     from cell.monitor import open_session
 
     try:
-        session = open_session(prep, getattr(args, "monitor", None), command)
+        session = open_session(
+            prep, getattr(args, "monitor", None), command,
+            accepted=lambda: _open_journal(prep, plan),
+        )
     except UserError:
         backend.close()
         if prep.state.journal is not None:
@@ -429,70 +434,99 @@ class _NothingToDo(Exception):
     pass
 
 
-def _open_journal(prep: Any, command: str, resume: bool) -> Any:
-    """Open the crash-safe journal; with ``resume``, restore the cell's state from it.
+@dataclasses.dataclass
+class _JournalPlan:
+    """What the run will do with its journal once its start is accepted."""
 
-    A fresh run keeps the earlier journals beside it (``NAME.1.sqlite`` the newest, up to
-    :data:`cell.journal.KEEP_JOURNALS`) rather than deleting them, and says so. On
-    resume, a part the journal says was in the gripper cannot be re-created in the twin (nor
-    trusted on hardware): in the twin it goes back where it came from -- the bin, or for a
-    machined part the slot -- and the journal says so; on hardware the run is refused until a
-    person has done the same.
+    path: Path | None
+    resume: bool
+    state: Any = None  #: :class:`cell.journal.Resume` to continue from (None: a fresh run)
+    returned: str | None = None  #: the record of a held part put back, appended at the start
+    run: int = 1  #: the number the run gets in the journal
+
+
+def _plan_journal(prep: Any, command: str, resume: bool) -> _JournalPlan:
+    """Read the crash-safe journal and say how the run will continue; writes nothing.
+
+    On resume, the cell's state (box places filled, the slot, cycles done) is restored from the
+    journal into the run's context -- in memory only, so a start refused afterwards (a device,
+    the monitor's port) leaves the journal as it was and the next ``--resume`` finds the run.
+    A part the journal says was in the gripper cannot be re-created in the twin (nor trusted on
+    hardware): in the twin it goes back where it came from -- the bin, or for a machined part
+    the slot -- and the journal will say so; on hardware the run is refused until a person has
+    done the same.
     """
-    from cell.journal import KEEP_JOURNALS, Journal, JournalError, Resume, keep_earlier
+    from cell.journal import JournalError, Resume, read_journal
 
     path = prep.config.log.journal
     if path is None:
         if resume:
             raise UserError("--resume needs a journal: log.journal is null in the configuration")
-        return None
+        return _JournalPlan(None, False)
     p = Path(path)
     if not resume:
+        return _JournalPlan(p, False)
+    if not p.exists():
+        raise UserError(f"--resume: no journal at {p} (log.journal)")
+    try:
+        events, run = read_journal(p)
+        state = Resume.from_events(events)
+        returned = None
+        if state.in_hand is not None:
+            if command == "run":
+                where = "the bin" if state.in_hand == "bin" else "the slot (it is machined)"
+                raise UserError(
+                    f"--resume: the journal ({p}) says the gripper held a part when the cell "
+                    f"stopped; take it out and put it back in {where}, then resume"
+                )
+            returned = RETURNED_TO_BIN if state.in_hand == "bin" else RETURNED_TO_SLOT
+            state = Resume.from_events([*events, {"kind": returned, "run": run}])
+    except JournalError as exc:
+        raise UserError(f"log.journal: {exc}") from None
+    ctx = prep.ctx
+    if state.cycles_done >= ctx.limits.cycles:
+        raise _NothingToDo(
+            f"{state.cycles_done} of {ctx.limits.cycles} cycles already done (journal {p})"
+        )
+    ctx.filled = set(state.filled)
+    ctx.slot_state = state.slot
+    ctx.limits.cycles_done = state.cycles_done
+    return _JournalPlan(p, True, state, returned, run)
+
+
+def _open_journal(prep: Any, plan: _JournalPlan) -> None:
+    """Once the start is accepted: open the journal the run appends to.
+
+    A fresh run keeps the earlier journals beside it (``NAME.1.sqlite`` the newest, up to
+    :data:`cell.journal.KEEP_JOURNALS`) rather than deleting them, and says so."""
+    from cell.journal import KEEP_JOURNALS, Journal, JournalError, keep_earlier
+
+    if plan.path is None:
+        return
+    p = plan.path
+    if not plan.resume:
         kept = keep_earlier(p)
         if kept is not None:
             print(
                 f"a fresh run: the previous journal is kept as {kept} (the last {KEEP_JOURNALS} "
                 f"are kept; --resume continues one instead)"
             )
-    if resume and not p.exists():
-        raise UserError(f"--resume: no journal at {p} (log.journal)")
     try:
         journal = Journal(p)
         journal.begin_run()
-        state = Resume.from_events(journal.events()) if resume else None
+        if plan.returned is not None:
+            why = "held at the crash; the twin cannot re-create a grasp"
+            journal.append(0, 0.0, plan.returned, {"why": why})
     except JournalError as exc:
         raise UserError(f"log.journal: {exc}") from None
     prep.state.journal = journal
-    if state is None:
-        return None
-    if state.in_hand is not None:
-        if command == "run":
-            journal.close()
-            where = "the bin" if state.in_hand == "bin" else "the slot (it is machined)"
-            raise UserError(
-                f"--resume: the journal ({p}) says the gripper held a part when the cell "
-                f"stopped; take it out and put it back in {where}, then resume"
-            )
-        kind = RETURNED_TO_BIN if state.in_hand == "bin" else RETURNED_TO_SLOT
-        journal.append(
-            0, 0.0, kind, {"why": "held at the crash; the twin cannot re-create a grasp"}
+    state = plan.state
+    if state is not None:
+        print(
+            f"run {journal.run} resumes where run {journal.run - 1} of {p} stopped: "
+            f"{state.cycles_done} cycles done, box places {sorted(state.filled)} filled, "
+            f"slot {state.slot}"
         )
-        state = Resume.from_events(journal.events())
-    ctx = prep.ctx
-    ctx.filled = set(state.filled)
-    ctx.slot_state = state.slot
-    ctx.limits.cycles_done = state.cycles_done
-    if state.cycles_done >= ctx.limits.cycles:
-        journal.close()
-        raise _NothingToDo(
-            f"{state.cycles_done} of {ctx.limits.cycles} cycles already done (journal {p})"
-        )
-    print(
-        f"run {journal.run} resumes where run {journal.run - 1} of {p} stopped: "
-        f"{state.cycles_done} cycles done, box places {sorted(state.filled)} filled, "
-        f"slot {state.slot}"
-    )
-    return state
 
 
 class _Progress:

@@ -44,21 +44,11 @@ class Journal:
                 "run INTEGER NOT NULL, tick INTEGER NOT NULL, t REAL NOT NULL, "
                 "kind TEXT NOT NULL, data TEXT NOT NULL)"
             )
-            row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
-            if row is None:
+            if _schema(self._db, self.path) is None:
                 self._db.execute(
                     "INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
                 )
-            elif row[0] != str(SCHEMA_VERSION):
-                raise JournalError(
-                    f"{self.path}: journal schema {row[0]}, this build reads {SCHEMA_VERSION}"
-                )
-            last = self._db.execute("SELECT MAX(run) FROM events").fetchone()[0]
-            # Runs are counted in meta too: a run that ended before its first event still
-            # has its number, so the next run's number is never given twice.
-            row = self._db.execute("SELECT value FROM meta WHERE key='runs'").fetchone()
-            counted = int(row[0]) if row is not None else 0
-            self.run = max(counted, 0 if last is None else int(last)) + 1
+            self.run = _next_run(self._db)
         except sqlite3.DatabaseError as exc:
             raise JournalError(f"{self.path}: not a readable cell journal: {exc}") from None
 
@@ -75,18 +65,62 @@ class Journal:
 
     def events(self) -> list[dict[str, Any]]:
         try:
-            rows = self._db.execute(
-                "SELECT seq, run, tick, t, kind, data FROM events ORDER BY seq"
-            ).fetchall()
+            return _events(self._db)
         except sqlite3.DatabaseError as exc:
             raise JournalError(f"{self.path}: not a readable cell journal: {exc}") from None
-        return [
-            {"seq": s, "run": r, "tick": k, "t": t, "kind": kind, **json.loads(d)}
-            for s, r, k, t, kind, d in rows
-        ]
 
     def close(self) -> None:
         self._db.close()
+
+
+def _schema(db: sqlite3.Connection, path: Path) -> str | None:
+    """The journal's schema version (None: a new file), refused when it is another one."""
+    row = db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+    if row is not None and row[0] != str(SCHEMA_VERSION):
+        raise JournalError(f"{path}: journal schema {row[0]}, this build reads {SCHEMA_VERSION}")
+    return None if row is None else str(row[0])
+
+
+def _next_run(db: sqlite3.Connection) -> int:
+    last = db.execute("SELECT MAX(run) FROM events").fetchone()[0]
+    # Runs are counted in meta too: a run that ended before its first event still has its
+    # number, so the next run's number is never given twice.
+    row = db.execute("SELECT value FROM meta WHERE key='runs'").fetchone()
+    counted = int(row[0]) if row is not None else 0
+    return max(counted, 0 if last is None else int(last)) + 1
+
+
+def _events(db: sqlite3.Connection) -> list[dict[str, Any]]:
+    rows = db.execute("SELECT seq, run, tick, t, kind, data FROM events ORDER BY seq").fetchall()
+    return [
+        {"seq": s, "run": r, "tick": k, "t": t, "kind": kind, **json.loads(d)}
+        for s, r, k, t, kind, d in rows
+    ]
+
+
+def read_journal(path: Path) -> tuple[list[dict[str, Any]], int]:
+    """The journal's events and the number the next run would get, read without writing.
+
+    Why: a start that is refused after this read (a device that does not answer, a busy
+    monitor port) must leave the journal as it was, or the ``--resume`` that follows would not
+    find the run it continues. A journal closed cleanly has no ``-wal`` file: it is opened
+    immutable, so SQLite creates none; one left by a crash is read with its ``-wal`` (the
+    events committed there) in read-only mode."""
+    wal = Path(str(path) + "-wal")
+    mode = "mode=ro" if wal.exists() else "immutable=1"
+    try:
+        db = sqlite3.connect(f"{path.resolve().as_uri()}?{mode}", uri=True)
+        try:
+            if db.execute(
+                "SELECT COUNT(*) FROM sqlite_master WHERE name IN ('meta', 'events')"
+            ).fetchone()[0] != 2:
+                raise sqlite3.DatabaseError("no meta and events tables")
+            _schema(db, path)
+            return _events(db), _next_run(db)
+        finally:
+            db.close()
+    except sqlite3.DatabaseError as exc:
+        raise JournalError(f"{path}: not a readable cell journal: {exc}") from None
 
 
 #: How many earlier journals a fresh run keeps beside the new one (``NAME.1.sqlite`` the newest).
@@ -109,6 +143,17 @@ def keep_earlier(path: Path, keep: int = KEEP_JOURNALS) -> Path | None:
     started by mistake without ``--resume`` can still be resumed by moving ``.1`` back."""
     if not path.exists():
         return None
+    if Path(str(path) + "-wal").exists():
+        # A crashed run's events may still sit in its -wal file: fold them into the journal
+        # first, so the move below is one rename, whole or not at all, whenever it is killed.
+        try:
+            db = sqlite3.connect(path)
+            try:
+                db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+            finally:
+                db.close()
+        except sqlite3.DatabaseError as exc:
+            raise JournalError(f"{path}: not a readable cell journal: {exc}") from None
     for src, _suffix in _with_wal(numbered(path, keep)):
         src.unlink(missing_ok=True)
     for k in range(keep - 1, 0, -1):
@@ -181,4 +226,12 @@ class Resume:
         return r
 
 
-__all__ = ["KEEP_JOURNALS", "Journal", "JournalError", "JournalKind", "Resume", "keep_earlier"]
+__all__ = [
+    "KEEP_JOURNALS",
+    "Journal",
+    "JournalError",
+    "JournalKind",
+    "Resume",
+    "keep_earlier",
+    "read_journal",
+]

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -44,16 +45,32 @@ class Session:
             self.server.close()
 
 
-def open_session(prep: Any, address: str | None, command: str) -> Session:
-    """Call after the backend is open (the camera is tapped) and before the tick loop."""
+def open_session(
+    prep: Any, address: str | None, command: str, accepted: Callable[[], None] | None = None
+) -> Session:
+    """Call after the backend is open (the camera is tapped) and before the tick loop.
+
+    The monitor's port is bound first: a busy one refuses the start before ``accepted`` runs
+    (the caller's last step of the start, the journal's opening) and before the tick log or the
+    frames folder is written."""
     from cell.runner import TickLog
 
     config = prep.config
     s = config.safety
+    server = None
     if address is not None:
-        from cell.monitor.server import parse_address
+        from cell.monitor.server import MonitorServer, parse_address, warn_if_exposed
 
         host, port = parse_address(address)
+        warn_if_exposed(host, "--monitor")
+        server = MonitorServer(host, port, frames_dir=None)
+    try:
+        if accepted is not None:
+            accepted()
+    except BaseException:
+        if server is not None:
+            server.close()
+        raise
     meta = {
         "command": command,
         "backend": config.cell.backend,
@@ -86,14 +103,13 @@ def open_session(prep: Any, address: str | None, command: str) -> Session:
         prep.ctx.devices = dataclasses.replace(devices, camera=tap)
         session.frames = tap
         session.taps.append(tap.tap)
-    if address is not None:
+    if server is not None:
         from cell.monitor.live import LiveMonitor
-        from cell.monitor.server import MonitorServer, warn_if_exposed
 
-        warn_if_exposed(host, "--monitor")
         session.live = LiveMonitor(meta)
         session.live.frames = session.frames
-        session.server = MonitorServer(host, port, live=session.live, frames_dir=folder).start()
+        server.live, server.frames_dir = session.live, folder
+        session.server = server.start()
         print(f"cell {command}: monitor on {session.server.url} (read-only)", file=sys.stderr)
         sys.stderr.flush()
     return session

@@ -112,7 +112,8 @@ class MonitorServer:
         return self
 
     def close(self) -> None:
-        self.httpd.shutdown()
+        if self.thread.is_alive():  # shutdown() waits for a serve_forever() that never began
+            self.httpd.shutdown()
         self.httpd.server_close()
 
     # --- data ---------------------------------------------------------------------------------

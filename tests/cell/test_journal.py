@@ -4,7 +4,9 @@ SIGKILL in the middle of a simulated run followed by a resume that finishes the 
 from __future__ import annotations
 
 import json
+import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -12,7 +14,14 @@ from pathlib import Path
 
 import pytest
 
-from cell.journal import KEEP_JOURNALS, Journal, JournalError, Resume, keep_earlier
+from cell.journal import (
+    KEEP_JOURNALS,
+    Journal,
+    JournalError,
+    Resume,
+    keep_earlier,
+    read_journal,
+)
 
 
 def _ev(kind: str, seq: int, **data: object) -> dict:
@@ -82,6 +91,20 @@ def test_a_fresh_run_keeps_the_earlier_journals_numbered(tmp_path) -> None:
     assert (newest, oldest) == (KEEP_JOURNALS + 1, 2)  # generations 0 and 1 dropped
 
 
+def test_a_crashed_journal_is_kept_whole_with_the_events_of_its_wal(tmp_path) -> None:
+    path = tmp_path / "j.sqlite"
+    code = (
+        "import os; from cell.journal import Journal; "
+        f"j = Journal({str(path)!r}); j.begin_run(); j.append(1, 0.1, 'fed', {{}}); os._exit(9)"
+    )
+    subprocess.run([sys.executable, "-c", code], check=False, timeout=60)
+    assert Path(f"{path}-wal").exists()  # the killed run's event is in the WAL only
+    kept = keep_earlier(path)
+    assert kept is not None and not kept.with_name(kept.name + "-wal").exists()
+    assert [e["kind"] for e in read_journal(kept)[0]] == ["fed"]
+    assert not path.exists() and not Path(f"{path}-wal").exists()
+
+
 def test_a_corrupt_journal_is_an_error_naming_it_never_discarded(tmp_path) -> None:
     bad = tmp_path / "j.sqlite"
     bad.write_bytes(b"this is not a database, but somebody's file" * 100)
@@ -100,6 +123,54 @@ log: {{tick_log: {d}/ticks.jsonl, state_file: {d}/state.json, journal: {d}/journ
 
 def _cell(*args: str) -> list[str]:
     return [sys.executable, "-m", "cell.cli", *args]
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` and its bytes, but SQLite's shared-memory index (a reader
+    maps it; it holds no record)."""
+    return {
+        str(f.relative_to(folder)): f.read_bytes()
+        for f in sorted(folder.rglob("*"))
+        if f.is_file() and not f.name.endswith("-shm")
+    }
+
+
+HW_CONFIG = """\
+cell: {{backend: hw}}
+devices:
+  arm: {{host: 127.0.0.1}}
+  gripper: {{port: {d}/no_tty0}}
+  ft: {{port: {d}/no_tty1}}
+skills:
+  pivot: {{grip_force_n: 20, hold_force_n: 20}}
+  slot: {{hold_force_n: 20}}
+workflow: {{cycles: 3}}
+log: {{tick_log: {d}/ticks.jsonl, state_file: {d}/state.json, journal: {d}/journal.sqlite}}
+"""
+
+
+def test_a_run_refused_by_its_devices_leaves_the_journal_it_would_resume(tmp_path) -> None:
+    cfg = tmp_path / "hw.yaml"
+    cfg.write_text(HW_CONFIG.format(d=tmp_path))
+    journal = Journal(tmp_path / "journal.sqlite")
+    journal.begin_run()
+    for i, (kind, data) in enumerate([
+        ("picked", {"x": 0.5, "y": 0.0}), ("fed", {}), ("machined", {}),
+        ("picked_from_slot", {}), ("packed", {"place": 0}), ("cycle_done", {}),
+    ]):
+        journal.append(i, float(i), kind, data)
+    journal.close()
+    files = _files(tmp_path)
+    for extra in ([], ["--resume"]):
+        r = subprocess.run(
+            _cell("run", "--config", str(cfg), *extra), capture_output=True, text=True,
+            timeout=120, cwd=tmp_path,
+        )
+        assert r.returncode == 2, r.stdout + r.stderr
+        assert "start-up checks failed, nothing moved" in r.stderr
+        assert _files(tmp_path) == files, extra
+    events, run = read_journal(tmp_path / "journal.sqlite")
+    assert run == 2 and Resume.from_events(events).filled == [0]
 
 
 def test_cli_refuses_resume_without_or_with_a_corrupt_journal(tmp_path) -> None:
@@ -135,8 +206,31 @@ def test_sigkill_mid_run_then_resume_finishes_without_doing_anything_twice(tmp_p
         time.sleep(0.3)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    before = Resume.from_events(Journal(journal).events())
+    before = Resume.from_events(read_journal(journal)[0])
     assert before.slot in ("fed", "machined") or before.filled, before
+    # Starts refused after the journal was read (the monitor's port is taken): nothing on disk
+    # changes, fresh or resumed, so the resume below still finds run 1 where it stopped.
+    files = _files(tmp_path)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        monitor = f"127.0.0.1:{busy.getsockname()[1]}"
+        for extra in ([], ["--resume"]):
+            r = subprocess.run(
+                _cell("sim", "--config", str(cfg), "--quiet", "--monitor", monitor, *extra),
+                capture_output=True, text=True, timeout=120,
+            )
+            assert r.returncode == 2 and "cannot listen" in r.stderr, r.stderr[-2000:]
+            assert _files(tmp_path) == files, extra
+    # Resumes killed during their start-up, while the twin is built and just after.
+    for delay in (1.5, 4.0):
+        proc = subprocess.Popen(
+            _cell("sim", "--config", str(cfg), "--quiet", "--resume"),
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
     out = tmp_path / "final.json"
     r = subprocess.run(
         _cell("sim", "--config", str(cfg), "--resume", "--quiet", "--json", str(out)),
@@ -145,7 +239,7 @@ def test_sigkill_mid_run_then_resume_finishes_without_doing_anything_twice(tmp_p
         timeout=300,
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "run 2 resumes where run 1 of" in r.stdout
+    assert re.search(r"run \d+ resumes where run \d+ of", r.stdout), r.stdout
     after = Resume.from_events(Journal(journal).events())  # raises on a double feed or fill
     assert sorted(after.filled) == [0, 1] and after.cycles_done == 2
     parts = json.loads(out.read_text())["parts"]
