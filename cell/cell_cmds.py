@@ -219,6 +219,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         raise UserError(f"--record: {args.record}: the animation is written as a .gif")
     if args.parts is not None and args.parts < 0:
         raise UserError(f"--parts: must be >= 0, got {args.parts}")
+    if args.max_sim_time is not None and not args.max_sim_time > 0:
+        raise UserError(f"--max-sim-time: must be > 0 s, got {args.max_sim_time:g}")
     try:
         prep = load_prepared(args.config, args.set, fill=args.fill, parts=args.parts)
     except ConfigError as exc:
@@ -325,7 +327,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         taps=session.taps,
         monitor=session.live,
     )
-    max_time = args.max_sim_time if args.max_sim_time else 150.0 * cycles + 60.0
+    max_time = args.max_sim_time if args.max_sim_time is not None else 150.0 * cycles + 60.0
     box_png = None
     parts = None
     stills: list[Path] = []

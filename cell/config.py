@@ -469,8 +469,17 @@ def _valid_keys(model: type[BaseModel], loc: tuple[Any, ...]) -> list[str] | Non
 
 
 def validate_document(doc: LinedDocument) -> CellConfig:
-    """Typed configuration from a loaded document; :class:`ConfigError` on the first problems."""
-    data = doc.data if doc.data is not None else {}
+    """Typed configuration from a loaded document; :class:`ConfigError` on the first problems.
+
+    An empty file is refused: a configuration whose keys were lost (a file truncated, the
+    wrong path) would otherwise drive the whole default cell. ``{}`` says "the defaults"."""
+    if doc.data is None:
+        raise ConfigError(
+            doc.source, None, "",
+            "the file is empty (no keys, only comments or blanks); write `{}` to run the "
+            "shipped defaults",
+        )
+    data = doc.data
     if not isinstance(data, dict):
         raise ConfigError(doc.source, 1, "", "expected a mapping of sections at the top level")
     try:

@@ -315,3 +315,24 @@ def test_a_tree_node_asking_the_gripper_too_little_is_refused(tmp_path) -> None:
     with pytest.raises(ConfigError) as info:
         prepare(config, doc)
     assert info.value.key.endswith("grip_force_n") and "20..235 N" in info.value.reason
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "# only a comment\n"])
+def test_an_empty_configuration_is_refused_and_braces_run_the_defaults(tmp_path, text) -> None:
+    cfg = tmp_path / "cell.yaml"
+    cfg.write_text(text)
+    for command in (["tree", "--config", str(cfg)], ["sim", "--config", str(cfg)]):
+        r = _cell(*command, cwd=tmp_path)
+        assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+        assert f"{cfg}: the file is empty" in r.stderr and "`{}`" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cell.yaml"]  # nothing written
+    cfg.write_text("{}\n")
+    r = _cell("tree", "--config", str(cfg), "--out", str(tmp_path / "t"), cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+
+
+@pytest.mark.parametrize("value", ["-3", "0", "nan"])
+def test_a_duration_that_is_not_positive_is_refused(tmp_path, value) -> None:
+    r = _cell("sim", "--cycles", "1", f"--max-sim-time={value}", cwd=tmp_path)
+    assert r.returncode == 2 and "--max-sim-time: must be > 0 s" in r.stderr, r.stderr
+    assert list(tmp_path.iterdir()) == []
