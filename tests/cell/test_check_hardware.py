@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.addresses import quiet_host
 from tests.drivers.peers.ft300_peer import FT300Peer
 from tests.drivers.peers.gripper_modbus_peer import GripperModel
 from tests.drivers.peers.urcap_peer import UrcapPeer, free_port
@@ -20,7 +21,7 @@ from tests.drivers.peers.urcap_peer import UrcapPeer, free_port
 @pytest.fixture
 def peers():
     model = GripperModel()
-    urcap = UrcapPeer(model)
+    urcap = UrcapPeer(model, quiet_host())  # the URCap is on the arm's host
     ft = FT300Peer().start()
     yield urcap, ft
     urcap.stop()
@@ -42,7 +43,7 @@ def _config(tmp_path: Path, urcap_port: int, ft_port: str, rtde_host: str) -> Pa
 def test_check_hardware_table_against_peers(tmp_path, peers) -> None:
     urcap, ft = peers
     out = tmp_path / "check.json"
-    cfg = _config(tmp_path, urcap.port, ft.port, "127.0.0.1")
+    cfg = _config(tmp_path, urcap.port, ft.port, quiet_host())
     t0 = time.monotonic()
     r = subprocess.run(
         [
@@ -66,14 +67,14 @@ def test_check_hardware_table_against_peers(tmp_path, peers) -> None:
     assert rows["2F-85"]["ok"], rows["2F-85"]  # activated through the URCap socket
     assert rows["FT300"]["ok"], rows["FT300"]
     assert float(rows["FT300"]["details"]["stream_rate_hz"]) > 80.0
-    assert not rows["UR5"]["ok"] and "127.0.0.1:30004" in rows["UR5"]["address"]
+    assert not rows["UR5"]["ok"] and f"{quiet_host()}:30004" in rows["UR5"]["address"]
     assert not rows["D435"]["ok"] and "no RealSense camera" in rows["D435"]["error"]
     assert "2 of 4 failed" in r.stdout
     assert elapsed < 60.0  # bounded retries, no storm
 
 
 def test_check_hardware_with_nothing_there_names_every_address(tmp_path) -> None:
-    cfg = _config(tmp_path, free_port(), str(tmp_path / "no_tty"), "127.0.0.1")
+    cfg = _config(tmp_path, free_port(), str(tmp_path / "no_tty"), quiet_host())
     r = subprocess.run(
         [sys.executable, "-m", "cell.cli", "check-hardware", "--config", str(cfg)],
         capture_output=True,
@@ -81,5 +82,5 @@ def test_check_hardware_with_nothing_there_names_every_address(tmp_path) -> None
         timeout=120,
     )
     assert r.returncode == 1 and "4 of 4 failed" in r.stdout
-    assert "127.0.0.1:30004" in r.stdout and "no_tty" in r.stdout
+    assert f"{quiet_host()}:30004" in r.stdout and "no_tty" in r.stdout
     assert "Traceback" not in r.stderr

@@ -11,6 +11,7 @@ import pytest
 
 from cell.assemble import prepare
 from cell.config import config_from_text, default_config_path, load_config, schema
+from tests.addresses import quiet_host
 from trees.registry import REGISTRY
 from trees.yaml_lines import ConfigError
 
@@ -247,14 +248,14 @@ def test_cli_run_refuses_the_sim_backend_and_devices_that_fail_their_checks(tmp_
     assert r.returncode == 2 and "needs `backend: hw`" in r.stderr and "Traceback" not in r.stderr
     hw = tmp_path / "hw.yaml"
     hw.write_text(
-        "cell:\n  backend: hw\ndevices:\n  arm: {host: 127.0.0.1}\n"
+        f"cell:\n  backend: hw\ndevices:\n  arm: {{host: {quiet_host()}}}\n"
         f"  gripper: {{port: {tmp_path}/no_tty0}}\n  ft: {{port: {tmp_path}/no_tty1}}\n"
         "skills:\n  pivot: {grip_force_n: 20, hold_force_n: 20}\n  slot: {hold_force_n: 20}\n"
     )
     r = _cell("run", "--config", str(hw), cwd=tmp_path)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "start-up checks failed, nothing moved" in r.stderr
-    for device in ("UR5 at 127.0.0.1:30004", "no_tty0", "no_tty1", "D435"):
+    for device in (f"UR5 at {quiet_host()}:30004", "no_tty0", "no_tty1", "D435"):
         assert device in r.stderr, device
 
 

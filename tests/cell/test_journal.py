@@ -22,6 +22,7 @@ from cell.journal import (
     keep_earlier,
     read_journal,
 )
+from tests.addresses import quiet_host
 
 
 def _ev(kind: str, seq: int, **data: object) -> dict:
@@ -138,7 +139,7 @@ def _files(folder: Path) -> dict[str, bytes]:
 HW_CONFIG = """\
 cell: {{backend: hw}}
 devices:
-  arm: {{host: 127.0.0.1}}
+  arm: {{host: {host}}}
   gripper: {{port: {d}/no_tty0}}
   ft: {{port: {d}/no_tty1}}
 skills:
@@ -151,7 +152,7 @@ log: {{tick_log: {d}/ticks.jsonl, state_file: {d}/state.json, journal: {d}/journ
 
 def test_a_run_refused_by_its_devices_leaves_the_journal_it_would_resume(tmp_path) -> None:
     cfg = tmp_path / "hw.yaml"
-    cfg.write_text(HW_CONFIG.format(d=tmp_path))
+    cfg.write_text(HW_CONFIG.format(d=tmp_path, host=quiet_host()))
     journal = Journal(tmp_path / "journal.sqlite")
     journal.begin_run()
     for i, (kind, data) in enumerate([

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import cell
+from tests.addresses import quiet_host
 from tests.drivers.peers.urcap_peer import free_port
 
 SHIPPED = Path(cell.__file__).resolve().parent / "data" / "bushing_cell.yaml"
@@ -58,7 +59,7 @@ def _hw_config(tmp_path: Path) -> Path:
     cfg.write_text(
         "cell:\n  backend: hw\n"
         "devices:\n"
-        "  arm: {host: 127.0.0.1, connect_timeout_s: 0.5}\n"
+        f"  arm: {{host: {quiet_host()}, connect_timeout_s: 0.5}}\n"
         f"  gripper: {{transport: urcap, urcap_port: {free_port()}, timeout_s: 0.5}}\n"
         f"  ft: {{port: {tmp_path / 'no_tty'}, stale_after_s: 0.5}}\n"
         "skills:\n  pivot: {grip_force_n: 20, hold_force_n: 20}\n  slot: {hold_force_n: 20}\n"
@@ -98,7 +99,7 @@ def test_cell_run_refuses_on_the_devices_not_on_pybullet(tmp_path: Path) -> None
     assert r.returncode == 2, r.stdout + r.stderr
     assert "cell run: error:" in r.stderr
     assert "start-up checks failed, nothing moved" in r.stderr
-    assert "127.0.0.1:30004" in r.stderr and "no_tty" in r.stderr
+    assert f"{quiet_host()}:30004" in r.stderr and "no_tty" in r.stderr
     _clean(r)
 
 
@@ -108,5 +109,5 @@ def test_cell_check_hardware_reports_every_device_without_pybullet(tmp_path: Pat
     assert "4 of 4 failed" in r.stdout
     for device in ("UR5", "2F-85", "FT300", "D435"):
         assert device in r.stdout
-    assert "127.0.0.1:30004" in r.stdout
+    assert f"{quiet_host()}:30004" in r.stdout
     _clean(r)

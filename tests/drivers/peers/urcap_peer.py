@@ -21,9 +21,10 @@ _SETTABLE = ("ACT", "GTO", "ATR", "POS", "SPE", "FOR")
 
 
 class UrcapPeer:
-    """The URCap socket on ``127.0.0.1`` and a free port (``port``); :meth:`stop` joins."""
+    """The URCap socket on ``host`` (``127.0.0.1`` by default) and a free port (``port``);
+    :meth:`stop` joins."""
 
-    def __init__(self, model: GripperModel) -> None:
+    def __init__(self, model: GripperModel, host: str = "127.0.0.1") -> None:
         self.model = model
         self.silent = False
         self.lines: list[str] = []
@@ -56,7 +57,7 @@ class UrcapPeer:
             daemon_threads = False
             block_on_close = True  # server_close() joins the connection threads
 
-        self._server = Server(("127.0.0.1", 0), Handler)
+        self._server = Server((host, 0), Handler)
         self.host, self.port = self._server.server_address[:2]
         self._thread = threading.Thread(target=self._server.serve_forever,
                                         kwargs={"poll_interval": 0.05}, name="urcap-peer",
