@@ -149,7 +149,7 @@ class Align(HoleGraspSkill):
         self.slide = CompliantPath(
             "slide into the hole", dev, params.descent_guard, self._slide_path,
             lambda path: float(np.linalg.norm(path(1.0).position - path(0.0).position)),
-            params.approach_speed, params.acceleration,
+            params.slide_speed, params.acceleration,
             # as far as the jaws leave room: the two wall gaps
             dataclasses.replace(ALONG_CLOSING, limit=2.0 * params.wall_gap),
         )

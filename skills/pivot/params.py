@@ -112,12 +112,13 @@ class PivotParams:
     )
     tilt_timeout: float = si(20.0, "s", 1.0, 600.0, "the longest the arc may take")
     settle: float = si(0.3, "s", 0.0, 5.0, "to let the standing part come to rest")
-    #: 1.0 rad/s (57 deg/s) and ``narrow_speed`` 0.05 m/s: the standing part waits free
-    #: between the Tilt and the hole grasp (Sec. IV-B: it must stand on its own meanwhile), and
-    #: the less it waits the less it drifts (tuning seeds 500-509, five parts: 34 of 50 against
-    #: 30 at 0.5 rad/s and 0.02 m/s).
+    #: 2.0 rad/s (115 deg/s), ``narrow_speed`` 0.05 m/s and ``slide_speed`` 0.1 m/s: the
+    #: standing part waits free between the Tilt and the hole grasp (Sec. IV-B: it must stand on
+    #: its own meanwhile), and the less it waits the less it drifts and the sooner a pad touches
+    #: it again (tuning seeds 510-529, five parts: 72 of 100 against 63 at 1.0 rad/s and
+    #: 0.05 m/s; fingers at 0.1 m/s took the bushing from 20 to 15 of 20).
     align_speed: float = si(
-        1.0, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
+        2.0, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
     )
     narrow_speed: float = si(
         0.05, "m/s", 0.001, 0.15, "of each finger closing on the wall and easing off it (Align)",
@@ -131,6 +132,10 @@ class PivotParams:
         0.08, "m", 0.0, 0.3, "the standing part may be off its predicted place (recovery)"
     )
     wall_gap: float = si(0.004, "m", 0.0, 0.02, "between each pad and the wall before the pinch")
+    slide_speed: float = si(
+        0.1, "m/s", 0.001, 0.5,
+        "of the slide into the hole, the pads a wall gap off each face (Align)",
+    )
     lift_height: float = si(0.05, "m", 0.0, 0.3, "the lift after Align")
     release: float = si(0.004, "m", 0.0, 0.03, "the jaws ease before Align turns the gripper")
     #: m the fingertips reach below the rim for the hole grasp; in the cell, the slot's
