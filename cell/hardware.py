@@ -297,6 +297,11 @@ def open_hardware(prep: Any) -> HardwareBackend:
     # The driver works in the configured description's widths and tip travel.
     if hasattr(opened["gripper"], "spec"):
         opened["gripper"].spec = prep.gripper
+    # Each motion's force-torque limit is also checked against every FT300 sample on the
+    # sensor's reader thread, which stops the arm itself: a long tick cannot delay the stop.
+    limits = getattr(opened["ft"], "limits", None)  # the FT300 has one; a test's fake may not
+    if limits is not None:
+        limits.connect_stop(opened["arm"].stop)
     devices = Devices(opened["arm"], opened["gripper"], opened["ft"], clock, opened["camera"])
     machine = TimedMachine(clock, config.workflow.machining_time_s)
     return HardwareBackend(devices, machine, opened)

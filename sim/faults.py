@@ -458,6 +458,9 @@ class FaultyFT:
 
     def __init__(self, inner: ForceTorqueSensor, injector: FaultInjector) -> None:
         self.inner, self.injector = inner, injector
+        #: the sensor's own limit guard: it sees the samples, not the spikes injected on reading
+        #: (those the tick's guards catch)
+        self.limits = getattr(inner, "limits", None)
 
     def _check_link(self) -> None:
         inj = self.injector

@@ -43,6 +43,7 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.limit_guard import LimitGuard
 from sim.world import SimWorld
 
 FORCE_NOISE = 0.1  #: N, standard deviation per force axis
@@ -88,6 +89,9 @@ class SimForceTorqueSensor:
         self._period = 0.0  #: s between samples; 0: one every control step
         self._next = -np.inf  #: s (clock) of the next sample on the stream's grid
         self._resolution = np.zeros(6)  #: N, N*m per count; 0: not rounded
+        #: the running motion's limits, checked against each sample as it is taken, as the
+        #: FT300's reader does (:class:`drivers.limit_guard.LimitGuard`)
+        self.limits = LimitGuard(world.clock.now)
         world.after_step(self.sample)
 
     def configure(
@@ -177,6 +181,7 @@ class SimForceTorqueSensor:
         self._newest = reading
         self._recent.append(reading)
         self._stamp = now
+        self.limits.feed(reading - self._zero, now)
 
     def wrench(self) -> NDArray[np.float64]:
         """Newest ``[Fx, Fy, Fz, Tx, Ty, Tz]`` (N, N*m) in the tool frame, bias removed."""

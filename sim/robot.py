@@ -65,6 +65,7 @@ class SimRobot:
         home = HOME_JOINTS if home_joints is None else np.asarray(home_joints, float)
         arm_joints = [self.joint_index[name] for name in ARM_JOINTS]
         self.arm = SimArm(world, self.body_id, arm_joints, self.ft, home_joints=home)
+        self.ft.limits.connect_stop(self.arm.stop)  # a sample over a motion's limit stops it
         self.arm.reset_joints(home)
         self.gripper.reset_width(self.gripper.stroke)
 

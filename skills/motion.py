@@ -5,6 +5,11 @@ A :class:`GuardedMotion` wraps one command (a callable that starts it) and a com
 ``tick()`` never blocks: it checks the wrench and the clock, then polls. On a guard trip it stops
 the arm at once and fails with the reason; the gripper keeps its state (dropping a part is rarely
 the safer choice).
+
+A tick can be long, so the motion also arms its force and torque limits on the sensor's own
+:class:`drivers.limit_guard.LimitGuard` (where the sensor has one: the FT300's reader and the
+twin's sensor do), which compares every sample as it arrives and stops the arm itself; the
+tick then reports that trip. The check in the tick stays as the second layer.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from drivers.devices import Devices
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
+from drivers.limit_guard import LimitGuard
 from skills.status import RUNNING, Failure, SkillInputError, Status, StepResult
 
 #: The cell's abort limits where a configuration gives none (its ``safety`` section defaults to
@@ -77,13 +83,30 @@ class GuardedMotion:
         self.arm, self.ft, self.clock, self.guard = arm, ft, clock, guard
         self._t0: float | None = None
         self.peak_force = 0.0
+        limits = getattr(ft, "limits", None)
+        self._limits = limits if isinstance(limits, LimitGuard) else None
+        self._token: int | None = None
 
     def start(self) -> None:
         self._t0 = self.clock.now()
         self.peak_force = 0.0
+        if self._limits is not None:  # armed before the command: no sample goes unchecked
+            self._limits.disarm(self._token)
+            self._token = self._limits.arm(self.name, self.guard.max_force, self.guard.max_torque)
         self._command()
 
+    def _disarm(self) -> None:
+        if self._limits is not None:
+            self._limits.disarm(self._token)
+            self._token = None
+
     def tick(self) -> StepResult:
+        result = self._guarded_tick()
+        if result.status is not Status.RUNNING:
+            self._disarm()
+        return result
+
+    def _guarded_tick(self) -> StepResult:
         try:
             return self._tick()
         except (DeviceError, TimeoutError, SkillInputError) as exc:
@@ -100,6 +123,11 @@ class GuardedMotion:
     def _tick(self) -> StepResult:
         if self._t0 is None:
             self.start()
+        trip = self._limits.trip() if self._limits is not None else None
+        if trip is not None and self._token is not None and trip.name == self.name:
+            self.arm.stop()  # stopped already by the trip; again in case its stop failed
+            self.peak_force = max(self.peak_force, trip.force)
+            return StepResult(Status.FAILURE, trip.describe(), Failure.FORCE_TORQUE)
         w = self.ft.wrench()
         force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
         self.peak_force = max(self.peak_force, force)
@@ -132,6 +160,7 @@ class GuardedMotion:
 
     def halt(self) -> None:
         """Stop what this motion started (idempotent)."""
+        self._disarm()
         if self._t0 is not None:
             self.arm.stop()
 

@@ -28,6 +28,7 @@ from drivers.ft300.protocol import (
     stop_stream_bytes,
 )
 from drivers.health import CheckResult, DeviceError, backoff_delays
+from drivers.limit_guard import LimitGuard
 
 DEVICE = "FT300"
 READ_WAIT = 0.02  #: s the reader waits for bytes before it looks at its stop flag again
@@ -50,7 +51,9 @@ class FT300:
     each sample and its arrival time on the thread that took it: the reader, or a caller of
     :meth:`wrench` that found the newest sample stale).
 
-    Use :meth:`start` / :meth:`stop` or ``with FT300(...) as ft:``.
+    :attr:`limits` is the running motion's force-torque limit, compared with every sample on
+    the thread that took it (:class:`drivers.limit_guard.LimitGuard`; connect the arm's stop to
+    it). Use :meth:`start` / :meth:`stop` or ``with FT300(...) as ft:``.
     """
 
     def __init__(
@@ -84,6 +87,8 @@ class FT300:
         self._stopping = threading.Event()
         self._first = threading.Event()
         self._reader_error: str | None = None
+        #: the running motion's limits, checked against every sample as it arrives
+        self.limits = LimitGuard()
 
     # -- life cycle ------------------------------------------------------------------------
 
@@ -237,7 +242,10 @@ class FT300:
             self._stamps.append(now)
             self._newest = samples[-1]
             self._stamp = now
+            zero = self._zero
         self._first.set()
+        for s in samples:  # outside the lock: a trip stops the arm, which takes a while
+            self.limits.feed(s - zero, now)
         if self._on_sample is not None:
             for s in samples:
                 self._on_sample(s, now)

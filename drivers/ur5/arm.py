@@ -47,11 +47,13 @@ How each command maps onto the controller, and why:
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any, TypeVar, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,6 +64,8 @@ from drivers.health import CheckResult, DeviceError, backoff_delays
 from drivers.pose import Pose
 from drivers.ur5.dashboard import DashboardClient
 from drivers.ur5.rtde_adapter import RTDE_PORT, RTDEAdapter, URRTDEAdapter
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 log = logging.getLogger(__name__)
 
@@ -186,6 +190,19 @@ class _PathJob:
 LINK_SETTLE = 0.25
 
 
+def _serialized(method: F) -> F:
+    """One caller at a time in the driver: the force-torque guard stops the arm from the
+    sensor's reader thread while the tick may be sending the next command, and neither this
+    driver's state nor ur_rtde's interfaces may be entered twice at once."""
+
+    @functools.wraps(method)
+    def locked(self: UR5Arm, *args: Any, **kwargs: Any) -> Any:
+        with self._cmd:
+            return method(self, *args, **kwargs)
+
+    return cast(F, locked)
+
+
 def _spawn_thread(fn: Callable[[], None]) -> None:
     threading.Thread(target=fn, name="ur5-reconnect", daemon=True).start()
 
@@ -207,6 +224,7 @@ class UR5Arm:
         dashboard: DashboardClient | None = None,
         spawn: Callable[[Callable[[], None]], None] = _spawn_thread,
     ) -> None:
+        self._cmd = threading.RLock()  #: see _serialized
         self._rtde = adapter
         self._clock = clock or WallClock()
         self.settings = settings or UR5Settings()
@@ -405,6 +423,7 @@ class UR5Arm:
             return "the ur_rtde control script is not running on the controller", False
         return None
 
+    @_serialized
     def status(self) -> ArmStatus:
         """State of the last commanded motion; a live safety condition or a lost link is a
         FAULT whatever the motion was (and stays latched until the next command)."""
@@ -496,6 +515,7 @@ class UR5Arm:
 
     # --- reading -------------------------------------------------------------------------
 
+    @_serialized
     def tool_pose(self) -> Pose:
         """Measured TCP pose in the base frame (``getActualTCPPose``), m and rad.
 
@@ -504,6 +524,7 @@ class UR5Arm:
             raise DeviceError(DEVICE, self.address, self._link_message())
         return vector_to_pose(self._rtde.tcp_pose())
 
+    @_serialized
     def joint_positions(self) -> NDArray[np.float64]:
         """Measured joint angles (rad), base to wrist 3 (``getActualQ``)."""
         if self._link_lost:
@@ -565,6 +586,7 @@ class UR5Arm:
         if self._send(what, call):
             self._latch(MotionState.MOVING)
 
+    @_serialized
     def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:
         """Start a straight-line move to ``pose`` (``moveL`` asynchronous; m/s, m/s^2)."""
         _check_limits(speed, acceleration)
@@ -574,6 +596,7 @@ class UR5Arm:
         self._mode, self._goal, self._goal_q = "path", pose, None
         self._start_async("moveL", lambda: self._rtde.move_l(target, speed, acceleration))
 
+    @_serialized
     def move_path(self, waypoints: Sequence[Pose], speed: float, acceleration: float) -> None:
         """Start a straight-line path through ``waypoints`` (one ``moveL`` over the list,
         blended at the intermediate waypoints)."""
@@ -616,6 +639,7 @@ class UR5Arm:
 
         self._spawn(upload)  # off the tick: ur_rtde blocks until the new script runs
 
+    @_serialized
     def move_joints(self, q: Sequence[float], speed: float, acceleration: float) -> None:
         """Start a joint-space move to ``q`` (``moveJ`` asynchronous; rad/s, rad/s^2)."""
         _check_limits(speed, acceleration)
@@ -626,6 +650,7 @@ class UR5Arm:
         self._mode, self._goal, self._goal_q = "joints", None, goal
         self._start_async("moveJ", lambda: self._rtde.move_j(target, speed, acceleration))
 
+    @_serialized
     def servo(self, target: Pose) -> None:
         """Stream the TCP target for the next control step: one ``servoL`` per call with
         ``time`` = one control period (the caller calls once per tick)."""
@@ -641,6 +666,7 @@ class UR5Arm:
             self.last_servo_target = target
             self._latch(MotionState.MOVING)
 
+    @_serialized
     def force_mode(
         self,
         selection: Sequence[bool],
@@ -674,6 +700,7 @@ class UR5Arm:
             self._rtde.force_mode_stop()
         self._mode = "hold"
 
+    @_serialized
     def stop(self) -> None:
         """Decelerate to standstill and drop the motion; a running motion ends STOPPED, a
         finished or faulted one keeps its state. Idempotent: a second call sends nothing.
@@ -701,6 +728,7 @@ class UR5Arm:
 
     # --- start-up and recovery -----------------------------------------------------------
 
+    @_serialized
     def recover(self) -> None:
         """After a protective stop whose cause was inspected: close the popup, unlock the stop
         on the dashboard and restart the control script. Blocking; not for a tick."""
@@ -729,6 +757,7 @@ class UR5Arm:
         if self.settings.watchdog_hz and not self._rtde.set_watchdog(self.settings.watchdog_hz):
             raise DeviceError(DEVICE, self.address, "the controller refused the watchdog")
 
+    @_serialized
     def check(self) -> CheckResult:
         """Start-up check: link, robot mode, safety status, control script; controller version
         and serial from the dashboard when there is one. Never moves the arm."""
@@ -773,6 +802,7 @@ class UR5Arm:
             DEVICE, self.address, not problems, details, "; ".join(problems) or None
         )
 
+    @_serialized
     def close(self) -> None:
         """Stop, then drop the links (shutdown path); no further reconnect attempt starts. A
         control link ur_rtde has seen drop is abandoned, not disconnected: see

@@ -247,6 +247,8 @@ class ControllerLog:
 
     commands: list[tuple[float, str]] = field(default_factory=list)
     stops: list[tuple[str, float]] = field(default_factory=list)  # (stopl|stopj, deceleration)
+    #: time.monotonic() of each stop's arrival in the controller's cycle (for latency benches)
+    stop_times: list[float] = field(default_factory=list)
     uploads: int = 0
     watchdog_trips: int = 0
     protective_stops: list[str] = field(default_factory=list)
@@ -279,6 +281,10 @@ class URController:
         self._protective_reason = ""
         self._unlock = False
         self._publish()
+
+    def _log_stop(self, stop: tuple[str, float]) -> None:
+        self.log.stops.append(stop)
+        self.log.stop_times.append(time.monotonic())
 
     # --- thread-safe surface --------------------------------------------------------------
 
@@ -538,7 +544,7 @@ class URController:
             if prog.mode == "force":
                 prog.mode = "idle"
             b.stop()
-            self.log.stops.append(("stopl", 10.0))
+            self._log_stop(("stopl", 10.0))
         elif cmd == 8:
             b.zero_ft()
         elif cmd == 24:  # servoL: the script runs servoj on get_inverse_kin(pose)
@@ -548,7 +554,7 @@ class URController:
             a = float(self._in(inputs, prog, "float", 0))
             prog.mode = "idle"
             b.stop()
-            self.log.stops.append(("stopl", a))
+            self._log_stop(("stopl", a))
         elif cmd in (33, 34):
             self._stop_cmd(prog, inputs)
         elif cmd == 35:
@@ -603,13 +609,13 @@ class URController:
             prog.stop_type = 1  # the script sets stopl for every async stop
             speed = self._stop_speed(linear=True)
             self.backend.stop()
-            self.log.stops.append(("stopl", a))
+            self._log_stop(("stopl", a))
             prog.stopper = _Op("stop", end=self.t + max(self.dt, speed / max(a, 1e-9)))
             self._async(prog, 0)
         else:
             kind = "stopl" if prog.stop_type == 1 else "stopj"
             self.backend.stop()
-            self.log.stops.append((kind, a))
+            self._log_stop((kind, a))
 
     def _stop_speed(self, linear: bool) -> float:
         if linear:

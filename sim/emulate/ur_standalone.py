@@ -69,6 +69,11 @@ class URAloneProcess:
     def protective_stop(self, reason: str = "injected") -> None:
         self._call(("protective", reason))
 
+    def stop_times(self) -> list[float]:
+        """``time.monotonic()`` (the machine's clock, the same in every process) of each stop
+        command as the emulated controller's cycle took it."""
+        return list(self._call(("stop_times",)))
+
     def requested_frequencies(self) -> list[float]:
         return list(self._call(("requested",)))
 
@@ -139,6 +144,9 @@ def _child(pipe: Any, parent_end: Any, host: str, settings: dict[str, Any]) -> N
         elif kind == "protective":
             controller.raise_protective_stop(message[1])
             pipe.send(None)
+        elif kind == "stop_times":
+            with lock:
+                pipe.send(list(controller.log.stop_times))
         elif kind == "requested":
             pipe.send([f for f, _ in servers.rtde.requested])
         elif kind == "stop":

@@ -579,3 +579,33 @@ def test_a_silent_link_that_still_looks_connected_is_lost_after_the_data_timeout
         clock.t += 0.008
     st = arm.status()
     assert st.state is MotionState.FAULT and "RTDE data stale" in st.message
+
+
+def test_a_stop_from_the_sensor_s_thread_waits_for_the_command_in_flight() -> None:
+    """The force-torque guard stops the arm from the FT300's reader thread: the driver lets one
+    caller in at a time, so that stop neither interleaves with the tick's command inside
+    ur_rtde nor is lost -- it follows the command and ends the motion it started."""
+    import threading
+
+    arm, rtde, _ = make()
+    inside, release = threading.Event(), threading.Event()
+    plain_move_l = rtde.move_l
+
+    def slow_move_l(*args: object) -> bool:
+        inside.set()
+        release.wait(2.0)
+        return plain_move_l(*args)  # type: ignore[arg-type]
+
+    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    tick = threading.Thread(target=arm.move_to, args=(goal_at(rtde), 0.1, 0.5))
+    tick.start()
+    assert inside.wait(2.0)
+    guard = threading.Thread(target=arm.stop)
+    guard.start()
+    guard.join(0.2)
+    assert guard.is_alive() and "stop_l" not in rtde.names()  # waits for the command
+    release.set()
+    tick.join(2.0)
+    guard.join(2.0)
+    assert rtde.names()[-2:] == ["move_l", "stop_l"]
+    assert arm.status().state is MotionState.STOPPED

@@ -1,0 +1,189 @@
+"""How soon a force over a motion's limit stops the arm, whatever the tick is doing.
+
+The real drivers of the cell's process -- the UR5 through ``ur_rtde``, the FT300 through its
+serial protocol -- against the emulated devices: the UR controller emulator in its own process
+(``sim/emulate/ur_standalone.py``, real time, the twin's arm) and the FT300 emulator streaming at
+100 Hz over a serial device server's TCP port (``sim/emulate/ft300_stream.py``). Each injection
+starts a guarded ``moveL`` (``skills.motion.arm_motion`` under the shipped 80 N / 8 N*m limits),
+then steps the wrist force to 100 N at a random moment 0.15-0.6 s into it. Every other injection
+lands inside a long tick: the tick thread is busy in Python for 1.3 s (the longest tick measured
+on the emulated cell) and never reads the wrench meanwhile.
+
+Latency: from the first stream sample over the limit leaving the FT300 emulator to the stop
+command taken by the emulated controller's cycle, both stamped with ``time.monotonic()`` (one
+clock for every process of the machine, the one the emulator's real-time loop runs on). The stop
+comes from the cell's process (the FT300 driver's reader thread, :mod:`drivers.limit_guard`);
+nothing inside the emulators stops the arm.
+
+    python bench/guard_latency.py [--injections 60] [--seed 0] [--json F]
+
+Target: p99 at most 20 ms, none over 30 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+LIMIT_N, LIMIT_NM = 80.0, 8.0  #: the shipped safety limits (cell/defaults: safety section)
+STEP_N = 100.0
+WEIGHT = np.array([0.0, 0.0, -12.5, 0.0, 0.0, 0.0])  #: the tool's load at rest
+BUSY_S = 1.3
+
+
+class StepWrist:
+    """The FT300 emulator's load: the tool's weight, plus a force step when injected. Records
+    when the first sample with the step was taken for the stream (the stream thread)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.step = False
+        self.first_over: float | None = None
+
+    def inject(self) -> None:
+        with self._lock:
+            self.step, self.first_over = True, None
+
+    def clear(self) -> None:
+        with self._lock:
+            self.step = False
+
+    def wrench(self) -> NDArray[np.float64]:
+        with self._lock:
+            if not self.step:
+                return WEIGHT.copy()
+            if self.first_over is None:
+                self.first_over = time.monotonic()
+            return WEIGHT + np.array([0.0, 0.0, STEP_N, 0.0, 0.0, 0.0])
+
+
+def busy(seconds: float) -> None:
+    """A tick that plans: pure Python for ``seconds``, holding the GIL as the planner's sweeps
+    do between their numpy calls."""
+    end = time.monotonic() + seconds
+    x = 0
+    while time.monotonic() < end:
+        for i in range(2000):
+            x += i * i
+    del x
+
+
+def percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(values), q)) if values else float("nan")
+
+
+def summary(values: list[float]) -> dict[str, float | int]:
+    return {
+        "n": len(values),
+        "median_ms": round(statistics.median(values), 2) if values else float("nan"),
+        "p99_ms": round(percentile(values, 99), 2),
+        "max_ms": round(max(values), 2) if values else float("nan"),
+    }
+
+
+def run(injections: int, seed: int) -> dict[str, object]:
+    from drivers.arm import MotionState
+    from drivers.clock import WallClock
+    from drivers.ft300 import FT300
+    from drivers.pose import Pose
+    from drivers.ur5.arm import UR5Arm, UR5Settings
+    from sim.emulate.ft300_stream import FT300Emulator
+    from sim.emulate.ur_standalone import URAloneProcess
+    from skills.motion import Guard, arm_motion
+    from skills.status import Failure, Status
+
+    rng = random.Random(seed)
+    wrist = StepWrist()
+    emu = URAloneProcess().start()
+    fte = FT300Emulator(wrist, listen=("127.0.0.1", 0), seed=seed).start()
+    arm = UR5Arm.connect(emu.host, settings=UR5Settings())
+    ft = FT300(fte.port, stale_after=0.2)
+    latencies: dict[str, list[float]] = {"quiet": [], "in a long tick": []}
+    missed: list[str] = []
+    try:
+        ft.start()
+        time.sleep(0.3)
+        ft.bias()
+        ft.limits.connect_stop(arm.stop)  # as cell/hardware.py connects them
+        clock = WallClock()
+        home = arm.tool_pose()
+        for k in range(injections):
+            kind = "in a long tick" if k % 2 else "quiet"
+            goal = Pose(home.position + np.array([0.0, 0.08 if k % 4 < 2 else -0.08, 0.0]),
+                        home.rotation)
+            motion = arm_motion("moveL", arm, ft, clock, Guard(LIMIT_N, LIMIT_NM, 10.0),
+                                lambda g=goal: arm.move_to(g, 0.05, 0.5))
+            stops_before = len(emu.stop_times())
+            delay = rng.uniform(0.15, 0.6)
+            result = motion.tick()  # starts the move, arms the limits
+            timer = threading.Timer(delay, wrist.inject)
+            timer.start()
+            if kind == "in a long tick":
+                busy(BUSY_S)
+            deadline = time.monotonic() + delay + 2.0
+            while result.status is Status.RUNNING and time.monotonic() < deadline:
+                time.sleep(0.008)
+                result = motion.tick()
+            timer.join()
+            stop_times = emu.stop_times()[stops_before:]
+            first = wrist.first_over
+            wrist.clear()
+            if result.code is not Failure.FORCE_TORQUE or first is None or not stop_times:
+                missed.append(f"{k}: {result.status.name} {result.message}")
+            else:
+                after = [t for t in stop_times if t >= first]
+                if after:
+                    latencies[kind].append(1000.0 * (after[0] - first))
+                else:
+                    missed.append(f"{k}: no stop after the step's first sample")
+            # Let the stop end and the reading fall back before the next one.
+            t_end = time.monotonic() + 1.0
+            while arm.status().state is MotionState.MOVING and time.monotonic() < t_end:
+                time.sleep(0.008)
+            time.sleep(0.1)
+            back = arm_motion("back", arm, ft, clock, Guard(LIMIT_N, LIMIT_NM, 10.0),
+                              lambda: arm.move_to(home, 0.1, 0.5))
+            r = back.tick()
+            while r.status is Status.RUNNING:
+                time.sleep(0.008)
+                r = back.tick()
+    finally:
+        ft.stop()
+        arm.close()
+        fte.close()
+        emu.stop()
+    every = latencies["quiet"] + latencies["in a long tick"]
+    out: dict[str, object] = dict(summary(every))
+    out["by_kind"] = {kind: summary(v) for kind, v in latencies.items()}
+    out["missed"] = missed
+    out["limit_n"], out["step_n"], out["busy_tick_s"] = LIMIT_N, STEP_N, BUSY_S
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--injections", type=int, default=60)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args()
+    out = run(args.injections, args.seed)
+    print(json.dumps(out, indent=2))
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
