@@ -7,7 +7,8 @@ serial protocol -- against the emulated devices: the UR controller emulator in i
 starts a guarded ``moveL`` (``skills.motion.arm_motion`` under the shipped 80 N / 8 N*m limits),
 then steps the wrist force to 100 N at a random moment 0.15-0.6 s into it. Every other injection
 lands inside a long tick: the tick thread is busy in Python for 1.3 s (the longest tick measured
-on the emulated cell) and never reads the wrench meanwhile.
+on the emulated cell) and never reads the wrench meanwhile. The interpreter's thread switch
+interval is the one ``cell run`` sets on hardware (``cell.hardware.SWITCH_INTERVAL_S``).
 
 Latency: from the first stream sample over the limit leaving the FT300 emulator to the stop
 command taken by the emulated controller's cycle, both stamped with ``time.monotonic()`` (one
@@ -93,6 +94,7 @@ def summary(values: list[float]) -> dict[str, float | int]:
 
 
 def run(injections: int, seed: int) -> dict[str, object]:
+    from cell.hardware import SWITCH_INTERVAL_S
     from drivers.arm import MotionState
     from drivers.clock import WallClock
     from drivers.ft300 import FT300
@@ -103,6 +105,7 @@ def run(injections: int, seed: int) -> dict[str, object]:
     from skills.motion import Guard, arm_motion
     from skills.status import Failure, Status
 
+    sys.setswitchinterval(SWITCH_INTERVAL_S)  # as cell run does on hardware
     rng = random.Random(seed)
     wrist = StepWrist()
     emu = URAloneProcess().start()

@@ -24,6 +24,7 @@ from drivers.machine import TimedMachine
 from trees.yaml_lines import ConfigError
 
 DEVICES = ("arm", "gripper", "ft", "camera")
+SWITCH_INTERVAL_S = 0.0005  #: the interpreter's thread switch interval on hardware (s)
 _ADDRESS = {
     "arm": lambda d: f"{d.arm.host}:30004",
     "gripper": lambda d: (
@@ -246,8 +247,9 @@ def open_hardware(prep: Any) -> HardwareBackend:
     # The drivers' reader threads (FT300 stream, gripper poll, camera feed) wake on their line
     # and then wait for the interpreter; with the default 5 ms switch interval, beside the tick
     # loop and each other, the FT300's samples reached the guards more than 50 ms apart
-    # (`cell run` against `cell emulate`). 0.5 ms bounds that wait.
-    sys.setswitchinterval(0.0005)
+    # (`cell run` against `cell emulate`). 0.5 ms bounds that wait; it also bounds how long the
+    # FT300's reader waits to stop the arm on a sample over a limit (bench/guard_latency.py).
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     clock = WallClock()
     opened: dict[str, Any] = {}
     problems: list[str] = []
