@@ -8,6 +8,7 @@ twin's simulation time or monotonic wall time, so timeouts mean the same on both
 
 from __future__ import annotations
 
+import heapq
 import json
 import os
 import signal
@@ -296,6 +297,9 @@ def _detection(d: Any) -> dict[str, Any]:
     }
 
 
+LONGEST_KEPT = 5  #: the longest ticks a paced run reports
+
+
 class Interrupted(Exception):
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -311,12 +315,13 @@ class RunResult:
     signum: int | None = None
     #: paced runs (`cell run`): the wall-clock period between tick starts (ms): median, p99,
     #: max, the jitter |period - 1/control_hz| at the median, p99 and max, and the periods
-    #: skipped after stalls (the loop resynchronises instead of bursting)
-    tick_period_ms: dict[str, float] | None = None
+    #: skipped after stalls (the loop resynchronises instead of bursting), the p99.9, and the
+    #: longest tree ticks with the leaf each ended on
+    tick_period_ms: dict[str, Any] | None = None
 
 
-def _period_stats(starts: list[float], period: float, skipped: int = 0
-                  ) -> dict[str, float] | None:
+def _period_stats(starts: list[float], period: float, skipped: int = 0,
+                  longest: list[tuple[float, int, str]] | None = None) -> dict[str, Any] | None:
     if len(starts) < 3:
         return None
     d = np.diff(np.asarray(starts)) * 1e3
@@ -326,7 +331,13 @@ def _period_stats(starts: list[float], period: float, skipped: int = 0
         "skipped_periods": skipped,
         "period_median_ms": round(float(np.median(d)), 3),
         "period_p99_ms": round(float(np.percentile(d, 99)), 3),
+        "period_p999_ms": round(float(np.percentile(d, 99.9)), 3),
         "period_max_ms": round(float(d.max()), 3),
+        # the longest tree ticks and the leaf each ended on: where a long period comes from
+        "longest_ticks": [
+            {"tick": n, "ms": round(1e3 * dt, 1), "leaf": leaf}
+            for dt, n, leaf in sorted(longest or [], reverse=True)
+        ],
         "jitter_median_ms": round(float(np.median(j)), 3),
         "jitter_p99_ms": round(float(np.percentile(j, 99)), 3),
         "jitter_max_ms": round(float(j.max()), 3),
@@ -374,6 +385,7 @@ class TickLoop:
         status = "out of time"
         starts: list[float] = []  # wall time of each tick's start (paced runs)
         skipped = 0  # periods skipped after stalls (paced runs)
+        longest: list[tuple[float, int, str]] = []  # a min-heap of the longest tree ticks
         try:
             self.root.setup_with_descendants()
             next_wall = time.monotonic()
@@ -388,7 +400,15 @@ class TickLoop:
                     starts.append(time.monotonic())
                 self.state.tick, self.state.time = tick, clock.now() - t_start
                 n_events, n_aborts = len(self.state.events), len(self.state.aborts)
+                t_tick = time.monotonic()
                 self.root.tick_once()
+                if self.realtime:
+                    spent = time.monotonic() - t_tick
+                    if len(longest) < LONGEST_KEPT or spent > longest[0][0]:
+                        tip = self.root.tip()
+                        entry = (spent, tick, tip.name if tip is not None else "")
+                        (heapq.heappush if len(longest) < LONGEST_KEPT else heapq.heapreplace)(
+                            longest, entry)
                 extra: dict[str, Any] = {}
                 if len(self.state.events) > n_events:
                     extra["events"] = self.state.events[n_events:]
@@ -440,7 +460,7 @@ class TickLoop:
                 signal.signal(s, h)
         return RunResult(
             status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal,
-            _period_stats(starts, self.period, skipped) if self.realtime else None,
+            _period_stats(starts, self.period, skipped, longest) if self.realtime else None,
         )
 
 

@@ -262,6 +262,12 @@ def test_after_a_stall_the_paced_loop_skips_the_missed_periods_instead_of_bursti
     assert len(burst) <= 4, [round((t - stall_end) * 1e3, 1) for t in starts[3:]]
     stats = result.tick_period_ms
     assert stats is not None and stats["skipped_periods"] >= 5
+    # the stall is named: the longest tick first, with the leaf it ended on
+    longest = stats["longest_ticks"]
+    assert longest[0]["ms"] >= 190 and longest[0]["leaf"] == "root"
+    assert all(t["ms"] < 100 for t in longest[1:])
+    assert len(longest) == 5 and longest[0]["ms"] >= longest[-1]["ms"]
+    assert stats["period_p99_ms"] <= stats["period_p999_ms"] <= stats["period_max_ms"]
 
 
 # ------------------------------------------------------------------------------ CellState
