@@ -16,5 +16,8 @@ class Clock(Protocol):
 class WallClock:
     """Monotonic wall time, for hardware."""
 
+    #: time passes while a tick computes: long work goes off the tick (skills/offtick.py)
+    realtime = True
+
     def now(self) -> float:
         return time.monotonic()

@@ -28,6 +28,7 @@ from py_trees.behaviour import Behaviour
 from drivers.events import EventKind, SlotState
 from drivers.health import DeviceError
 from skills.home import go_home, put_back
+from skills.offtick import OffTick, runs_in_real_time
 from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
@@ -223,19 +224,28 @@ class PlanPick(Behaviour):
         self.bb.register_key(key="/part/target", access=common.Access.WRITE)
         self.bb.register_key(key="/cell/bin_empty", access=common.Access.WRITE)
         self.bb.set("/cell/bin_empty", False)
-        #: the clearance sweeps (tens of milliseconds a part) are spread over ticks, one part
-        #: a tick, the leaf RUNNING meanwhile: no tick waits for the whole bin's
+        #: the clearance sweeps (tens to hundreds of milliseconds a part) run off the tick on
+        #: hardware (skills/offtick.py); in the twin they are spread over ticks, one part a
+        #: tick; the leaf is RUNNING meanwhile either way
         self._work: Iterator[None] | None = None
+        self._job: OffTick[None] | None = None
         self._pending: tuple | None = None
         self._found: tuple[dict, dict] = ({}, {})
 
     def initialise(self) -> None:
-        self._work, self._pending = None, None
+        self._work, self._pending, self._job = None, None, None
 
     def terminate(self, new_status: Status) -> None:
-        self._work = None
+        self._work, self._job = None, None  # a worker still running finishes unread
 
     def update(self) -> Status:
+        if self._job is not None:
+            if not self._job.done():
+                self.feedback_message = "plan pick: checking where the pivot's gripper goes"
+                return Status.RUNNING
+            self._job = None
+            assert self._pending is not None
+            return self._choose(*self._pending, *self._found)
         if self._work is not None:
             if next(self._work, StopIteration) is not StopIteration:
                 self.feedback_message = "plan pick: checking where the pivot's gripper goes"
@@ -275,7 +285,12 @@ class PlanPick(Behaviour):
             return Status.FAILURE
         self._pending = (usable, dets, left, skipped)
         self._found = ({}, {})
-        self._work = self._clearances(usable, dets, left, *self._found)
+        work = self._clearances(usable, dets, left, *self._found)
+        if runs_in_real_time(self.ctx.devices.clock):
+            self._job = OffTick("plan pick", lambda: _exhaust(work), background=True)
+            self._job.start()
+        else:
+            self._work = work
         self.feedback_message = "plan pick: checking where the pivot's gripper goes"
         return Status.RUNNING
 
@@ -364,6 +379,11 @@ class PlanPick(Behaviour):
                     "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
                 }
             )
+
+
+def _exhaust(work: Iterator[None]) -> None:
+    for _ in work:
+        pass
 
 
 def _target_frame(bb: Any) -> PivotFrame:

@@ -647,3 +647,38 @@ def test_plan_pick_spreads_its_sweeps_over_ticks(ctx) -> None:
     node2.stop(Status.INVALID)
     settle(node2)
     assert node2.status == Status.SUCCESS
+
+
+@pytest.mark.parametrize("realtime", [False, True])
+def test_plan_pick_sweeps_off_the_tick_where_time_runs_on_and_inline_in_the_twin(
+    ctx, monkeypatch, realtime: bool
+) -> None:
+    """On hardware's clock the clearance sweeps run on a worker thread (a tick must come round
+    every period); on the twin's they run on the tick, one part a tick (simulated time stands
+    still while it computes). Either way the same part and end are chosen."""
+    import threading
+
+    from drivers.clock import WallClock
+
+    if realtime:
+        ctx = dataclasses.replace(ctx, devices=dataclasses.replace(ctx.devices, clock=WallClock()))
+    bb = blackboard()
+    walled = lying(0.283, 0.069, np.radians(165))
+    free = lying(0.47, 0.07, -np.pi / 2)
+    bb.set("/part/detections", [walled, free])
+    bb.set("/part/seen", walled)
+    swept_on: list[str] = []
+    plain = lv.choose_end
+
+    def spy(*args, **kwargs):  # type: ignore[no-untyped-def]
+        swept_on.append(threading.current_thread().name)
+        return plain(*args, **kwargs)
+
+    monkeypatch.setattr(lv, "choose_end", spy)
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.SUCCESS
+    tgt = bb.get("/part/target")
+    assert tgt["detection"] is free and tgt["frame"].u[1] == pytest.approx(1.0)
+    expected = "off-tick plan pick" if realtime else threading.current_thread().name
+    assert swept_on == [expected, expected]
