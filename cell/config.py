@@ -96,8 +96,8 @@ class ArmDevice(_Section):
         None, gt=0.0, le=500.0,
         description="arm ur_rtde's watchdog: the controller stops the control script (and the "
         "arm) when the cell has not polled it for 1/hz s -- a dead process or a lost link. Off "
-        "by default: some ticks still take up to 1.3 s (planning), which a watchdog faster than "
-        "that would trip",
+        "by default: the start-up (device checks, the gripper's calibration) polls the arm less "
+        "often than every 100 ms, which a 10 Hz watchdog trips",
     )
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
