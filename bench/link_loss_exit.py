@@ -35,6 +35,7 @@ def child(mode: str) -> None:
 
     emu = URAloneProcess(script_start_delay=0.15).start()
     arm = UR5Arm.connect(emu.host, settings=UR5Settings(watchdog_hz=5.0))
+    arm.start_watchdog()  # as cell run does once its ticks start
     for _ in range(25):  # polled as the tick loop does
         arm.status()
         time.sleep(0.008)

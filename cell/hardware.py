@@ -209,6 +209,7 @@ class HardwareBackend:
     machine: Any
     opened: dict[str, Any] = field(default_factory=dict)
     name: str = "hw"
+    watchdog_started: bool = False
 
     @property
     def clock(self) -> Any:
@@ -217,7 +218,17 @@ class HardwareBackend:
     def step(self) -> None:
         """Poll the arm once per tick even when no motion runs: it is the heartbeat that lets a
         controller-side watchdog (`devices.arm.watchdog_hz`) stop the arm if this process dies
-        or the link drops. The drivers run their own I/O; the tick loop paces wall time."""
+        or the link drops. The watchdog is armed after the first tick, not at start-up (the
+        checks and the gripper's calibration poll the arm less often than it needs). The
+        drivers run their own I/O; the tick loop paces wall time."""
+        if not self.watchdog_started:
+            self.watchdog_started = True
+            start = getattr(self.devices.arm, "start_watchdog", None)
+            if start is not None:
+                try:
+                    start()
+                except DeviceError as exc:  # the run goes on as without one, and says so
+                    print(f"warning: no controller watchdog: {exc}", file=sys.stderr)
         self.devices.arm.status()
 
     def judge(self, kind: str, data: dict[str, Any]) -> dict[str, Any] | None:

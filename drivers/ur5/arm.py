@@ -259,8 +259,9 @@ class UR5Arm:
             2.0,
             self.settings.reconnect_max_delay,
         )
-        if self.settings.watchdog_hz:
-            self._rtde.set_watchdog(self.settings.watchdog_hz)
+        #: the watchdog is armed by start_watchdog(), once the start-up is over: the checks
+        #: and the gripper's calibration poll the arm less often than a 10 Hz watchdog needs
+        self._watchdog_on = False
 
     @classmethod
     def connect(
@@ -344,7 +345,7 @@ class UR5Arm:
     def _attempt_reconnect(self) -> None:
         try:
             ok, cause = bool(self._rtde.reconnect()), "reconnect refused"
-            if ok and self.settings.watchdog_hz:  # a fresh script: arm its watchdog again
+            if ok and self._watchdog_on:  # a fresh script: arm its watchdog again
                 ok = bool(self._rtde.set_watchdog(self.settings.watchdog_hz))
                 cause = "the controller refused the watchdog after the reconnect"
         except Exception as e:  # whatever ur_rtde raises, the attempt failed
@@ -405,7 +406,7 @@ class UR5Arm:
             # running, no watchdog) and the control interface is the worker's.
             uploading = self._job is not None
             running = uploading or self._rtde.is_program_running()
-            if self.settings.watchdog_hz and not uploading:
+            if self._watchdog_on and not uploading:
                 self._rtde.kick_watchdog()
         except Exception as e:  # ur_rtde raises RuntimeError on a dead socket
             self._lose_link(f"{type(e).__name__}: {e}")
@@ -624,7 +625,7 @@ class UR5Arm:
         job = _PathJob(self._clock.now())
         self._job = job
         self._latch(MotionState.MOVING)
-        watchdog = self.settings.watchdog_hz
+        watchdog = self.settings.watchdog_hz if self._watchdog_on else None
 
         def upload() -> None:
             try:
@@ -753,7 +754,20 @@ class UR5Arm:
         self._stop_sent, self._deferred = False, None
         self._latch(MotionState.IDLE)
 
+    @_serialized
+    def start_watchdog(self) -> None:
+        """Arm ur_rtde's watchdog at ``settings.watchdog_hz`` (if set): from now on the
+        controller stops the control script, and the arm, when :meth:`status` is not polled
+        that often (the tick loop polls it every tick). Call it when the ticks start, not
+        before: the start-up does not poll that often. Raises :class:`DeviceError` when the
+        controller refuses it."""
+        if self.settings.watchdog_hz and not self._watchdog_on:
+            self._watchdog_on = True
+            self._arm_watchdog()
+
     def _arm_watchdog(self) -> None:
+        if not self._watchdog_on:
+            return
         if self.settings.watchdog_hz and not self._rtde.set_watchdog(self.settings.watchdog_hz):
             raise DeviceError(DEVICE, self.address, "the controller refused the watchdog")
 

@@ -8,6 +8,7 @@ import pytest
 from cell import hardware
 from cell.assemble import prepare
 from cell.config import config_from_text
+from drivers.devices import Devices
 from drivers.health import CheckResult, DeviceError
 from trees.yaml_lines import ConfigError
 
@@ -187,7 +188,26 @@ def test_the_arms_watchdog_is_off_unless_configured_and_then_reaches_the_driver(
     seen: list[object] = []
     monkeypatch.setattr(UR5Arm, "connect",
                         classmethod(lambda cls, host, **kw: seen.append(kw["settings"])))
-    for text, hz in (("", None), ("devices:\n  arm:\n    watchdog_hz: 2\n", 2.0)):
+    for text, hz in (("", None), ("devices:\n  arm:\n    watchdog_hz: 2\n", 2.0),
+                     ("devices:\n  arm:\n    watchdog_hz: null\n", None)):
         prep = _prep("cell:\n  backend: hw\n" + FORCES + text)
         hardware._open_arm(prep.config.devices, prep.layout, None)
         assert seen[-1].watchdog_hz == hz  # type: ignore[attr-defined]
+
+
+def test_the_watchdog_is_armed_on_the_first_tick_not_during_the_start_up() -> None:
+    """The start-up polls the arm less often than a 10 Hz watchdog needs: the backend arms it
+    once, on its first step, and polls the arm every step after."""
+    from drivers.ur5.arm import UR5Arm, UR5Settings
+    from tests.drivers.ur5.recording_adapter import FakeClock, RecordingAdapter
+
+    rtde = RecordingAdapter()
+    arm = UR5Arm(rtde, FakeClock(), UR5Settings(watchdog_hz=10.0), spawn=lambda f: f())
+    assert "set_watchdog" not in rtde.names(include_reads=True)  # connected, not armed
+    backend = hardware.HardwareBackend(Devices(arm, None, None, None), None)  # type: ignore[arg-type]
+    for _ in range(3):
+        backend.step()
+    names = rtde.names(include_reads=True)
+    assert names.count("set_watchdog") == 1
+    assert names.index("set_watchdog") < names.index("kick_watchdog")
+    assert names.count("kick_watchdog") == 3

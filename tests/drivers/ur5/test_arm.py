@@ -465,13 +465,18 @@ def test_force_mode_during_a_move_stops_the_move_first() -> None:
     assert rtde.names()[-2:] == ["force_mode_stop", "move_l"]
 
 
-def test_watchdog_is_armed_and_kicked_each_status_poll_when_configured() -> None:
+def test_watchdog_is_armed_when_started_and_kicked_each_status_poll_when_configured() -> None:
     arm, rtde, _ = make(UR5Settings(watchdog_hz=5.0))
-    assert rtde.calls[0] == ("set_watchdog", (5.0,))
+    arm.status()  # the start-up: connected and polled, not armed yet
+    assert "set_watchdog" not in rtde.names() and "kick_watchdog" not in rtde.names()
+    arm.start_watchdog()
+    arm.start_watchdog()  # once
+    assert rtde.args("set_watchdog") == [(5.0,)]
     for _ in range(3):
         arm.status()
     assert rtde.names().count("kick_watchdog") == 3
     arm2, rtde2, _ = make()
+    arm2.start_watchdog()
     arm2.status()
     assert "kick_watchdog" not in rtde2.names() and "set_watchdog" not in rtde2.names()
 

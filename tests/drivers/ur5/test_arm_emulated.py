@@ -142,6 +142,7 @@ def test_a_path_does_not_block_the_tick_and_ends_done(connect) -> None:
 def test_recover_returns_with_the_script_running_and_the_watchdog_armed(
         connect, emulator: URAloneProcess) -> None:
     arm = connect(UR5Settings(watchdog_hz=5.0))
+    arm.start_watchdog()
     assert run_until(arm, lambda: emulator.status()["watchdog_hz"] == 5.0, 1.0)
     emulator.protective_stop("test")
     assert run_until(arm, lambda: arm.status().protective_stop, 1.0) is MotionState.FAULT
@@ -165,6 +166,7 @@ def test_after_a_cable_pull_the_link_comes_back_at_the_configured_rate_with_the_
     settings = UR5Settings(frequency=50.0, watchdog_hz=5.0, reconnect_first_delay=0.2,
                            reconnect_attempts=12, reconnect_max_delay=1.0)
     arm = connect(settings)
+    arm.start_watchdog()
     before = len(emulator.requested_frequencies())
     emulator.pull_cable()
     st = None
