@@ -262,6 +262,7 @@ class UR5Arm:
         #: the watchdog is armed by start_watchdog(), once the start-up is over: the checks
         #: and the gripper's calibration poll the arm less often than a 10 Hz watchdog needs
         self._watchdog_on = False
+        self._last_command = -float("inf")  #: clock time of the newest command written
 
     @classmethod
     def connect(
@@ -406,7 +407,12 @@ class UR5Arm:
             # running, no watchdog) and the control interface is the worker's.
             uploading = self._job is not None
             running = uploading or self._rtde.is_program_running()
-            if self._watchdog_on and not uploading:
+            # A kick writes the command register (with 0): sent within a controller cycle of
+            # a command, it overwrote the command before the script read it (a force mode that
+            # never began, on the UR emulator). A command written since refreshes the watchdog
+            # itself, so the kick waits two cycles after one.
+            quiet = self._clock.now() - self._last_command >= 2.0 / self.settings.frequency
+            if self._watchdog_on and not uploading and quiet:
                 self._rtde.kick_watchdog()
         except Exception as e:  # ur_rtde raises RuntimeError on a dead socket
             self._lose_link(f"{type(e).__name__}: {e}")
@@ -559,6 +565,7 @@ class UR5Arm:
 
     def _send(self, what: str, call: Callable[[], bool]) -> bool:
         """Run one controller call; a refusal or an exception is a FAULT naming the call."""
+        self._last_command = self._clock.now()
         try:
             ok = call()
         except Exception as e:
@@ -688,6 +695,7 @@ class UR5Arm:
     def _stop_motion(self) -> None:
         """Send the stop that matches the running mode (no-op when holding)."""
         s = self.settings
+        self._last_command = self._clock.now()
         if self._job is not None:
             self._job.cancelled = True  # the worker stops the arm once its upload returns
         elif self._deferred is not None:

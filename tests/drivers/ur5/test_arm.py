@@ -466,7 +466,7 @@ def test_force_mode_during_a_move_stops_the_move_first() -> None:
 
 
 def test_watchdog_is_armed_when_started_and_kicked_each_status_poll_when_configured() -> None:
-    arm, rtde, _ = make(UR5Settings(watchdog_hz=5.0))
+    arm, rtde, clock = make(UR5Settings(watchdog_hz=5.0))
     arm.status()  # the start-up: connected and polled, not armed yet
     assert "set_watchdog" not in rtde.names() and "kick_watchdog" not in rtde.names()
     arm.start_watchdog()
@@ -475,6 +475,16 @@ def test_watchdog_is_armed_when_started_and_kicked_each_status_poll_when_configu
     for _ in range(3):
         arm.status()
     assert rtde.names().count("kick_watchdog") == 3
+    # No kick within two controller cycles of a command: it would overwrite the command's
+    # register before the script read it (the command refreshes the watchdog itself).
+    arm.force_mode([False, False, True, False, False, False], [0, 0, -5.0, 0, 0, 0],
+                   [0, 0, 0.02, 0, 0, 0])
+    kicks = rtde.names().count("kick_watchdog")
+    arm.status()
+    assert rtde.names().count("kick_watchdog") == kicks
+    clock.t += 2.0 / arm.settings.frequency
+    arm.status()
+    assert rtde.names().count("kick_watchdog") == kicks + 1
     arm2, rtde2, _ = make()
     arm2.start_watchdog()
     arm2.status()

@@ -155,6 +155,25 @@ def test_recover_returns_with_the_script_running_and_the_watchdog_armed(
     assert emulator.status()["watchdog_hz"] == 5.0
 
 
+def test_a_force_mode_under_the_watchdog_moves_the_arm(
+        connect, emulator: URAloneProcess) -> None:
+    """A kick writes the command register: polled right after a continuous command (force mode)
+    it overwrote the command within the controller's cycle and the arm never moved."""
+    arm = connect(UR5Settings(watchdog_hz=10.0))
+    arm.start_watchdog()
+    assert run_until(arm, lambda: emulator.status()["watchdog_hz"] == 10.0, 1.0)
+    z0 = float(arm.tool_pose().position[2])
+    trips = emulator.status()["watchdog_trips"]  # the emulator is the module's: counts add up
+    arm.force_mode([False, False, True, False, False, False], [0, 0, -5.0, 0, 0, 0],
+                   [0, 0, 0.02, 0, 0, 0])
+    run_until(arm, lambda: False, 0.6)  # the tick loop's polls, every one a chance to kick
+    moved = z0 - float(arm.tool_pose().position[2])
+    status = emulator.status()
+    arm.stop()
+    assert moved > 0.005, f"force mode moved the TCP {moved * 1e3:.1f} mm down"
+    assert status["watchdog_trips"] == trips and "forceMode" in status["commands"]
+
+
 @pytest.mark.skipif(
     os.environ.get("PIVOT_RUN_FLAKY") != "1",
     reason="fails now and then when the machine is loaded (the arm reads IDLE for 2 s after the "
