@@ -15,6 +15,7 @@ stop on an arm that holds still does nothing). A trip disarms, and is kept until
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import threading
 import time
@@ -26,68 +27,75 @@ from numpy.typing import NDArray
 
 
 @dataclass(frozen=True)
-class Trip:
-    """One trip: which armed motion, what the sample read, when it arrived and when the stop
-    command returned (both on the guard's clock, s)."""
+class Limits:
+    """What one motion armed: its token, name and limits (N, N*m)."""
 
+    token: int
     name: str
-    force: float  #: |F| of the sample, N
-    torque: float  #: |T| of the sample, N*m
     max_force: float
     max_torque: float
+
+
+@dataclass(frozen=True)
+class Trip:
+    """One trip: the limits that were armed, what the sample read and when it arrived (the
+    guard's clock, s), and why the stop command failed, if it did (the tick's guard stops
+    again)."""
+
+    limits: Limits
+    force: float  #: |F| of the sample, N
+    torque: float  #: |T| of the sample, N*m
     sample_time: float
-    stopped_time: float
-    stop_error: str = ""  #: why the stop command failed, if it did (the tick's guard stops again)
+    stop_error: str = ""
 
     def describe(self) -> str:
+        lim = self.limits
         return (
-            f"{self.name}: force-torque guard (at the sensor's rate): |F| = {self.force:.1f} N "
-            f"(limit {self.max_force:g}), |T| = {self.torque:.2f} N*m (limit "
-            f"{self.max_torque:g}); arm stopped"
+            f"{lim.name}: force-torque guard (at the sensor's rate): |F| = {self.force:.1f} N "
+            f"(limit {lim.max_force:g}), |T| = {self.torque:.2f} N*m (limit "
+            f"{lim.max_torque:g}); arm stopped"
         )
 
 
 class LimitGuard:
     """Armed by motions, fed by the sensor, stopping the arm (see the module's doc).
 
-    ``stop`` is the arm's stop (connected by whoever assembles the devices: the sensor is
-    opened before the arm); ``clock`` stamps the trips (``time.monotonic`` on hardware, the
-    simulation's clock in the twin). Thread-safe: :meth:`feed` runs on the sensor's thread,
-    the rest on the tick's."""
+    The arm's stop is connected by whoever assembles the devices (the sensor is opened before
+    the arm); ``clock`` stamps samples that come without a time (``time.monotonic`` on
+    hardware, the simulation's clock in the twin). Thread-safe: :meth:`feed` runs on the
+    sensor's thread, the rest on the tick's."""
 
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._clock = clock
         self._lock = threading.Lock()
-        self._armed: dict[int, tuple[str, float, float]] = {}
+        self._armed: Limits | None = None
         self._tokens = itertools.count(1)
         self._trip: Trip | None = None
         self._stop: Callable[[], None] | None = None
-        self.trips = 0  #: trips since start-up (diagnostics)
 
     def connect_stop(self, stop: Callable[[], None]) -> None:
         """What a trip calls: the arm's stop (it must be safe to call from another thread)."""
         self._stop = stop
 
     @property
-    def connected(self) -> bool:
-        return self._stop is not None
+    def armed(self) -> Limits | None:
+        """The limits in force, or None."""
+        return self._armed
 
     def arm(self, name: str, max_force: float, max_torque: float) -> int:
         """Arm ``name``'s limits (N, N*m) in place of any armed before; returns the token that
         disarms them. Clears an earlier trip: a motion that starts has seen it."""
         with self._lock:
             token = next(self._tokens)
-            self._armed.clear()
-            self._armed[token] = (name, float(max_force), float(max_torque))
+            self._armed = Limits(token, name, float(max_force), float(max_torque))
             self._trip = None
             return token
 
     def disarm(self, token: int | None) -> None:
         """Disarm the limits ``token`` armed, if still in force (idempotent; None: nothing)."""
-        if token is None:
-            return
         with self._lock:
-            self._armed.pop(token, None)
+            if self._armed is not None and self._armed.token == token:
+                self._armed = None
 
     def trip(self) -> Trip | None:
         """The last trip since the newest :meth:`arm`, or None."""
@@ -95,26 +103,20 @@ class LimitGuard:
             return self._trip
 
     def feed(self, wrench: NDArray[np.float64], stamp: float | None = None) -> Trip | None:
-        """Compare one bias-removed sample ``[Fx..Tz]`` with every armed limit; on the first
-        over any, disarm all, stop the arm and keep the trip. Called on the sensor's thread
-        for every sample; quick when nothing is armed."""
-        if not self._armed:
+        """Compare one bias-removed sample ``[Fx..Tz]`` with the armed limits; over either,
+        disarm, keep the trip and stop the arm. Called on the sensor's thread for every
+        sample; quick when nothing is armed."""
+        if self._armed is None:
             return None
         w = np.asarray(wrench, float)
         force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:6]))
-        sampled = self._clock() if stamp is None else stamp
         with self._lock:
-            over = next(
-                ((n, f, t) for n, f, t in self._armed.values() if force > f or torque > t),
-                None,
-            )
-            if over is None:
+            lim = self._armed
+            if lim is None or (force <= lim.max_force and torque <= lim.max_torque):
                 return None
-            self._armed.clear()
-            name, max_force, max_torque = over
-            first = Trip(name, force, torque, max_force, max_torque, sampled, sampled)
-            self._trip = first  # kept before the stop: a motion armed meanwhile clears it
-            self.trips += 1
+            self._armed = None
+            trip = Trip(lim, force, torque, self._clock() if stamp is None else stamp)
+            self._trip = trip  # kept before the stop: a motion armed meanwhile clears it
         error = "no arm connected"
         if self._stop is not None:
             try:
@@ -122,10 +124,12 @@ class LimitGuard:
                 error = ""
             except Exception as exc:  # noqa: BLE001 -- the sensor's thread must live on
                 error = f"{type(exc).__name__}: {exc}"
-        trip = Trip(name, force, torque, max_force, max_torque, sampled, self._clock(), error)
-        with self._lock:
-            if self._trip is first:
-                self._trip = trip
+        if error:
+            trip = dataclasses.replace(trip, stop_error=error)
+            with self._lock:
+                if self._trip is not None and self._trip.limits is lim:
+                    self._trip = trip
         return trip
 
-__all__ = ["LimitGuard", "Trip"]
+
+__all__ = ["LimitGuard", "Limits", "Trip"]

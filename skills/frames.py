@@ -15,7 +15,6 @@ the arm at rest, and the frame is exposed after that (see the D435 driver's ``ca
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -23,55 +22,40 @@ from drivers.camera import Camera, Frame
 from drivers.devices import Devices
 from drivers.pose import Pose
 from skills.motion import Failed, Guard, GuardedMotion
+from skills.offtick import OffTick
 from skills.status import Failure
 
 T = TypeVar("T")
 
 
 class FrameJob(Generic[T]):
-    """One ``capture()`` and ``work(frame, world_T_camera)``; inline or on a worker thread."""
+    """One ``capture()`` and ``work(frame, world_T_camera)``; inline or on a worker thread
+    (:class:`skills.offtick.OffTick`), as the camera streams."""
 
     def __init__(self, camera: Camera, arm_pose: Callable[[], Pose],
                  work: Callable[[Frame, Pose], T]) -> None:
         self._camera, self._arm_pose, self._work = camera, arm_pose, work
-        self._done = threading.Event()
-        self._result: T | None = None
-        self._error: BaseException | None = None
+        self._job: OffTick[T] | None = None
 
     @property
     def background(self) -> bool:
         return bool(getattr(self._camera, "captures_in_background", False))
 
     def start(self) -> None:
-        self._done.clear()
-        self._result, self._error = None, None
         pose = self._arm_pose() @ self._camera.tool_T_camera()
-        if self.background:
-            threading.Thread(target=self._run, args=(pose,), name="frame-job",
-                             daemon=True).start()
-        else:
-            self._run(pose)
-
-    def _run(self, pose: Pose) -> None:
-        try:
-            self._result = self._work(self._camera.capture(), pose)
-        except BaseException as exc:  # noqa: BLE001 -- handed to the tick thread, raised there
-            self._error = exc
-        finally:
-            self._done.set()
+        camera, work = self._camera, self._work
+        self._job = OffTick("frame-job", lambda: work(camera.capture(), pose), self.background)
+        self._job.start()
 
     def done(self) -> bool:
         """True once finished; raises what the capture or the work raised (on the tick)."""
-        if not self._done.is_set():
-            return False
-        if self._error is not None:
-            raise self._error
-        return True
+        assert self._job is not None, "a frame job is done only once started"
+        return self._job.done()
 
     @property
     def result(self) -> T:
-        assert self._done.is_set() and self._error is None
-        return self._result  # type: ignore[return-value]
+        assert self._job is not None
+        return self._job.result
 
 
 def frame_step(

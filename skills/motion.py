@@ -91,7 +91,6 @@ class GuardedMotion:
         self._t0 = self.clock.now()
         self.peak_force = 0.0
         if self._limits is not None:  # armed before the command: no sample goes unchecked
-            self._limits.disarm(self._token)
             self._token = self._limits.arm(self.name, self.guard.max_force, self.guard.max_torque)
         self._command()
 
@@ -124,7 +123,7 @@ class GuardedMotion:
         if self._t0 is None:
             self.start()
         trip = self._limits.trip() if self._limits is not None else None
-        if trip is not None and self._token is not None and trip.name == self.name:
+        if trip is not None and self._token is not None and trip.limits.token == self._token:
             self.arm.stop()  # stopped already by the trip; again in case its stop failed
             self.peak_force = max(self.peak_force, trip.force)
             return StepResult(Status.FAILURE, trip.describe(), Failure.FORCE_TORQUE)

@@ -27,8 +27,9 @@ def runs_in_real_time(clock: Clock) -> bool:
 
 
 class OffTick(Generic[T]):
-    """``work()`` started by :meth:`start`, on a worker thread when ``background`` is True,
-    else at once; :meth:`done` polls it from the tick and raises what the work raised."""
+    """``work()`` started by :meth:`start`, on a worker thread named ``name`` when
+    ``background`` is True, else at once; :meth:`done` polls it from the tick and raises what
+    the work raised. (skills/frames.py's camera frames run the same way.)"""
 
     def __init__(self, name: str, work: Callable[[], T], background: bool) -> None:
         self.name, self._work, self.background = name, work, background
@@ -38,7 +39,7 @@ class OffTick(Generic[T]):
 
     def start(self) -> None:
         if self.background:
-            threading.Thread(target=self._run, name=f"off-tick {self.name}", daemon=True).start()
+            threading.Thread(target=self._run, name=self.name, daemon=True).start()
         else:
             self._run()
 

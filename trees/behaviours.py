@@ -287,7 +287,7 @@ class PlanPick(Behaviour):
         self._found = ({}, {})
         work = self._clearances(usable, dets, left, *self._found)
         if runs_in_real_time(self.ctx.devices.clock):
-            self._job = OffTick("plan pick", lambda: _exhaust(work), background=True)
+            self._job = OffTick("off-tick plan pick", lambda: _exhaust(work), background=True)
             self._job.start()
         else:
             self._work = work

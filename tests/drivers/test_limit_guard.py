@@ -45,7 +45,8 @@ def test_a_sample_over_either_limit_stops_once_and_disarms() -> None:
     assert g.feed(wrench(29.9, 1.9)) is None
     trip = g.feed(wrench(0.0, 2.1), stamp=4.0)
     assert trip is not None and len(stops.calls) == 1
-    assert (trip.name, trip.max_force, trip.max_torque, trip.sample_time) == ("press", 30, 2, 4)
+    lim = trip.limits
+    assert (lim.name, lim.max_force, lim.max_torque, trip.sample_time) == ("press", 30, 2, 4)
     assert trip.torque == pytest.approx(2.1) and trip.stop_error == ""
     assert g.feed(wrench(99.0)) is None  # disarmed: one stop per trip
     assert len(stops.calls) == 1 and g.trip() == trip
@@ -60,7 +61,7 @@ def test_the_newest_motion_s_limits_are_in_force() -> None:
     g.arm("press", 60.0, 8.0)  # replaces the slide's, even if its owner never disarms
     g.disarm(old)  # a stale token disarms nothing
     assert g.feed(wrench(40.0)) is None
-    assert g.feed(wrench(61.0)) is not None and g.trip().name == "press"
+    assert g.feed(wrench(61.0)) is not None and g.trip().limits.name == "press"
 
 
 def test_a_stop_that_fails_is_kept_in_the_trip_and_the_reader_lives_on() -> None:
@@ -116,7 +117,7 @@ def test_a_guarded_motion_arms_its_limits_and_reports_the_sensor_s_trip() -> Non
     ft.value = wrench(5.0)  # the reading the tick sees has fallen again
     result = m.tick()
     assert result.status is Status.FAILURE and result.code is Failure.FORCE_TORQUE
-    assert ft.limits._armed == {}  # type: ignore[attr-defined]
+    assert ft.limits.armed is None  # type: ignore[attr-defined]
 
 
 def test_a_motion_that_ends_or_is_halted_disarms() -> None:
@@ -125,11 +126,11 @@ def test_a_motion_that_ends_or_is_halted_disarms() -> None:
     done = {"v": False}
     m = GuardedMotion("m", lambda: None, lambda: done["v"], arm, ft, clock, Guard(40.0, 4.0))
     m.tick()
-    assert ft.limits._armed  # type: ignore[attr-defined]
+    assert ft.limits.armed is not None  # type: ignore[attr-defined]
     done["v"] = True
     assert m.tick().status is Status.SUCCESS
-    assert not ft.limits._armed  # type: ignore[attr-defined]
+    assert ft.limits.armed is None  # type: ignore[attr-defined]
     m.start()
-    assert ft.limits._armed  # type: ignore[attr-defined]
+    assert ft.limits.armed is not None  # type: ignore[attr-defined]
     m.halt()
-    assert not ft.limits._armed  # type: ignore[attr-defined]
+    assert ft.limits.armed is None  # type: ignore[attr-defined]
