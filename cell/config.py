@@ -315,8 +315,9 @@ class EmulatedFault(_Section):
         description="whose cable: arm (every UR socket), gripper (its serial line and the "
         "URCap socket), ft (the sensor's cable, power included), camera (frames freeze)"
     )
-    fault: Literal["cable", "protective_stop"] = Field(
-        "cable", description="cable: pull the cable; protective_stop: the arm's (arm only)"
+    fault: Literal["cable", "protective_stop", "force_step"] = Field(
+        "cable", description="cable: pull the cable; protective_stop: the arm's (arm only); "
+        "force_step: a load step on the wrist sensor (ft only), as a collision reads"
     )
     at_s: float = Field(
         ge=0.0, description="when: seconds of the emulated controller's time after the arm "
@@ -327,7 +328,11 @@ class EmulatedFault(_Section):
     )
     duration_s: float | None = Field(
         None, gt=0.0, description="plug the cable back after this long (null: only SIGUSR1 or "
-        "a restart of the emulator brings it back)"
+        "a restart of the emulator brings it back); a force step lasts this long (null: 0.5 s)"
+    )
+    force_n: float = Field(
+        150.0, gt=0.0, le=1000.0, description="force_step: the step's size (N, along the "
+        "sensor's +z, against the tool's approach); more than the running motion's limit"
     )
 
 
@@ -354,6 +359,9 @@ class EmulateSection(_Section):
             if f.fault == "protective_stop" and f.device != "arm":
                 raise ValueError(f"fault {i}: a protective stop is the arm's, not the "
                                  f"{f.device}'s")
+            if f.fault == "force_step" and f.device != "ft":
+                raise ValueError(f"fault {i}: a force step is on the wrist sensor (device: "
+                                 f"ft), not the {f.device}'s")
         return value
 
 

@@ -28,6 +28,7 @@ refused), a second SIGUSR1 plugs it back; SIGUSR2 raises a protective stop.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import signal
@@ -116,8 +117,10 @@ def _socket_url(port: str, key: str) -> tuple[str, int] | None:
 class _Wires:
     """Every emulated device's cable: pull and plug by device name."""
 
-    def __init__(self, servers: Any, rtu: Any, urcap: Any, ft: Any, camera: Any) -> None:
+    def __init__(self, servers: Any, rtu: Any, urcap: Any, ft: Any, camera: Any,
+                 wrist: Any = None) -> None:
         self.servers, self.rtu, self.urcap, self.ft, self.camera = servers, rtu, urcap, ft, camera
+        self.wrist = wrist  #: the FT300 emulator's load (a force step is injected there)
 
     def pull(self, device: str) -> None:
         if device == "arm":
@@ -140,6 +143,29 @@ class _Wires:
             self.ft.restore()
         else:
             self.camera.restore()
+
+
+#: How long a force step lasts when its fault names no ``duration_s`` (s).
+FORCE_STEP_S = 0.5
+
+
+def _lasts(fault: Any) -> float | None:
+    """How long a fault lasts (s) before it is undone; None: once, for good."""
+    if fault.fault == "protective_stop":
+        return None
+    if fault.fault == "force_step":
+        return fault.duration_s if fault.duration_s is not None else FORCE_STEP_S
+    return fault.duration_s  # type: ignore[no-any-return]
+
+
+def step_latency(first_stepped: float | None, stop_times: list[float],
+                 within: float) -> float | None:
+    """ms from the first reading with a force step to the first stop the emulated controller
+    took after it (both ``time.monotonic()``), or None if none came within ``within`` s."""
+    if first_stepped is None:
+        return None
+    after = [t for t in stop_times if first_stepped <= t <= first_stepped + within]
+    return round(1e3 * (after[0] - first_stepped), 2) if after else None
 
 
 class _Schedule:
@@ -170,9 +196,9 @@ class _Schedule:
                     self._pulled_at[i] = t
                     with self._lock:
                         self._due.append((i, "pull"))
-                    if f.duration_s is None or f.fault == "protective_stop":
+                    if _lasts(f) is None:
                         self._done.add(i)
-            elif f.duration_s is not None and t - self._pulled_at[i] >= f.duration_s:
+            elif (lasts := _lasts(f)) is not None and t - self._pulled_at[i] >= lasts:
                 self._done.add(i)
                 with self._lock:
                     self._due.append((i, "plug"))
@@ -246,7 +272,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         opened.append(urcap.stop)
         ft_listen = _socket_url(dev.ft.port, "devices.ft.port")
         try:
-            ft = FT300Emulator(TwinWrist(robot.ft), unit_id=dev.ft.slave_id,
+            wrist = TwinWrist(robot.ft)
+            ft = FT300Emulator(wrist, unit_id=dev.ft.slave_id,
                                seed=config.sim.seed, listen=ft_listen).start()
         except OSError as exc:
             raise UserError(f"devices.ft.port: cannot listen on {dev.ft.port}: {exc}") from None
@@ -254,7 +281,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         links.append(_link(dev.gripper.port, rtu.port, "devices.gripper.port"))
         if ft_listen is None:
             links.append(_link(dev.ft.port, ft.port, "devices.ft.port"))
-        wires = _Wires(servers, rtu, urcap, ft, camera)
+        wires = _Wires(servers, rtu, urcap, ft, camera, wrist)
         schedule = _Schedule(emu.faults)
         return _serve(args, backend, controller, servers, wires, schedule, lock, settings)
     finally:
@@ -274,6 +301,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any, wires: _Wires,
            schedule: _Schedule, lock: threading.Lock, settings: Any) -> int:
+    import numpy as np
+
     from drivers.arm import MotionState
     from sim.emulate.realtime import RealTimeLoop
 
@@ -323,6 +352,10 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
     signal.signal(signal.SIGTERM, on_stop)
     signal.signal(signal.SIGUSR1, on_cable)
     signal.signal(signal.SIGUSR2, on_protective)
+    # The twin, the servers and the modules live as long as the emulator: out of the
+    # collector's sight, a full collection no longer holds the stepping thread for 25 ms.
+    gc.collect()
+    gc.freeze()
     thread = threading.Thread(target=loop.run, name="twin", daemon=True)
     thread.start()
     print("ready", flush=True)
@@ -330,17 +363,30 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
     try:
         while not stop.wait(0.01):
             for fault, what in schedule.take():
+                entry: dict[str, Any] = {}
                 if fault.fault == "protective_stop":
                     controller.raise_protective_stop("raised by emulate.faults")
+                elif fault.fault == "force_step":
+                    if what == "pull":
+                        wires.wrist.inject(np.array([0.0, 0.0, fault.force_n, 0.0, 0.0, 0.0]))
+                        entry["arm_mode"] = twin_arm.mode  # what the arm was doing
+                    else:
+                        wires.wrist.clear()
+                        # The stop must come from the cell's process: nothing here stops the arm.
+                        entry["latency_ms"] = step_latency(
+                            wires.wrist.first_stepped, list(controller.log.stop_times),
+                            _lasts(fault) or FORCE_STEP_S)
+                        entry["force_n"] = fault.force_n
                 elif what == "pull":
                     wires.pull(fault.device)
                 else:
                     wires.plug(fault.device)
                 schedule.fired.append({"device": fault.device, "fault": fault.fault,
                                        "what": what, "t_s": round(controller.t, 3),
-                                       "wall": time.time()})
+                                       "wall": time.time(), **entry})
                 print(f"emulate: {fault.device} {fault.fault} {what} at "
                       f"{controller.t:.3f} s", file=sys.stderr, flush=True)
+                write_report()  # what a fault did is on disk as it happens
             now = time.monotonic()
             if now < next_report:
                 continue

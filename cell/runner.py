@@ -8,6 +8,7 @@ twin's simulation time or monotonic wall time, so timeouts mean the same on both
 
 from __future__ import annotations
 
+import gc
 import heapq
 import json
 import os
@@ -388,6 +389,12 @@ class TickLoop:
         longest: list[tuple[float, int, str]] = []  # a min-heap of the longest tree ticks
         try:
             self.root.setup_with_descendants()
+            if self.realtime:
+                # What start-up built (modules, configuration, the tree, the drivers) lives as
+                # long as the run: out of the collector's sight, its full collections scan what
+                # the ticks make, not 45 000 objects for 25 ms on the tick loop's thread.
+                gc.collect()
+                gc.freeze()
             next_wall = time.monotonic()
             while clock.now() - t_start < max_time:
                 if self._signal is not None:

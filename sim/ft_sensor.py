@@ -53,6 +53,16 @@ TORQUE_OFFSET = 0.1  #: N*m, the power-up offset is uniform in +-this per torque
 BIAS_SAMPLES = 8  #: samples averaged by bias() (64 ms at 125 Hz, 80 ms at 100 Hz): a quieter zero
 
 
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise cross product of (n, 3) arrays, as ``np.cross`` computes it (bit for bit) without
+    its axis handling, which cost more than the products at the twin's every step."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
 class SimForceTorqueSensor:
     """Implements :class:`drivers.ft_sensor.ForceTorqueSensor` on a fixed joint of a body."""
 
@@ -145,16 +155,20 @@ class SimForceTorqueSensor:
         self._last_v, self._last_t = velocity, now
         forces = self._masses[:, None] * (self._gravity - acceleration)[None, :]
         force = forces.sum(axis=0)
-        torque = np.cross(coms - origin, forces).sum(axis=0)
-        for c in p.getContactPoints(bodyA=body):
-            if c[2] == body or c[3] not in self._link_set:
-                continue
+        torque = _cross(coms - origin, forces).sum(axis=0)
+        mine = [c for c in p.getContactPoints(bodyA=body)
+                if c[2] != body and c[3] in self._link_set]
+        if mine:
             # On A: the normal force along the normal on B (it points towards A), friction
             # against its directions (PyBullet's convention, checked against a hanging part).
-            f = (c[9] * np.asarray(c[7], float) - c[10] * np.asarray(c[11], float)
-                 - c[12] * np.asarray(c[13], float))
-            force += f
-            torque += np.cross(np.asarray(c[5], float) - origin, f)
+            # All contacts at once, summed row after row onto the links' load: the same
+            # arithmetic in the same order as one contact at a time, a third of the time.
+            c = np.array([(*x[5], *x[7], x[9], x[10], *x[11], x[12], *x[13]) for x in mine],
+                         float)
+            f = (c[:, 6:7] * c[:, 3:6] - c[:, 7:8] * c[:, 8:11]) - c[:, 11:12] * c[:, 12:15]
+            force = np.add.reduce(np.vstack([force[None], f]), axis=0)
+            torque = np.add.reduce(np.vstack([torque[None], _cross(c[:, 0:3] - origin, f)]),
+                                   axis=0)
         self._cached = np.concatenate([rotation.T @ force, rotation.T @ torque])
         self._cached_t = now
         return self._cached.copy()

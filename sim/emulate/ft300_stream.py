@@ -77,14 +77,35 @@ class WrenchBackend(Protocol):
 
 
 class TwinWrist:
-    """:class:`WrenchBackend` on the twin's wrist sensor (its noiseless sample, sensor frame)."""
+    """:class:`WrenchBackend` on the twin's wrist sensor (its noiseless sample, sensor frame),
+    plus a load step while one is injected (``emulate.faults``' ``force_step``: a collision as
+    the sensor reads it, so that the cell's limits can be timed on the whole emulated cell)."""
 
     def __init__(self, ft) -> None:  # type: ignore[no-untyped-def]
         """``ft``: the twin's ``SimForceTorqueSensor``."""
         self._ft = ft
+        self._lock = threading.Lock()
+        self._step: NDArray[np.float64] | None = None
+        #: time.monotonic() when the first reading with the step was taken for the stream
+        self.first_stepped: float | None = None
+
+    def inject(self, wrench: NDArray[np.float64]) -> None:
+        """Add ``wrench`` (N, N*m; sensor frame) to every reading until :meth:`clear`."""
+        with self._lock:
+            self._step, self.first_stepped = np.asarray(wrench, float), None
+
+    def clear(self) -> None:
+        with self._lock:
+            self._step = None
 
     def wrench(self) -> NDArray[np.float64]:
-        return np.array(self._ft.sampled_true_load(), dtype=float)
+        load = np.array(self._ft.sampled_true_load(), dtype=float)
+        with self._lock:
+            if self._step is None:
+                return load
+            if self.first_stepped is None:
+                self.first_stepped = time.monotonic()
+            return load + self._step
 
 
 def counts(reading: NDArray[np.float64]) -> list[int]:

@@ -18,11 +18,15 @@ some slip is expected there.
 
 from __future__ import annotations
 
+import heapq
 import threading
 import time
 from collections.abc import Callable
 
 import numpy as np
+
+#: How many of the latest-ending steps the report lists.
+WORST_KEPT = 5
 
 
 class RealTimeLoop:
@@ -36,6 +40,8 @@ class RealTimeLoop:
         self.overruns = 0
         self.slipped = 0.0  #: s the twin's time has fallen behind the wall clock
         self._margins: list[float] = []  # s left in each period (ring of the last 100 000)
+        self._costs: list[float] = []  # s each step itself took (same ring)
+        self._worst: list[tuple[float, int, float]] = []  # min-heap: (-lateness, step, cost)
 
     def stop(self) -> None:
         self._stop.set()
@@ -43,13 +49,23 @@ class RealTimeLoop:
     def run(self) -> None:
         t_next = time.monotonic()
         while not self._stop.is_set():
+            t_start = time.monotonic()
             self._step()
             self.steps += 1
             t_next += self.period
-            margin = t_next - time.monotonic()
+            t_end = time.monotonic()
+            margin = t_next - t_end
             if len(self._margins) >= 100_000:
                 self._margins = self._margins[50_000:]
+                self._costs = self._costs[50_000:]
             self._margins.append(margin)
+            self._costs.append(t_end - t_start)
+            if margin < 0:
+                entry = (-margin, self.steps, t_end - t_start)
+                if len(self._worst) < WORST_KEPT:
+                    heapq.heappush(self._worst, entry)
+                elif entry > self._worst[0]:
+                    heapq.heapreplace(self._worst, entry)
             if margin < 0:
                 self.overruns += 1
                 self.slipped -= margin
@@ -58,16 +74,28 @@ class RealTimeLoop:
             self._stop.wait(margin)
 
     def margin_stats(self) -> dict[str, float]:
-        """Margin per step (ms): median, 1st percentile, minimum; overruns counted."""
+        """Margin per step (ms): median, 1st percentile, minimum; overruns counted; and the
+        step's own cost (ms; median, p99, max), which tells a world that costs more than its
+        period from a step kept waiting for a core."""
         if not self._margins:
             return {"steps": 0}
         m = np.asarray(self._margins) * 1e3
+        c = np.asarray(self._costs) * 1e3
         return {
             "steps": self.steps,
             "period_ms": self.period * 1e3,
             "margin_median_ms": float(np.median(m)),
             "margin_p1_ms": float(np.percentile(m, 1)),
             "margin_min_ms": float(m.min()),
+            "step_median_ms": float(np.median(c)),
+            "step_p99_ms": float(np.percentile(c, 99)),
+            "step_max_ms": float(c.max()),
             "overruns": self.overruns,
             "slipped_s": round(self.slipped, 3),
+            # Where they were: the twin's time of each (its clock advances a period a step).
+            "worst_overruns": [
+                {"twin_s": round(step * self.period, 3), "late_ms": round(1e3 * late, 1),
+                 "step_ms": round(1e3 * cost, 1)}
+                for late, step, cost in sorted(self._worst, reverse=True)
+            ],
         }

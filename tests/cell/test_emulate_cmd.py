@@ -16,6 +16,7 @@ import pytest
 pytest.importorskip("rtde_control")
 
 from cell.emulate_cmd import EXAMPLE  # noqa: E402
+from sim.emulate.camera_process import CAMERA_NICENESS  # noqa: E402
 from tests.cell.emulated import emulated_config  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,6 +44,11 @@ def test_emulate_serves_the_arm_and_reports_on_sigterm(tmp_path: Path) -> None:
         assert result.ok, result.message
         assert result.details["control_script"] == "running"
         assert result.details["controller_version"].startswith("URSoftware 3.15")
+        # The camera's renderer (the emulator's one child process) yields to the twin.
+        children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
+        assert len(children) == 1
+        assert (os.getpriority(os.PRIO_PROCESS, int(children[0]))
+                == os.getpriority(os.PRIO_PROCESS, proc.pid) + CAMERA_NICENESS)
     finally:
         proc.send_signal(signal.SIGTERM)
         try:
@@ -110,3 +116,32 @@ def test_a_protective_stop_is_the_arms_only(tmp_path: Path) -> None:
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "emulate.faults" in r.stderr and "protective stop is the arm's" in r.stderr
+
+
+def test_a_force_step_is_the_wrist_sensors_only(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("emulate:\n  faults:\n    - {device: arm, fault: force_step, at_s: 1}\n")
+    r = subprocess.run([sys.executable, "-m", "cell.cli", "emulate", "--config", str(bad)],
+                       capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "emulate.faults" in r.stderr and "force step is on the wrist sensor" in r.stderr
+
+
+def test_a_force_step_lasts_its_default_and_is_timed_to_the_first_stop_after_it() -> None:
+    from cell.config import EmulatedFault
+    from cell.emulate_cmd import FORCE_STEP_S, _Schedule, step_latency
+
+    step = EmulatedFault(device="ft", fault="force_step", at_s=0.0)
+    s = _Schedule([step])
+    s.check(1.0, moving=True)
+    assert s.take() == [(step, "pull")]
+    s.check(1.0 + FORCE_STEP_S - 0.01, moving=True)
+    assert s.take() == []
+    s.check(1.0 + FORCE_STEP_S, moving=False)
+    assert s.take() == [(step, "plug")]
+    # A stop before the step is not its stop; none within the step's time is a miss.
+    assert step_latency(100.0, [99.0, 100.012, 100.2], 0.5) == 12.0
+    assert step_latency(100.0, [99.0], 0.5) is None
+    assert step_latency(100.0, [100.7], 0.5) is None
+    assert step_latency(None, [100.1], 0.5) is None

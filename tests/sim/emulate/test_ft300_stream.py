@@ -181,3 +181,23 @@ def test_the_stream_through_a_serial_device_servers_tcp_port(load: FixedLoad) ->
         with FT300(emu.port, stale_after=0.5) as ft:
             assert wait_for(lambda: ft.stats()["frames"] >= 5, timeout=5.0)
         assert emu.clients == 2
+
+
+def test_a_force_step_adds_to_the_twins_load_and_stamps_its_first_reading() -> None:
+    from sim.emulate.ft300_stream import TwinWrist
+
+    class Twin:
+        def sampled_true_load(self) -> np.ndarray:
+            return np.array([0.0, 0.0, -12.0, 0.1, 0.0, 0.0])
+
+    wrist = TwinWrist(Twin())
+    assert wrist.first_stepped is None and wrist.wrench()[2] == -12.0
+    wrist.inject(np.array([0.0, 0.0, 150.0, 0.0, 0.0, 0.0]))
+    assert wrist.first_stepped is None  # not read yet: no sample carried it
+    assert wrist.wrench()[2] == pytest.approx(138.0)
+    first = wrist.first_stepped
+    assert first is not None
+    wrist.wrench()
+    assert wrist.first_stepped == first  # the first reading's time, kept
+    wrist.clear()
+    assert wrist.wrench()[2] == -12.0

@@ -5,6 +5,8 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
+
 from sim.emulate.realtime import RealTimeLoop
 
 PERIOD = 0.01
@@ -31,3 +33,8 @@ def test_a_step_that_overran_is_not_caught_up_in_a_burst() -> None:
     stats = loop.margin_stats()
     assert stats["overruns"] >= 1
     assert stats["slipped_s"] >= 4 * PERIOD  # the twin's time fell behind by about the overrun
+    # The step's own cost, apart from the margin: the six-period step is the longest.
+    assert stats["step_max_ms"] >= 5.5 * PERIOD * 1e3 > stats["step_median_ms"]
+    worst = stats["worst_overruns"][0]  # the latest step first, at its place in the twin's time
+    assert worst["step_ms"] >= 5.5 * PERIOD * 1e3 and worst["late_ms"] >= 4.5 * PERIOD * 1e3
+    assert worst["twin_s"] == pytest.approx(5 * PERIOD)
