@@ -353,8 +353,8 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
     signal.signal(signal.SIGUSR1, on_cable)
     signal.signal(signal.SIGUSR2, on_protective)
     # The twin, the servers and the modules live as long as the emulator: out of the
-    # collector's sight, a full collection no longer holds the stepping thread for 25 ms.
-    gc.collect()
+    # collector's sight, a full collection no longer holds the stepping thread for 25 ms. (No
+    # collection first: the device servers already stream.)
     gc.freeze()
     thread = threading.Thread(target=loop.run, name="twin", daemon=True)
     thread.start()

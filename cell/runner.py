@@ -392,8 +392,9 @@ class TickLoop:
             if self.realtime:
                 # What start-up built (modules, configuration, the tree, the drivers) lives as
                 # long as the run: out of the collector's sight, its full collections scan what
-                # the ticks make, not 45 000 objects for 25 ms on the tick loop's thread.
-                gc.collect()
+                # the ticks make, not 45 000 objects for 25 ms on the tick loop's thread. No
+                # collection first: it would hold the interpreter for tens of ms while the
+                # devices' readers already run (the FT300's stream went stale on the first tick).
                 gc.freeze()
             next_wall = time.monotonic()
             while clock.now() - t_start < max_time:
