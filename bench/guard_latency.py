@@ -261,12 +261,12 @@ def run_cell(injections: int, spacing: float, watchdog_hz: float | None,
     latencies = [float(f["latency_ms"]) for f in steps if f.get("latency_ms") is not None]
     out: dict[str, object] = dict(summary(latencies))
     out["injections"] = len(steps)
-    pulls = {f["t_s"]: f for f in data.get("faults", [])
-             if f.get("fault") == "force_step" and f.get("what") == "pull"}
+    pulls = [f for f in data.get("faults", [])
+             if f.get("fault") == "force_step" and f.get("what") == "pull"]
     out["missed"] = [f"step at {f['t_s']} s: no stop within its 0.3 s" for f in steps
                      if f.get("latency_ms") is None]
     modes: dict[str, list[float]] = {}
-    for p, f in zip(pulls.values(), steps, strict=False):
+    for p, f in zip(pulls, steps, strict=False):
         if f.get("latency_ms") is not None:
             modes.setdefault(str(p.get("arm_mode")), []).append(float(f["latency_ms"]))
     out["by_arm_mode"] = {m: summary(v) for m, v in sorted(modes.items())}

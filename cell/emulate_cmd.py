@@ -118,7 +118,7 @@ class _Wires:
     """Every emulated device's cable: pull and plug by device name."""
 
     def __init__(self, servers: Any, rtu: Any, urcap: Any, ft: Any, camera: Any,
-                 wrist: Any = None) -> None:
+                 wrist: Any) -> None:
         self.servers, self.rtu, self.urcap, self.ft, self.camera = servers, rtu, urcap, ft, camera
         self.wrist = wrist  #: the FT300 emulator's load (a force step is injected there)
 
@@ -159,10 +159,10 @@ def _lasts(fault: Any) -> float | None:
 
 
 def step_latency(first_stepped: float | None, stop_times: list[float],
-                 within: float) -> float | None:
+                 within: float | None) -> float | None:
     """ms from the first reading with a force step to the first stop the emulated controller
     took after it (both ``time.monotonic()``), or None if none came within ``within`` s."""
-    if first_stepped is None:
+    if first_stepped is None or within is None:
         return None
     after = [t for t in stop_times if first_stepped <= t <= first_stepped + within]
     return round(1e3 * (after[0] - first_stepped), 2) if after else None
@@ -375,7 +375,7 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
                         # The stop must come from the cell's process: nothing here stops the arm.
                         entry["latency_ms"] = step_latency(
                             wires.wrist.first_stepped, list(controller.log.stop_times),
-                            _lasts(fault) or FORCE_STEP_S)
+                            _lasts(fault))
                         entry["force_n"] = fault.force_n
                 elif what == "pull":
                     wires.pull(fault.device)

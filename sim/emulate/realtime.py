@@ -22,6 +22,7 @@ import heapq
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -66,14 +67,13 @@ class RealTimeLoop:
                     heapq.heappush(self._worst, entry)
                 elif entry > self._worst[0]:
                     heapq.heapreplace(self._worst, entry)
-            if margin < 0:
                 self.overruns += 1
                 self.slipped -= margin
                 t_next -= margin  # the deadline moves to now: no catch-up burst
                 continue
             self._stop.wait(margin)
 
-    def margin_stats(self) -> dict[str, float]:
+    def margin_stats(self) -> dict[str, Any]:
         """Margin per step (ms): median, 1st percentile, minimum; overruns counted; and the
         step's own cost (ms; median, p99, max), which tells a world that costs more than its
         period from a step kept waiting for a core."""

@@ -108,24 +108,20 @@ def test_the_fault_schedule_counts_from_the_first_motion_and_waits_for_motion() 
     assert s.take() == [(pull, "plug")]
 
 
-def test_a_protective_stop_is_the_arms_only(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("fault", "reason"), [
+    ("{device: ft, fault: protective_stop, at_s: 1}", "protective stop is the arm's"),
+    ("{device: arm, fault: force_step, at_s: 1}", "force step is on the wrist sensor"),
+])
+def test_a_fault_on_a_device_that_has_no_such_fault_is_refused(
+    tmp_path: Path, fault: str, reason: str
+) -> None:
     bad = tmp_path / "bad.yaml"
-    bad.write_text("emulate:\n  faults:\n    - {device: ft, fault: protective_stop, at_s: 1}\n")
+    bad.write_text(f"emulate:\n  faults:\n    - {fault}\n")
     r = subprocess.run([sys.executable, "-m", "cell.cli", "emulate", "--config", str(bad)],
                        capture_output=True, text=True, timeout=60,
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "emulate.faults" in r.stderr and "protective stop is the arm's" in r.stderr
-
-
-def test_a_force_step_is_the_wrist_sensors_only(tmp_path: Path) -> None:
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("emulate:\n  faults:\n    - {device: arm, fault: force_step, at_s: 1}\n")
-    r = subprocess.run([sys.executable, "-m", "cell.cli", "emulate", "--config", str(bad)],
-                       capture_output=True, text=True, timeout=60,
-                       env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert "emulate.faults" in r.stderr and "force step is on the wrist sensor" in r.stderr
+    assert "emulate.faults" in r.stderr and reason in r.stderr
 
 
 def test_a_force_step_lasts_its_default_and_is_timed_to_the_first_stop_after_it() -> None:
