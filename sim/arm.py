@@ -223,6 +223,7 @@ class SimArm:
         self._message = ""
         self._path: _Path | None = None
         self._t = 0.0
+        self._speed = 1.0  #: the speed slider: trajectory time per control step, in steps
         self._servo_target: Pose | None = None
         # The pose commanded for the step just run, as (position, rotation).
         self._last_target: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
@@ -254,6 +255,14 @@ class SimArm:
             raise ValueError(f"the command lag must be a whole number of steps >= 0, got {steps}")
         self._lag = int(steps)
         self._line.clear()
+
+    def set_speed_fraction(self, fraction: float) -> None:
+        """The UR's speed slider (0-1), as its controller applies it: the timing of a path or
+        a joint move runs at this fraction, so 0 holds the arm where the trajectory is and
+        a later value resumes it from there. Servo and force mode are not scaled."""
+        if not 0.0 <= fraction <= 1.0:
+            raise ValueError(f"the speed fraction must lie in [0, 1], got {fraction}")
+        self._speed = float(fraction)
 
     @property
     def command_lag(self) -> int:
@@ -355,7 +364,7 @@ class SimArm:
 
     def _follow_joints(self) -> None:
         start, goal, span, v, a, duration = self._joint_move
-        self._t += self._dt
+        self._t += self._dt * self._speed
         t = min(self._t, duration)
         t_acc = v / a
         if t < t_acc:
@@ -592,7 +601,7 @@ class SimArm:
     def _follow_path(self) -> None:
         assert self._path is not None
         path = self._path
-        self._t += self._dt
+        self._t += self._dt * self._speed
         goal = path.poses[-1]
         if self._t <= path.duration + self._dt:
             self._track_frame(*path.frame_at(path.distance_at(self._t)))

@@ -188,6 +188,8 @@ class _PathJob:
 
 #: s close() waits for the control side to see a drop the receive side has seen
 LINK_SETTLE = 0.25
+#: the speed slider the cell's moves run at: their speeds and accelerations as programmed
+RUN_SPEED_FRACTION = 1.0
 
 
 def _serialized(method: F) -> F:
@@ -225,6 +227,10 @@ class UR5Arm:
         spawn: Callable[[Callable[[], None]], None] = _spawn_thread,
     ) -> None:
         self._cmd = threading.RLock()  #: see _serialized
+        self._io_lock = threading.Lock()  #: the speed slider's connection (see stop)
+        #: the slider is at 0 after a stop; set back before the next command. Set at start-up
+        #: too: a run that ended between the two leaves the controller's slider at 0.
+        self._paused = True
         self._rtde = adapter
         self._clock = clock or WallClock()
         self.settings = settings or UR5Settings()
@@ -553,6 +559,11 @@ class UR5Arm:
             return False
         self._deferred = None
         try:
+            self._resume_speed()
+            if self._paused:
+                self._fault(f"{what} refused: the controller did not take the speed slider "
+                            "back from 0")
+                return False
             if self._mode == "servo" and what != "servo":
                 self._rtde.servo_stop(self.settings.stop_deceleration)
             elif self._mode == "force" and what != "force_mode":
@@ -709,13 +720,44 @@ class UR5Arm:
             self._rtde.force_mode_stop()
         self._mode = "hold"
 
-    @_serialized
     def stop(self) -> None:
         """Decelerate to standstill and drop the motion; a running motion ends STOPPED, a
         finished or faulted one keeps its state. Idempotent: a second call sends nothing.
 
+        A move (path or joints) is first paused by the speed slider, before the driver's
+        lock: the force-torque guard calls this from the sensor's thread, possibly while the
+        tick is inside a command, and ``stopL`` itself waits for the control script to finish
+        the handshake of any command in flight (up to three controller cycles on a CB3, 24
+        ms). The slider acts in the controller's next cycle; ``stopL`` then ends the move, and
+        the next command sets the slider back (:data:`RUN_SPEED_FRACTION`).
+
         Never raises: it is what guards call on their way out. Without a link nothing can be
         sent; the status stays FAULT with the reason."""
+        self._pause()
+        with self._cmd:
+            self._stop_locked()
+
+    def _pause(self) -> None:
+        """The speed slider to 0 if a move runs (see :meth:`stop`). Reads the mode without the
+        lock: a move that ends meanwhile costs a pause the next command undoes, and one that
+        starts meanwhile is stopped by ``stopL`` all the same."""
+        if self._mode not in ("path", "joints") or self._link_lost:
+            return
+        with self._io_lock:
+            try:
+                paused = bool(self._rtde.set_speed_slider(0.0))
+            except Exception:  # noqa: BLE001 -- stopL follows; the status says what failed
+                paused = False
+            self._paused = self._paused or paused
+
+    def _resume_speed(self) -> None:
+        """Set the slider back before a command (the paused move was ended by its stop: a
+        command is refused while a path's upload, which stops on its own, is under way)."""
+        with self._io_lock:
+            if self._paused and self._rtde.set_speed_slider(RUN_SPEED_FRACTION):
+                self._paused = False
+
+    def _stop_locked(self) -> None:
         mode = self._mode
         if self._job is not None:
             self._job.cancelled = True

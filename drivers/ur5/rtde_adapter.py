@@ -133,6 +133,13 @@ class RTDEAdapter(Protocol):
 
     def kick_watchdog(self) -> bool: ...
 
+    def set_speed_slider(self, fraction: float) -> bool:
+        """``RTDEIOInterface.setSpeedSlider(fraction)`` on a connection of its own: the
+        controller scales every motion's timing by it from its next cycle. Unlike a command it
+        waits for no handshake with the control script, so it acts within a controller cycle
+        even while a command is in flight. False when it could not be sent."""
+        ...
+
     # --- receive side (state) ------------------------------------------------------------
 
     def tcp_pose(self) -> list[float]:
@@ -183,6 +190,7 @@ class URRTDEAdapter:
         self.frequency = frequency
         self._control: Any = None
         self._receive: Any = None
+        self._io: Any = None
         # Interfaces given up on: kept referenced, never destroyed under a thread of theirs
         # that may still be inside a blocking call.
         self._retired: list[Any] = []
@@ -191,6 +199,14 @@ class URRTDEAdapter:
     def connect(self) -> None:
         self.connect_receive()
         self.connect_control()
+        self.connect_io()
+
+    def connect_io(self) -> None:
+        import rtde_io
+
+        if self._abandoned:
+            raise RuntimeError("the link was abandoned (shutting down)")
+        self._io = self._keep(rtde_io.RTDEIOInterface(self.host))
 
     def connect_receive(self) -> None:
         # Imported here, not at the top: only the hardware path needs ur_rtde.
@@ -210,7 +226,7 @@ class URRTDEAdapter:
         self._control = self._keep(rtde_control.RTDEControlInterface(self.host, self.frequency))
 
     def disconnect(self) -> None:
-        for iface in (self._control, self._receive):
+        for iface in (self._control, self._receive, self._io):
             if iface is not None:
                 iface.disconnect()
 
@@ -219,9 +235,9 @@ class URRTDEAdapter:
         # live interface behind (with a fresh script running) that nothing will close.
         self._abandoned = True
         _ABANDONED.extend(
-            i for i in (self._control, self._receive, *self._retired) if i is not None
+            i for i in (self._control, self._receive, self._io, *self._retired) if i is not None
         )
-        self._control = self._receive = None
+        self._control = self._receive = self._io = None
         self._retired = []
 
     def _keep(self, iface: Any) -> Any:
@@ -259,8 +275,16 @@ class URRTDEAdapter:
         self.connect_control()
         return self.control_connected()
 
+    def reconnect_io(self) -> bool:
+        if self._io is not None and bool(self._io.isConnected()):
+            return True
+        self._retire(self._io)
+        self._io = None
+        self.connect_io()
+        return self._io is not None
+
     def reconnect(self) -> bool:
-        return self.reconnect_receive() and self.reconnect_control()
+        return self.reconnect_receive() and self.reconnect_control() and self.reconnect_io()
 
     def drop_control(self) -> None:
         """Disconnect the control interface so a late command it still sends goes nowhere;
@@ -336,6 +360,12 @@ class URRTDEAdapter:
 
     def kick_watchdog(self) -> bool:
         return bool(self._ctl().kickWatchdog())
+
+    def set_speed_slider(self, fraction: float) -> bool:
+        io = self._io
+        if io is None or not io.isConnected():
+            return False
+        return bool(io.setSpeedSlider(float(fraction)))
 
     def tcp_pose(self) -> list[float]:
         return list(self._receive.getActualTCPPose())

@@ -199,6 +199,11 @@ class ArmBackend(Protocol):
         """Why the arm tripped its force limit just now; None when it did not."""
         ...
 
+    def speed_fraction(self, fraction: float) -> None:
+        """The speed slider (0-1): every trajectory's timing runs at this fraction of its
+        own, so 0 halts a move where it is and a later 1 resumes it."""
+        ...
+
     def zero_ft(self) -> None: ...
 
 
@@ -249,6 +254,9 @@ class ControllerLog:
     stops: list[tuple[str, float]] = field(default_factory=list)  # (stopl|stopj, deceleration)
     #: time.monotonic() of each stop's arrival in the controller's cycle (for latency benches)
     stop_times: list[float] = field(default_factory=list)
+    #: time.monotonic() of each speed slider set to 0 while the arm moved: the arm begins to
+    #: stop in that cycle (counted with stop_times, kept apart from the script's stops)
+    pauses: list[float] = field(default_factory=list)
     uploads: int = 0
     watchdog_trips: int = 0
     protective_stops: list[str] = field(default_factory=list)
@@ -280,6 +288,7 @@ class URController:
         self._protective_since: float | None = None
         self._protective_reason = ""
         self._unlock = False
+        self._slider = 1.0  #: the speed slider (see _speed_slider)
         self._publish()
 
     def _log_stop(self, stop: tuple[str, float]) -> None:
@@ -372,6 +381,7 @@ class URController:
             inputs = dict(self._inputs)
             stamps = dict(self._input_stamp)
         self.t += self.dt
+        self._speed_slider(inputs)
         if unlock and self._protective_since is not None:
             self._protective_since = None
             log.info("UR emulator: protective stop unlocked")
@@ -399,6 +409,22 @@ class URController:
         if prog is not None and prog.running:
             self._threads(prog)
         self._publish()
+
+    def _speed_slider(self, inputs: dict[str, Any]) -> None:
+        """The speed slider, set by any RTDE client that sends ``speed_slider_fraction`` with
+        bit 0 of ``speed_slider_mask``: a controller setting that outlives programs, read in
+        the cycle like every input, with no command handshake."""
+        if not int(inputs.get("speed_slider_mask", 0)) & 1:
+            return
+        fraction = min(max(float(inputs.get("speed_slider_fraction", 1.0)), 0.0), 1.0)
+        if fraction == self._slider:
+            return
+        if fraction == 0.0 and self.backend.motion_state() == "moving":
+            now = time.monotonic()
+            self.log.pauses.append(now)
+            self.log.stop_times.append(now)
+        self._slider = fraction
+        self.backend.speed_fraction(fraction)
 
     def _protective(self, reason: str) -> None:
         self.backend.stop()
@@ -658,8 +684,8 @@ class URController:
             "robot_status_bits": ROBOT_STATUS_POWER_ON
             | (ROBOT_STATUS_PROGRAM_RUNNING if running else 0),
             "runtime_state": RUNTIME_PLAYING if running else RUNTIME_STOPPED,
-            "speed_scaling": 1.0,
-            "target_speed_fraction": 1.0,
+            "speed_scaling": self._slider,
+            "target_speed_fraction": self._slider,
         }
         out.update(self._registers)
         with self._lock:
@@ -679,6 +705,8 @@ class URController:
             "commands": [c for _, c in self.log.commands],
             "errors": list(self.errors),
             "watchdog_trips": self.log.watchdog_trips,
+            "speed_slider": self._slider,
+            "pauses": len(self.log.pauses),
         }
 
 
@@ -1106,6 +1134,9 @@ class TwinArmBackend:
 
     def stop(self) -> None:
         self.arm.stop()
+
+    def speed_fraction(self, fraction: float) -> None:
+        self.arm.set_speed_fraction(fraction)
 
     def motion_state(self) -> str:
         from drivers.arm import MotionState

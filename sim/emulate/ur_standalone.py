@@ -34,7 +34,11 @@ class URAloneProcess:
     """A child process running :class:`URController` + :class:`URServers` on a twin robot."""
 
     def __init__(self, host: str | None = None, **settings: Any) -> None:
-        ctx = mp.get_context("fork")
+        # Not a plain fork: a parent whose numerical libraries keep a thread pool (torch,
+        # OpenBLAS; a test process that ran perception first) forks a child that hangs on its
+        # first parallel operation (seen: the twin's inertia arithmetic, for ever). The fork
+        # server's children come from a clean process.
+        ctx = mp.get_context("forkserver")
         self._pipe, child = ctx.Pipe()
         self.host = host or loopback_host()
         self._child_end = child
@@ -98,7 +102,7 @@ def _child(pipe: Any, parent_end: Any, host: str, settings: dict[str, Any]) -> N
     from sim.robot import SimRobot
     from sim.world import PhysicsSettings, SimWorld
 
-    # The fork's copy of the parent's end closed, a parent that dies (even by a signal, which
+    # The child's copy of the parent's end closed, a parent that dies (even by a signal, which
     # runs no clean-up) reads as EOF below and the emulator ends with it: left running, it held
     # the parent's stdout and stderr open, and whoever waited on those waited for ever.
     parent_end.close()

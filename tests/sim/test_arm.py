@@ -130,6 +130,34 @@ def test_stop_holds_where_it_is(world: SimWorld, robot: SimRobot) -> None:
     assert arm.status().state is MotionState.STOPPED
 
 
+def test_the_speed_slider_holds_a_move_where_it_is_and_resumes_it(
+    world: SimWorld, robot: SimRobot
+) -> None:
+    """The UR's speed slider as its controller applies it: 0 freezes the trajectory's
+    timing (the move stays MOVING, the arm stands), a later 1 finishes the same move."""
+    arm = robot.arm
+    start = arm.tool_pose()
+    goal = Pose(start.position + [0.1, 0, 0], start.rotation)
+    arm.move_to(goal, 0.05, 0.5)
+    for _ in range(100):
+        world.step()
+    arm.set_speed_fraction(0.0)
+    for _ in range(5):  # the tracking catches up with the frozen target
+        world.step()
+    held = arm.tool_pose()
+    assert 0.02 < held.position[0] - start.position[0] < 0.06
+    for _ in range(300):
+        world.step()
+    assert arm.tool_pose().distance(held)[0] < 1e-4
+    assert arm.status().state is MotionState.MOVING
+    arm.set_speed_fraction(1.0)
+    run_motion(world, robot)
+    assert arm.status().state is MotionState.DONE
+    assert arm.tool_pose().distance(goal)[0] < 1e-3
+    with pytest.raises(ValueError, match="speed fraction"):
+        arm.set_speed_fraction(1.5)
+
+
 def test_servo_follows_a_streamed_line(world: SimWorld, robot: SimRobot) -> None:
     arm = robot.arm
     start = arm.tool_pose()

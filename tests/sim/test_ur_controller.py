@@ -78,6 +78,9 @@ class Backend:
         self.calls.append(("stop", ()))
         self.state = "idle"
 
+    def speed_fraction(self, fraction: float) -> None:
+        self.calls.append(("speed_fraction", (fraction,)))
+
     def motion_state(self) -> str:
         return self.state
 
@@ -280,3 +283,28 @@ def test_a_connection_accepted_while_the_cable_is_pulled_does_not_survive_the_pu
         pulled.set()
         client.close()
         listener.shutdown()
+
+
+def test_the_speed_slider_acts_in_the_next_cycle_without_a_handshake(ctl) -> None:
+    """``speed_slider_fraction`` with bit 0 of its mask, from any client (ur_rtde's
+    RTDEIOInterface): read in the next cycle like every input, with no command handshake; a 0
+    while the arm moves is counted as a stop (the arm begins to stop in that cycle)."""
+    c, backend = ctl
+    c.write_inputs({"speed_slider_mask": 0, "speed_slider_fraction": 0.0})
+    c.cycle()
+    assert ("speed_fraction", (0.0,)) not in backend.calls  # without the mask, nothing
+    move_l(c, 0.2)
+    before = len(c.log.stop_times)
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 0.0})
+    c.cycle()
+    assert backend.calls[-1] == ("speed_fraction", (0.0,))
+    assert c.outputs()["target_speed_fraction"] == 0.0
+    assert len(c.log.stop_times) == before + 1 and len(c.log.pauses) == 1
+    assert c.log.stops == []  # not one of the script's stops
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 1.5})
+    c.cycle()
+    assert backend.calls[-1] == ("speed_fraction", (1.0,))  # clamped to the slider's range
+    backend.state = "idle"
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 0.0})
+    c.cycle()
+    assert len(c.log.pauses) == 1  # nothing moved: no stop to count

@@ -38,10 +38,11 @@ class RecordingAdapter:
             raise self.raise_on[name]
 
     def names(self, include_reads: bool = False) -> list[str]:
-        """Call names in order; by default only commands (not state reads)."""
+        """Call names in order; by default only the control script's commands (not state
+        reads, nor the speed slider: its own connection; see ``args("set_speed_slider")``)."""
         reads = {
             "is_connected", "async_status", "safety_status_bits", "robot_mode",
-            "is_program_running", "tcp_pose", "joint_positions",
+            "is_program_running", "tcp_pose", "joint_positions", "set_speed_slider",
         }
         return [n for n, _ in self.calls if include_reads or n not in reads]
 
@@ -138,6 +139,10 @@ class RecordingAdapter:
     def kick_watchdog(self) -> bool:
         self._rec("kick_watchdog")
         return True
+
+    def set_speed_slider(self, fraction: float) -> bool:
+        self._rec("set_speed_slider", fraction)
+        return getattr(self, "slider_ok", True)
 
     # --- receive -------------------------------------------------------------------------
 

@@ -624,3 +624,72 @@ def test_a_stop_from_the_sensor_s_thread_waits_for_the_command_in_flight() -> No
     guard.join(2.0)
     assert rtde.names()[-2:] == ["move_l", "stop_l"]
     assert arm.status().state is MotionState.STOPPED
+
+
+def test_a_stop_pauses_a_move_by_the_speed_slider_before_waiting_for_the_command_in_flight(
+) -> None:
+    """``stopL`` waits behind the tick's command (above) and behind the control script's
+    handshake; the speed slider has its own connection and no handshake, so it goes first,
+    from the guard's thread, while the command is still in flight. The next command sets it
+    back before it is sent."""
+    import threading
+
+    arm, rtde, _ = make()
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.args("set_speed_slider") == [(1.0,)]  # start-up: whatever a last run left
+    rtde.op = (True, 1)
+    assert arm.status().state is MotionState.MOVING
+    inside, release = threading.Event(), threading.Event()
+    plain = rtde.async_status
+
+    def slow_status() -> tuple[bool, int]:
+        inside.set()
+        release.wait(2.0)
+        return plain()
+
+    rtde.async_status = slow_status  # type: ignore[method-assign]
+    tick = threading.Thread(target=arm.status)
+    tick.start()
+    assert inside.wait(2.0)
+    guard = threading.Thread(target=arm.stop)
+    guard.start()
+    guard.join(0.2)
+    assert guard.is_alive() and "stop_l" not in rtde.names()
+    assert rtde.args("set_speed_slider")[-1] == (0.0,)  # sent without the lock
+    release.set()
+    tick.join(2.0)
+    guard.join(2.0)
+    rtde.async_status = plain  # type: ignore[method-assign]
+    assert rtde.names()[-1] == "stop_l" and arm.status().state is MotionState.STOPPED
+    rtde.op = (False, 2)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    order = [(n, a) for n, a in rtde.calls if n in ("set_speed_slider", "move_l")][-2:]
+    assert order == [("set_speed_slider", (1.0,)), ("move_l", order[1][1])]
+    arm.stop()
+    arm.stop()  # idempotent: nothing runs, no second pause
+    assert rtde.args("set_speed_slider")[-2:] == [(1.0,), (0.0,)]
+
+
+@pytest.mark.parametrize("start", ["servo", "force"])
+def test_servo_and_force_mode_stop_by_their_own_commands_without_a_pause(start: str) -> None:
+    arm, rtde, _ = make()
+    if start == "servo":
+        arm.servo(goal_at(rtde))
+    else:
+        arm.force_mode([False] * 6, [0.0] * 6, [0.1] * 6)
+    arm.stop()
+    assert (0.0,) not in rtde.args("set_speed_slider")
+
+
+def test_a_slider_the_controller_does_not_take_back_refuses_the_next_command() -> None:
+    arm, rtde, _ = make()
+    rtde.slider_ok = False
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    st = arm.status()
+    assert st.state is MotionState.FAULT and "speed slider" in st.message
+    assert "move_l" not in rtde.names()
+    rtde.slider_ok = True
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    assert rtde.names() == ["move_l"]

@@ -31,6 +31,8 @@ UNLOCK = 0.3  #: s: the emulator's protective-stop unlock delay (5 s on a real c
 def emulator():
     try:
         emu = URAloneProcess(script_start_delay=0.15, unlock_delay=UNLOCK).start()
+    except TimeoutError:  # an emulator that never answers is a failure, not a skip
+        raise
     except OSError as e:  # ports taken on our loopback address: nothing to test against
         pytest.skip(f"cannot bind the UR emulator: {e}")
     yield emu
@@ -105,6 +107,27 @@ def test_a_move_sent_right_after_an_async_stop_ends_done(connect) -> None:
     arm.move_to(goal, 0.1, 0.5)  # the stop thread is still decelerating
     state = run_until(arm, lambda: arm.status().state is not MotionState.MOVING, 5.0)
     assert state is MotionState.DONE, arm.status().message
+    assert arm.tool_pose().distance(goal)[0] < 0.002
+
+
+def test_a_stop_pauses_the_move_by_the_speed_slider_and_the_next_move_runs_at_full_speed(
+        connect, emulator: URAloneProcess) -> None:
+    """Through ur_rtde's own RTDEIOInterface: the controller takes the slider at 0 (a
+    pause it counts as a stop), then the stopL; the next move sets it back to 1."""
+    arm = connect()
+    start = arm.tool_pose()
+    arm.move_to(offset(start, dz=-0.10), 0.1, 0.5)
+    run_until(arm, lambda: False, 0.3)
+    pauses = emulator.status()["pauses"]
+    arm.stop()
+    status = emulator.status()
+    assert status["pauses"] == pauses + 1 and status["speed_slider"] == 0.0
+    settle(arm)
+    goal = offset(start, dy=0.02)
+    arm.move_to(goal, 0.1, 0.5)
+    state = run_until(arm, lambda: arm.status().state is not MotionState.MOVING, 5.0)
+    assert state is MotionState.DONE, arm.status().message
+    assert emulator.status()["speed_slider"] == 1.0
     assert arm.tool_pose().distance(goal)[0] < 0.002
 
 
