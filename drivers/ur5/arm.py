@@ -188,6 +188,10 @@ class _PathJob:
 
 #: s close() waits for the control side to see a drop the receive side has seen
 LINK_SETTLE = 0.25
+#: a watchdog kick once this share of the watchdog's period has passed since the last kick or
+#: command: the tick loop polls every period, so a poll up to (1 - share) of the watchdog's
+#: period late still keeps it fed
+KICK_SHARE = 0.25
 #: the speed slider the cell's moves run at: their speeds and accelerations as programmed
 RUN_SPEED_FRACTION = 1.0
 
@@ -269,6 +273,7 @@ class UR5Arm:
         #: and the gripper's calibration poll the arm less often than a 10 Hz watchdog needs
         self._watchdog_on = False
         self._last_command = -float("inf")  #: clock time of the newest command written
+        self._last_kick = -float("inf")  #: clock time of the newest watchdog kick
 
     @classmethod
     def connect(
@@ -417,9 +422,16 @@ class UR5Arm:
             # a command, it overwrote the command before the script read it (a force mode that
             # never began, on the UR emulator). A command written since refreshes the watchdog
             # itself, so the kick waits two cycles after one.
-            quiet = self._clock.now() - self._last_command >= 2.0 / self.settings.frequency
-            if self._watchdog_on and not uploading and quiet:
+            # A kick is sent as often as the watchdog needs, not on every poll: a command the
+            # tick sends right after a kick waits longer for the control script (measured
+            # against the UR emulator: commands' median 2.9 -> 6.0 ms with a kick every poll).
+            now = self._clock.now()
+            quiet = now - self._last_command >= 2.0 / self.settings.frequency
+            due = (now - max(self._last_command, self._last_kick)
+                   >= KICK_SHARE / (self.settings.watchdog_hz or 1.0))
+            if self._watchdog_on and not uploading and quiet and due:
                 self._rtde.kick_watchdog()
+                self._last_kick = now
         except Exception as e:  # ur_rtde raises RuntimeError on a dead socket
             self._lose_link(f"{type(e).__name__}: {e}")
             self._maybe_reconnect()

@@ -465,24 +465,35 @@ def test_force_mode_during_a_move_stops_the_move_first() -> None:
     assert rtde.names()[-2:] == ["force_mode_stop", "move_l"]
 
 
-def test_watchdog_is_armed_when_started_and_kicked_each_status_poll_when_configured() -> None:
+def test_watchdog_is_armed_when_started_and_kicked_as_often_as_it_needs() -> None:
+    from drivers.ur5.arm import KICK_SHARE
+
     arm, rtde, clock = make(UR5Settings(watchdog_hz=5.0))
     arm.status()  # the start-up: connected and polled, not armed yet
     assert "set_watchdog" not in rtde.names() and "kick_watchdog" not in rtde.names()
     arm.start_watchdog()
     arm.start_watchdog()  # once
     assert rtde.args("set_watchdog") == [(5.0,)]
-    for _ in range(3):
+    share = KICK_SHARE / 5.0  # s between kicks
+    arm.status()
+    assert rtde.names().count("kick_watchdog") == 1
+    for _ in range(3):  # polls within the share of the period: no more kicks
+        clock.t += 0.3 * share
         arm.status()
-    assert rtde.names().count("kick_watchdog") == 3
+    assert rtde.names().count("kick_watchdog") == 1
+    clock.t += 0.2 * share
+    arm.status()
+    assert rtde.names().count("kick_watchdog") == 2
     # No kick within two controller cycles of a command: it would overwrite the command's
-    # register before the script read it (the command refreshes the watchdog itself).
+    # register before the script read it (the command refreshes the watchdog itself), and the
+    # next one a share of the period after the command.
     arm.force_mode([False, False, True, False, False, False], [0, 0, -5.0, 0, 0, 0],
                    [0, 0, 0.02, 0, 0, 0])
     kicks = rtde.names().count("kick_watchdog")
+    clock.t += 2.0 / arm.settings.frequency
     arm.status()
     assert rtde.names().count("kick_watchdog") == kicks
-    clock.t += 2.0 / arm.settings.frequency
+    clock.t += share
     arm.status()
     assert rtde.names().count("kick_watchdog") == kicks + 1
     arm2, rtde2, _ = make()
