@@ -259,6 +259,7 @@ class ControllerLog:
     pauses: list[float] = field(default_factory=list)
     uploads: int = 0
     watchdog_trips: int = 0
+    watchdog_trips_at: list[float] = field(default_factory=list)  #: the controller's time, s
     protective_stops: list[str] = field(default_factory=list)
 
 
@@ -485,6 +486,7 @@ class URController:
         last = stamps.get(prog.watchdog_reg, -math.inf)
         if self.t - last > 1.0 / prog.watchdog:
             self.log.watchdog_trips += 1
+            self.log.watchdog_trips_at.append(round(self.t, 3))
             self._end_program(f"RTDE watchdog: no input for {1.0 / prog.watchdog:.3f} s")
 
     # --- the script ----------------------------------------------------------------------
@@ -705,6 +707,7 @@ class URController:
             "commands": [c for _, c in self.log.commands],
             "errors": list(self.errors),
             "watchdog_trips": self.log.watchdog_trips,
+            "watchdog_trips_at": list(self.log.watchdog_trips_at),
             "speed_slider": self._slider,
             "pauses": len(self.log.pauses),
         }

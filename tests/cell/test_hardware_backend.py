@@ -181,14 +181,14 @@ def test_a_gripper_that_holds_something_is_not_opened_to_calibrate_it(monkeypatc
     assert "calibrate" not in made["gripper"].calls and "bias" not in made["ft"].calls
 
 
-def test_the_arms_watchdog_is_off_unless_configured_and_then_reaches_the_driver(
+def test_the_arms_watchdog_is_armed_at_10_hz_unless_configured_and_reaches_the_driver(
         monkeypatch) -> None:
     from drivers.ur5.arm import UR5Arm
 
     seen: list[object] = []
     monkeypatch.setattr(UR5Arm, "connect",
                         classmethod(lambda cls, host, **kw: seen.append(kw["settings"])))
-    for text, hz in (("", None), ("devices:\n  arm:\n    watchdog_hz: 2\n", 2.0),
+    for text, hz in (("", 10.0), ("devices:\n  arm:\n    watchdog_hz: 2\n", 2.0),
                      ("devices:\n  arm:\n    watchdog_hz: null\n", None)):
         prep = _prep("cell:\n  backend: hw\n" + FORCES + text)
         hardware._open_arm(prep.config.devices, prep.layout, None)
