@@ -20,7 +20,10 @@ from the simulated state by :class:`sim.judge.ForceWatch` (never from the plan):
   ground truth the sim sensor reads before its noise and power-up offset), less the tool's own
   weight (read at rest before the trial, turned with the tool); null for a phase never reached;
 * ``shove_mm``: how far the Grasp's close moved the part: its centre in the floor plane when the
-  "close onto H" step starts against when the Grasp ends (mm); null when the close never began.
+  "close onto H" step starts against when the Grasp ends (mm); null when the close never began;
+* ``hook_depth_mm``: how far the inner pad's tip (the judge's point, 2 mm from its end) lay past
+  the open end's face at the judge's first sample after the Grasp closed (mm; negative: short of
+  the face, the pad on the lip); null when the Grasp never closed.
 
 The top level's ``pose_source`` says where the Grasp's pose came from: ``camera`` (default: the
 twin's wrist camera and the Look skill) or ``nominal`` (``--nominal``).

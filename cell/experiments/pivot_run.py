@@ -207,6 +207,10 @@ class TrialResult:
     #: mm the Grasp's close moved the part's centre in the floor plane, from the start of its
     #: "close onto H" step to the Grasp's end (None: the close never began)
     shove_mm: float | None = None
+    #: mm the inner pad's tip (the judge's point, 2 mm from its end) lay past the open end's
+    #: face at the judge's first sample after the Grasp closed; negative: short of the face
+    #: (None: the Grasp never closed)
+    hook_depth_mm: float | None = None
 
     @property
     def failure_key(self) -> str:
@@ -526,6 +530,8 @@ def run_trial(
             grip_force_n=forces.grip_force(),
             peak_force_n=forces.peaks(),
             shove_mm=forces.moved_mm("close", "grasp end"),
+            hook_depth_mm=(round(1e3 * watch.samples[0].depth[watch.inner], 2)
+                           if watch.samples else None),
         )
     finally:
         world.close()

@@ -297,7 +297,8 @@ def test_a_config_without_mu_ground_keeps_the_perturbed_floor(
 
 
 def test_per_trial_forces_and_shove_from_the_simulated_state(tmp_path: Path, capsys) -> None:
-    """grip_force_n, peak_force_n and shove_mm on one trial: measured, present, physical."""
+    """grip_force_n, peak_force_n, shove_mm and hook_depth_mm on one trial: measured,
+    present, physical."""
     from skills.pivot import PivotParams
 
     out_json = tmp_path / "r.json"
@@ -321,6 +322,10 @@ def test_per_trial_forces_and_shove_from_the_simulated_state(tmp_path: Path, cap
     assert 0.5 < trial["grip_force_n"] <= defaults.grip_force + 0.5
     # The close moved the part a little (never centimetres), and it was measured.
     assert isinstance(trial["shove_mm"], float) and 0.0 <= trial["shove_mm"] < 10.0
+    # A successful hole grasp has the inner pad's tip past the open end's face, within the
+    # finger's reach (the judge's first sample after the close).
+    if trial["success"]:
+        assert 0.0 < trial["hook_depth_mm"] < 20.0
 
 
 def test_a_configured_gripper_description_is_the_one_the_trials_run(tmp_path: Path, capsys) -> None:
