@@ -12,6 +12,7 @@ reason. Checks are on statuses, arm stops, events and numbers, not on message wo
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import py_trees
@@ -172,12 +173,40 @@ def test_perceive_looks_twice_and_publishes_the_parts_and_the_one_nearest_the_ro
     node = lv.Perceive("perceive", ctx)
     statuses = run(node, ctx)
     assert statuses[0] == Status.RUNNING and statuses[-1] == Status.SUCCESS
-    assert camera.captures == 2  # the wide view and the look at its end
-    assert [c[0] for c in ctx.devices.arm.commands] == ["path", "path"]
+    assert camera.captures == 3  # the wide view, the closer look, the close view over it
+    assert [c[0] for c in ctx.devices.arm.commands] == ["path", "path", "path"]
     bb = blackboard()
     assert len(bb.get("/part/detections")) == 2
-    assert bb.get("/part/seen") is near
+    seen = bb.get("/part/seen")
+    assert np.allclose(seen.center, near.center) and seen.open_end_seen
     assert not ctx.events.aborts
+
+
+def test_the_close_view_refines_the_chosen_part_s_pose_and_keeps_its_open_end(
+    ctx, seeing, monkeypatch
+) -> None:
+    """The last view, over the chosen part, moves its centre and axis to what it saw there; the
+    open end the earlier views decided stays (an axis seen the other way round is turned)."""
+    camera, found = seeing
+    near = detection(0.30, 0.02)
+    found.append(near)
+    close = dataclasses.replace(
+        near, center=np.array([0.302, 0.023, 0.017]), yaw=math.pi + 0.01, open_end_seen=False,
+        open_end=np.array([0.268, 0.023, 0.017]),
+    )
+    far_away = detection(0.45, 0.02)  # another part in the close view: not the chosen one
+    monkeypatch.setattr(
+        "skills.perception.look.detect_parts",
+        lambda *a, **k: [far_away, close] if camera.captures >= 3 else [near],
+    )
+    node = lv.Perceive("perceive", ctx)
+    statuses = run(node, ctx)
+    assert statuses[-1] == Status.SUCCESS
+    seen = blackboard().get("/part/seen")
+    assert np.allclose(seen.center, [0.302, 0.023, 0.017])
+    assert seen.yaw == pytest.approx(0.01) and seen.open_end_seen
+    assert np.allclose(seen.open_end[:2], [0.302 + 0.034 * math.cos(0.01),
+                                           0.023 + 0.034 * math.sin(0.01)])
 
 
 def test_perceive_on_an_empty_bin_succeeds_with_nothing_and_the_plan_then_ends_the_cycles(
