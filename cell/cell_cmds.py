@@ -154,9 +154,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--format",
         choices=("picture", "btcpp"),
-        default="picture",
+        default=None,
         help="picture: DOT and PNG (default); btcpp: BehaviorTree.CPP v4 XML (DIR/tree.xml) "
-        "that Groot2 opens",
+        "that Groot2 opens; not with --from-btcpp, which writes the YAML form",
     )
     p.add_argument(
         "--from-btcpp",
@@ -428,6 +428,7 @@ def _still(  # noqa: PLR0913 -- the camera's placement, spelled out
     rec = Recorder(backend.world, target, normal, distance=distance, height=height, size=(480, 360))
     rec.capture()
     path = record.with_name(record.stem + suffix)
+    path.parent.mkdir(parents=True, exist_ok=True)  # --record's folder, as --json makes its own
     Image.fromarray(rec.frames[0]).save(path)
     return path
 
@@ -698,6 +699,9 @@ def cmd_tree(args: argparse.Namespace) -> int:
         print(describe_types())
         return 0
     if args.from_btcpp is not None:
+        if args.format is not None:
+            raise UserError(f"--format {args.format}: does not go with --from-btcpp, which "
+                            "reads a BehaviorTree.CPP tree and writes the YAML form")
         from cell.tree_xml import from_btcpp
 
         return from_btcpp(args.from_btcpp, args.out)

@@ -8,14 +8,18 @@ else the nearest existing folder above it -- and an output the configuration nam
 log, the state file, the journal) is checked by :func:`check_config_outputs` before any device
 or twin is opened. A failure is one line naming the option (or the key) and the path, exit 2.
 
-Nothing is created here: a folder that does not exist yet is made by the command when it
-writes, so a refused command leaves no trace.
+Whether a folder takes files is found out by creating a probe file in it and removing it at
+once, not by ``os.access``: as root (containers, CI) ``os.access`` says yes to ``/proc`` and to
+read-only mounts, and the run found out only when it wrote. Nothing else is created here: a
+folder that does not exist yet is made by the command when it writes, so a refused command
+leaves no trace.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Literal
@@ -54,6 +58,17 @@ def _option(dest: str) -> str:
     return "DIR" if dest == "dir" else "--" + dest.replace("_", "-")
 
 
+def _takes_files(folder: Path) -> str | None:
+    """Why no file can be created in ``folder`` (a probe file made and removed), or None."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".cell-probe-", dir=folder)
+    except OSError as e:
+        return f"cannot create files in {folder} ({e.strerror or type(e).__name__})"
+    os.close(fd)
+    os.unlink(name)
+    return None
+
+
 def writable_problem(path: Path, kind: Kind) -> str | None:
     """Why ``path`` cannot be written as a ``kind``, or None when it can."""
     if path.exists():
@@ -61,20 +76,19 @@ def writable_problem(path: Path, kind: Kind) -> str | None:
             return "is a folder, need a file"
         if kind == "dir" and not path.is_dir():
             return "is a file, need a folder"
-        probe = path if kind == "dir" else path.parent
-        if kind == "file" and not os.access(path, os.W_OK):
-            return "permission denied"
-        if not os.access(probe, os.W_OK | os.X_OK):
-            return "permission denied"
-        return None
+        if kind == "file":
+            try:  # opened to append and closed: its content and time stamps stay
+                with open(path, "ab"):
+                    pass
+            except OSError as e:
+                return f"cannot open it for writing ({e.strerror or type(e).__name__})"
+        return _takes_files(path if kind == "dir" else path.parent)
     above = path.parent
     while not above.exists() and above != above.parent:
         above = above.parent
     if not above.is_dir():
         return f"{above} is a file, not a folder"
-    if not os.access(above, os.W_OK | os.X_OK):
-        return f"cannot create it: {above} is not writable (permission denied)"
-    return None
+    return _takes_files(above)
 
 
 def check_path(path: Path | str, kind: Kind, name: str) -> None:

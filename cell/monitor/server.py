@@ -76,6 +76,10 @@ class _Server(ThreadingHTTPServer):
     allow_reuse_address = True
 
 
+#: addresses that mean "every address of this machine"
+WILDCARDS = frozenset({"0.0.0.0", "::", ""})
+
+
 class MonitorServer:
     """Serves one source: a :class:`LiveMonitor` or a :class:`RunModel` (replay)."""
 
@@ -104,7 +108,10 @@ class MonitorServer:
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
+        """The link to open; bound to every address (0.0.0.0, ::), the machine's name: a
+        browser cannot follow a link to 0.0.0.0 from another machine."""
+        host = socket.gethostname() if self.host in WILDCARDS else self.host
+        host = f"[{host}]" if ":" in host else host
         return f"http://{host}:{self.port}/"
 
     def start(self) -> MonitorServer:

@@ -347,3 +347,20 @@ def test_any_line_of_a_replay_is_the_fold_of_the_lines_before() -> None:
         assert view.last == fold.last and view.tick == index + 1
         assert view.n_events == len(fold.events)
     assert run.marks()["first_failure"] == 1  # line 2 (tick 2): b FAILURE
+
+
+def test_a_monitor_bound_to_every_address_links_to_the_machine_s_name() -> None:
+    """A browser cannot follow http://0.0.0.0:P/ from another machine: the printed link names
+    this machine; a server bound to one address links to that address."""
+    import socket
+
+    from cell.monitor.server import MonitorServer
+
+    everywhere = MonitorServer("0.0.0.0", 0)
+    one = MonitorServer("127.0.0.1", 0)
+    try:
+        assert everywhere.url == f"http://{socket.gethostname()}:{everywhere.port}/"
+        assert one.url == f"http://127.0.0.1:{one.port}/"
+    finally:
+        everywhere.close()
+        one.close()

@@ -112,9 +112,29 @@ def test_writable_problem_reasons(tmp_path: Path) -> None:
         ro.mkdir()
         ro.chmod(0o500)
         try:
-            assert "permission denied" in str(writable_problem(ro / "x.json", "file"))
+            assert "cannot create files" in str(writable_problem(ro / "x.json", "file"))
         finally:
             ro.chmod(0o700)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_files_is_refused_even_as_root() -> None:
+    """os.access says yes to /proc as root; the probe file finds out the truth."""
+    assert "cannot create files in /proc" in str(writable_problem(Path("/proc/x.json"), "file"))
+    assert "cannot create files in /proc" in str(writable_problem(Path("/proc/x"), "dir"))
+    assert "cannot create files in /proc" in str(writable_problem(Path("/proc/a/b.gif"), "file"))
+
+
+def test_the_probe_leaves_no_trace(tmp_path: Path) -> None:
+    kept = tmp_path / "report.json"
+    kept.write_text("{}")
+    os.utime(kept, (1_000_000, 1_000_000))
+    before = _snapshot(tmp_path)
+    assert writable_problem(kept, "file") is None
+    assert writable_problem(tmp_path / "new" / "x.gif", "file") is None
+    assert writable_problem(tmp_path, "dir") is None
+    assert _snapshot(tmp_path) == before
+    assert kept.read_text() == "{}" and kept.stat().st_mtime == 1_000_000
 
 
 def test_a_configured_log_that_cannot_be_written_stops_sim_before_the_twin(

@@ -197,4 +197,12 @@ def test_the_cli_writes_tree_xml_and_reads_it_back(tmp_path: Path, capsys) -> No
     assert main(["tree", "--from-btcpp", str(bad)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"cell tree: error: {bad}:") and "'Nope'" in err[0]
+    # --format names what a configured tree is written as: with --from-btcpp it is refused,
+    # never silently ignored, and nothing is written.
+    for fmt in ("btcpp", "picture"):
+        assert main(["tree", "--from-btcpp", str(xml), "--format", fmt,
+                     "--out", str(tmp_path / "refused")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--format" in err[0] and "--from-btcpp" in err[0]
+    assert not (tmp_path / "refused").exists()
     py_trees.blackboard.Blackboard.clear()
