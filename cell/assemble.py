@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from py_trees.behaviour import Behaviour
 
-from cell.catalogue import load_catalogue
+from cell.catalogue import CatalogueError, load_catalogue
 from cell.config import CellConfig, check_tree_actuators, gripper_of, skill_settings
 from cell.reach import ur5_reach
 from cell.runner import Backend, CellState
@@ -140,6 +140,8 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         cat_path = str(Path(doc.source).resolve().parent / cat_path)
     try:
         catalogue = load_catalogue(Path(cat_path) if cat_path else None)
+    except CatalogueError as exc:  # the catalogue's own file and line, not this file's
+        raise exc.as_config_error() from None
     except ValueError as exc:
         raise doc.error(("cell", "catalogue"), str(exc)) from None
     name = config.workflow.part

@@ -277,7 +277,7 @@ def test_invalid_yaml_reports_the_line(tmp_path: Path) -> None:
     )
     message = _error(path)
     assert "YAML" in message
-    assert "line" in message
+    assert message.startswith(f"{path}:5:") or message.startswith(f"{path}:4:"), message
 
 
 def test_invalid_yaml_line_number_points_at_the_problem(tmp_path: Path) -> None:
@@ -285,7 +285,7 @@ def test_invalid_yaml_line_number_points_at_the_problem(tmp_path: Path) -> None:
     # A tab where indentation is expected, on line 3.
     path.write_text("parts:\n  foo:\n\tlength_mm: 68\n", encoding="utf-8")
     message = _error(path)
-    assert "line 3" in message
+    assert message.startswith(f"{path}:3:"), message
 
 
 @pytest.mark.parametrize(
@@ -353,3 +353,38 @@ def test_get_unknown_name_in_a_custom_catalogue(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="known parts: foo") as info:
         catalogue.get("bushing")
     assert "'bushing'" in str(info.value)
+
+
+def test_a_key_error_names_the_catalogue_s_line(tmp_path: Path) -> None:
+    path = tmp_path / "parts.yaml"
+    path.write_text(
+        "parts:\n  foo:\n    length_mm: 68\n    outer_mm: 34\n    hole_mm: 28\n"
+        "    hole_shape: circle\n    mass_kg: 0.1\n    open_end: 1\n",
+        encoding="utf-8",
+    )
+    message = _error(path)
+    assert message.startswith(f"{path}:8: parts.foo.open_end: unknown key"), message
+
+
+def test_a_configuration_reports_its_catalogue_s_typo_at_the_catalogue_s_line(
+    tmp_path: Path,
+) -> None:
+    """Not at the line of the configuration that names the catalogue."""
+    import subprocess
+    import sys
+
+    text = default_catalogue_path().read_text(encoding="utf-8")
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.strip().startswith("outer_mm:"))
+    lines[at] = lines[at].replace("outer_mm:", "outer_mn:")
+    (tmp_path / "parts.yaml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (tmp_path / "cell.yaml").write_text("cell:\n  catalogue: parts.yaml\n", encoding="utf-8")
+    proc = subprocess.run(
+        [sys.executable, "-m", "cell.cli", "tree", "--config", "cell.yaml", "--out", "t"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 2, proc.stderr
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in proc.stderr
+    assert f"parts.yaml:{at + 1}:" in err[0] and "outer_mn: unknown key" in err[0], err[0]
+    assert not (tmp_path / "t").exists()
