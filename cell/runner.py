@@ -8,6 +8,7 @@ twin's simulation time or monotonic wall time, so timeouts mean the same on both
 
 from __future__ import annotations
 
+import enum
 import gc
 import heapq
 import json
@@ -281,7 +282,29 @@ def _summary(value: Any) -> Any:
             "y": round(float(d.center[1]), 4),
             "yaw": round(float(d.yaw), 4),
         }
-    return _jsonable(value) if isinstance(value, bool | int | float | str) else repr(value)[:120]
+    if hasattr(value, "center") and hasattr(value, "yaw") and hasattr(value, "length"):
+        return _detection(value)  # one part the camera found
+    if hasattr(value, "center") and hasattr(value, "yaw") and hasattr(value, "section"):
+        return {  # a pivot frame: where the part lies, and its floor
+            "x": round(float(value.center[0]), 4),
+            "y": round(float(value.center[1]), 4),
+            "yaw": round(float(value.yaw), 4),
+            "floor_z": round(float(value.floor_z), 4),
+        }
+    if hasattr(value, "position") and hasattr(value, "rotation"):
+        r = np.asarray(value.rotation, dtype=float)
+        x, y, z = (round(float(c), 4) for c in value.position)
+        return {"x": x, "y": y, "z": z, "yaw": round(float(np.arctan2(r[1, 0], r[0, 0])), 4)}
+    if isinstance(value, float):
+        return round(value, 4)
+    if isinstance(value, bool | int | str):
+        return _jsonable(value)
+    if isinstance(value, enum.Enum):
+        return _summary(value.value)
+    if isinstance(value, np.ndarray) and value.size <= 12:
+        return [round(float(v), 4) for v in value.ravel()]
+    # Anything else by its type's name: a repr of its internals is no reading for a person.
+    return f"<{type(value).__name__}>"
 
 
 def _detection(d: Any) -> dict[str, Any]:

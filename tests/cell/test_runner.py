@@ -402,3 +402,36 @@ def test_a_log_without_a_path_writes_nothing(ctx, tmp_path) -> None:
     log.flush()
     log.close()
     assert log.lines == 0 and list(tmp_path.iterdir()) == []
+
+
+def test_the_log_writes_blackboard_values_a_person_can_read() -> None:
+    """Numbers rounded, a part as x/y/yaw and its sizes, a pose as x/y/z/yaw; never a Python
+    repr of an object's internals."""
+    from enum import Enum
+
+    from cell.runner import _summary
+    from drivers.pose import Pose
+    from skills.perception.bin_parts import Detection
+
+    d = Detection(center=np.array([0.444042, 0.002249, 0.016947]), yaw=0.00461, length=0.0652,
+                  outer=0.034, part="bushing", open_end=np.array([0.47, 0.0, 0.017]),
+                  open_end_seen=True, confidence=0.91234, pixels=500)
+    seen = _summary(d)
+    assert seen["x"] == 0.444 and seen["y"] == 0.0022 and seen["yaw"] == 0.0046
+    assert seen["part"] == "bushing"
+    pose = _summary(Pose(np.array([0.4, 0.1, 0.3]), np.array([[0.0, -1.0, 0.0],
+                                                              [1.0, 0.0, 0.0],
+                                                              [0.0, 0.0, 1.0]])))
+    assert pose == {"x": 0.4, "y": 0.1, "z": 0.3, "yaw": round(np.pi / 2, 4)}
+    assert _summary(0.123456789) == 0.1235
+
+    class Colour(Enum):
+        RED = "red"
+
+    assert _summary(Colour.RED) == "red"
+
+    class Thing:
+        pass
+
+    assert _summary(Thing()) == "<Thing>"
+    assert _summary(np.array([1.234567, 2.0])) == [1.2346, 2.0]
