@@ -45,6 +45,8 @@ from cell.monitor.model import (
 )
 
 PAGE = Path(__file__).with_name("page.html")
+#: where the page takes what it shows first (see MonitorServer.page)
+FIRST_SLOT = '<script id="first" type="application/json">null</script>'
 
 
 def parse_address(text: str, option: str = "--monitor") -> tuple[str, int]:
@@ -135,6 +137,20 @@ class MonitorServer:
         if p is None or live.header is None:
             return None
         return live.header, p.view, p
+
+    def page(self, query: dict[str, list[str]]) -> bytes:
+        """The page with what it shows first inside it (the timeline, the tree, the state and
+        the events at ``?at=`` or the start of a replay, now when live): its first paint is the
+        cell, with no request of its own to wait for."""
+        if self.replay is not None and "at" not in query:
+            query = {**query, "at": ["0"]}
+        first = {"timeline": self.payload("/api/timeline", query)}
+        for name in ("tree", "state", "events"):
+            first[name] = self.payload(f"/api/{name}", query)
+        # "</" cannot end the script element early inside the JSON: escaped as "<\/".
+        blob = json.dumps(first).replace("</", "<\\/")
+        html = PAGE.read_text(encoding="utf-8")
+        return html.replace(FIRST_SLOT, FIRST_SLOT.replace(">null<", f">{blob}<"), 1).encode()
 
     def payload(self, route: str, query: dict[str, list[str]]) -> Any:
         if route == "/api/timeline":
@@ -243,7 +259,7 @@ def _handler(server: MonitorServer) -> type[BaseHTTPRequestHandler]:
             route, query = parts.path, parse_qs(parts.query)
             try:
                 if route in ("/", "/index.html"):
-                    self._send(200, PAGE.read_bytes(), "text/html; charset=utf-8")
+                    self._send(200, server.page(query), "text/html; charset=utf-8")
                 elif route.startswith("/frames/") and route.endswith(".jpg"):
                     jpeg = server.frame_jpeg(int(route[len("/frames/") : -4]))
                     if jpeg is None:

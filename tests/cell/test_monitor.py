@@ -247,6 +247,27 @@ def test_the_replay_api_steps_through_the_run(replay: tuple[str, Path]) -> None:
     assert len(get(url + "api/events")) == len(fold.events) + len(fold.aborts)
 
 
+def test_the_page_carries_what_it_shows_first(replay: tuple[str, Path]) -> None:
+    """The first paint needs no request of its own: the page holds the timeline and the
+    tree, state and events at ``?at=`` (the start by default), as the API gives them."""
+    import re
+    import urllib.request
+
+    url, _ = replay
+    tl = get(url + "api/timeline")
+    at = tl["lines"] // 2
+    for query, line in (("", 0), (f"?at={at}", at)):
+        with urllib.request.urlopen(url + query, timeout=10) as r:
+            html = r.read().decode()
+        blob = re.search(r'<script id="first" type="application/json">(.*?)</script>', html, re.S)
+        assert blob is not None
+        first = json.loads(blob.group(1))
+        assert first["timeline"] == tl
+        assert first["tree"] == get(url + f"api/tree?at={line}")
+        assert first["state"]["tick"] == tl["tick"][line]
+        assert first["events"] == get(url + f"api/events?at={line}")
+
+
 @needs_chromium
 def test_the_replay_slider_steps_and_jumps(replay: tuple[str, Path], tmp_path: Path) -> None:
     url, _ = replay
