@@ -351,6 +351,11 @@ class EmulateSection(_Section):
     faults: list[EmulatedFault] = Field(
         default_factory=list, description="faults on the wire, each once, on a schedule"
     )
+    step_niceness: int = Field(
+        -10, ge=-20, le=19, description="the nice value of the thread that steps the twin "
+        "(lower runs first; where the process may not raise it, it runs as it is and the "
+        "report says so; 0 leaves it unchanged)"
+    )
 
     @field_validator("faults")
     @classmethod

@@ -283,7 +283,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
             links.append(_link(dev.ft.port, ft.port, "devices.ft.port"))
         wires = _Wires(servers, rtu, urcap, ft, camera, wrist)
         schedule = _Schedule(emu.faults)
-        return _serve(args, backend, controller, servers, wires, schedule, lock, settings)
+        return _serve(args, backend, controller, servers, wires, schedule, lock, settings,
+                      config.emulate.step_niceness)
     finally:
         for link in links:
             try:
@@ -300,7 +301,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
 
 def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any, wires: _Wires,
-           schedule: _Schedule, lock: threading.Lock, settings: Any) -> int:
+           schedule: _Schedule, lock: threading.Lock, settings: Any, emulate_niceness: int) -> int:
     import numpy as np
 
     from drivers.arm import MotionState
@@ -332,7 +333,7 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
             if schedule.faults:
                 schedule.check(controller.t, twin_arm.status().state is MotionState.MOVING)
 
-    loop = RealTimeLoop(1.0 / settings.frequency, step)
+    loop = RealTimeLoop(1.0 / settings.frequency, step, niceness=emulate_niceness)
     stop = threading.Event()
 
     def on_stop(signum: int, frame: Any) -> None:

@@ -110,6 +110,7 @@ class WatchSample:
     depth: dict[str, float]  #: finger name -> pad tip depth below the open end (m)
     beta_deg: float  #: the part's axis above the floor
     l_a: float | None  #: where the outer finger touches along the part, l / length
+    step: str | None = None  #: the running skill's step (its sequence's current name), if known
 
 
 class PivotWatch:
@@ -138,6 +139,7 @@ class PivotWatch:
         self.phase = ""
         self.active = False
         self.phase_starts: dict[str, float] = {}
+        self.step: str | None = None  #: set by the caller as the skill's steps change
         self._frames0: int | None = None
         self._frames1: int | None = None
         world.after_step(self._sample)
@@ -213,6 +215,7 @@ class PivotWatch:
                 depth,
                 math.degrees(beta),
                 l_a,
+                self.step,
             )
         )
 
@@ -232,6 +235,23 @@ class PivotWatch:
             run = 0 if any(s.touch.values()) else run + 1
             longest = max(longest, run)
         return longest * dt
+
+    def longest_free(self) -> dict[str, Any] | None:
+        """Where the longest untouched run was: its length (s), the phase and step it began in,
+        and when (s after that phase began) -- the diagnosis of a part left standing alone."""
+        dt = self.world.settings.control_dt
+        best: tuple[int, int] = (0, -1)  # (length, index of its first sample)
+        run = 0
+        for i, s in enumerate(self.samples):
+            run = 0 if any(s.touch.values()) else run + 1
+            if run > best[0]:
+                best = (run, i - run + 1)
+        if best[0] == 0:
+            return None
+        first = self.samples[best[1]]
+        start = self.phase_starts.get(first.phase, first.t)
+        return {"s": round(best[0] * dt, 3), "phase": first.phase, "step": first.step,
+                "after_phase_start_s": round(first.t - start, 3)}
 
     def camera_frames_steering(self) -> int:
         if self._frames0 is None:

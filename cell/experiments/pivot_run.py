@@ -181,6 +181,8 @@ class TrialResult:
     end_state_ok: bool = False  #: the end-state test alone (upright, held, finger in the hole)
     inner_in_hole_all_along: bool = False
     longest_free_s: float = 0.0  #: longest time no finger touched the part, closed Grasp to lift
+    #: where that run began: {"s", "phase", "step", "after_phase_start_s"} (None: always touched)
+    longest_free: dict[str, Any] | None = None
     final_grasp: str = "none"  #: "hole" | "pinch" | "other" | "none"
     camera_frames_steering: int = 0  #: frames taken after the Grasp began
     recovered: bool = False  #: the in-hand Align failed and the pick from above saved the part
@@ -455,12 +457,18 @@ def run_trial(
         else:
             align = make_align(tilt, setup, params, dev)
 
+        def step_of(skill: Any) -> None:
+            sequence = getattr(skill, "sequence", None)
+            watch.step = getattr(sequence, "current", None)
+
         def align_phase() -> None:
+            step_of(align)
             if getattr(align, "lifting", False) and watch.phase != "lift":
                 watch.enter("lift")
                 forces.enter("lift")
 
         def close_began() -> None:
+            step_of(grasp)
             if getattr(grasp, "sequence", None) and grasp.sequence.current == Grasp.close_step:
                 forces.mark("close")
 
@@ -479,7 +487,8 @@ def run_trial(
                 t_end,
                 on_frame,
                 frame_every,
-                align_phase if skill is align else close_began if skill is grasp else None,
+                align_phase if skill is align else close_began if skill is grasp
+                else (lambda s=skill: step_of(s)),
             )
             if failure is not None:
                 break
@@ -519,6 +528,7 @@ def run_trial(
             end_state_ok=end_ok,
             inner_in_hole_all_along=watch.inner_in_hole_all_along(),
             longest_free_s=watch.longest_free_s(),
+            longest_free=watch.longest_free(),
             final_grasp=watch.final_grasp().value,
             camera_frames_steering=watch.camera_frames_steering(),
             recovered=recovered,

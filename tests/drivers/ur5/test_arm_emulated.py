@@ -113,13 +113,19 @@ def test_a_move_sent_right_after_an_async_stop_ends_done(connect) -> None:
 def test_a_stop_pauses_the_move_by_the_speed_slider_and_the_next_move_runs_at_full_speed(
         connect, emulator: URAloneProcess) -> None:
     """Through ur_rtde's own RTDEIOInterface: the controller takes the slider at 0 (a
-    pause it counts as a stop), then the stopL; the next move sets it back to 1."""
+    pause it counts as a stop) besides the stopL; the next move sets it back to 1.
+
+    The slider travels on the IO interface's socket, the stopL on the control script's: which
+    the controller reads first depends on the machine's load, so the pause is waited for."""
     arm = connect()
     start = arm.tool_pose()
     arm.move_to(offset(start, dz=-0.10), 0.1, 0.5)
     run_until(arm, lambda: False, 0.3)
     pauses = emulator.status()["pauses"]
     arm.stop()
+    t_end = time.monotonic() + 1.0
+    while emulator.status()["pauses"] == pauses and time.monotonic() < t_end:
+        time.sleep(0.005)
     status = emulator.status()
     assert status["pauses"] == pauses + 1 and status["speed_slider"] == 0.0
     settle(arm)

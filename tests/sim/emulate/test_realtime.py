@@ -38,3 +38,23 @@ def test_a_step_that_overran_is_not_caught_up_in_a_burst() -> None:
     worst = stats["worst_overruns"][0]  # the latest step first, at its place in the twin's time
     assert worst["step_ms"] >= 5.5 * PERIOD * 1e3 and worst["late_ms"] >= 4.5 * PERIOD * 1e3
     assert worst["twin_s"] == pytest.approx(5 * PERIOD)
+
+
+def test_the_stepping_thread_runs_at_its_own_niceness_and_the_report_says_so() -> None:
+    import os
+
+    seen: list[int] = []
+
+    def step() -> None:
+        seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+        loop.stop()
+
+    before = os.getpriority(os.PRIO_PROCESS, 0)
+    # Lowering one's own priority is always permitted, so this runs everywhere.
+    loop = RealTimeLoop(PERIOD, step, niceness=min(before + 3, 19))
+    thread = threading.Thread(target=loop.run)
+    thread.start()
+    thread.join(timeout=5.0)
+    assert seen == [min(before + 3, 19)]
+    assert loop.margin_stats()["priority"] == {"niceness": min(before + 3, 19), "applied": True}
+    assert os.getpriority(os.PRIO_PROCESS, 0) == before  # per thread: the caller is unchanged
