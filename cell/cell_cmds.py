@@ -326,6 +326,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         state_file=config.log.state_file,
         taps=session.taps,
         monitor=session.live,
+        niceness=config.cell.tick_niceness,
     )
     max_time = args.max_sim_time if args.max_sim_time is not None else 150.0 * cycles + 60.0
     box_png = None

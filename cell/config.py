@@ -46,6 +46,11 @@ class CellSection(_Section):
         "sim", description="sim: the PyBullet twin; hw: the real UR5, 2F-85, FT300 and D435"
     )
     control_hz: float = Field(125.0, ge=10.0, le=500.0, description="tick rate of the tree (Hz)")
+    tick_niceness: int = Field(
+        -5, ge=-20, le=19, description="the nice value of the tick loop's thread in paced runs "
+        "(`cell run`, `sim.realtime`): lower runs first; where the process may not raise it, it "
+        "runs as it is and the run's JSON says so; 0 leaves it unchanged"
+    )
     catalogue: str | None = Field(
         None, description="part catalogue YAML (relative to this file); default: the shipped one"
     )

@@ -30,6 +30,7 @@ from cell.phases import PhaseTimes
 from drivers.clock import Clock
 from drivers.events import EventKind, StopKind
 from drivers.health import DeviceError
+from drivers.priority import set_thread_niceness
 from skills.status import Failure
 
 #: The events that end a cycle (the state file is saved on them).
@@ -384,8 +385,11 @@ class TickLoop:
         state_file: str | Path | None = None,
         taps: Sequence[Callable[[], dict[str, Any]]] = (),
         monitor: Any = None,
+        niceness: int = 0,
     ) -> None:
+        """``niceness``: the tick loop's thread's nice value in paced runs (0: as it is)."""
         self.root, self.backend, self.state, self.log = root, backend, state, log
+        self.niceness = niceness
         self.period = 1.0 / control_hz
         self.wrench, self.on_tick, self.realtime = wrench, on_tick, realtime
         self.state_file = state_file
@@ -410,6 +414,7 @@ class TickLoop:
         starts: list[float] = []  # wall time of each tick's start (paced runs)
         skipped = 0  # periods skipped after stalls (paced runs)
         longest: list[tuple[float, int, str]] = []  # a min-heap of the longest tree ticks
+        priority: dict[str, Any] | None = None
         try:
             self.root.setup_with_descendants()
             if self.realtime:
@@ -419,6 +424,8 @@ class TickLoop:
                 # collection first: it would hold the interpreter for tens of ms while the
                 # devices' readers already run (the FT300's stream went stale on the first tick).
                 gc.freeze()
+                # Threads started from here on (the off-tick planners) inherit it too.
+                priority = set_thread_niceness(self.niceness)
             next_wall = time.monotonic()
             while clock.now() - t_start < max_time:
                 if self._signal is not None:
@@ -489,9 +496,11 @@ class TickLoop:
                 self.state.save(self.state_file)
             for s, h in old.items():
                 signal.signal(s, h)
+        stats = _period_stats(starts, self.period, skipped, longest) if self.realtime else None
+        if stats is not None:
+            stats["priority"] = priority
         return RunResult(
-            status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal,
-            _period_stats(starts, self.period, skipped, longest) if self.realtime else None,
+            status, tick, clock.now() - t_start, time.perf_counter() - wall0, self._signal, stats
         )
 
 

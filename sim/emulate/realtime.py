@@ -24,7 +24,6 @@ process may not raise it (no root, no CAP_SYS_NICE), it runs as it is and the re
 from __future__ import annotations
 
 import heapq
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -32,21 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from drivers.priority import set_thread_niceness
+
 #: How many of the latest-ending steps the report lists.
 WORST_KEPT = 5
-
-
-def raise_thread_priority(niceness: int) -> dict[str, Any]:
-    """Set the calling thread's nice value (Linux: per thread); what it got, for the report."""
-    if niceness == 0:
-        return {"niceness": os.getpriority(os.PRIO_PROCESS, 0), "applied": False}
-    tid = threading.get_native_id()
-    try:
-        os.setpriority(os.PRIO_PROCESS, tid, niceness)
-    except (OSError, AttributeError) as exc:
-        return {"niceness": os.getpriority(os.PRIO_PROCESS, tid), "applied": False,
-                "why": f"not permitted ({exc.__class__.__name__})"}
-    return {"niceness": os.getpriority(os.PRIO_PROCESS, tid), "applied": True}
 
 
 class RealTimeLoop:
@@ -72,7 +60,7 @@ class RealTimeLoop:
         self._stop.set()
 
     def run(self) -> None:
-        self.priority = raise_thread_priority(self._niceness)
+        self.priority = set_thread_niceness(self._niceness)
         t_next = time.monotonic()
         while not self._stop.is_set():
             t_start = time.monotonic()

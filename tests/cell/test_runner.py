@@ -241,6 +241,28 @@ def test_realtime_paces_the_ticks_at_the_control_rate(ctx) -> None:
 
 
 
+def test_a_paced_loop_ticks_at_its_configured_niceness_and_says_so(ctx) -> None:
+    import os
+    import threading
+
+    seen: list[int] = []
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    wanted = min(before + 1, 19)  # lowering one's priority is always permitted
+    root = Scripted("root", *[Status.RUNNING] * 4, Status.SUCCESS, on_update=lambda n: seen.append(
+        os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+    tl, _ = loop(root, ctx, realtime=True, niceness=wanted)
+    try:
+        result = tl.run(max_time=10.0)
+    finally:
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), before)
+        except OSError:
+            pass  # not root: this thread stays one step lower
+    assert seen and all(n == wanted for n in seen)
+    assert result.tick_period_ms is not None and result.tick_period_ms["priority"] == {
+        "niceness": wanted, "applied": True}
+
+
 def test_after_a_stall_the_paced_loop_skips_the_missed_periods_instead_of_bursting(ctx) -> None:
     """A tick that stalls 10 periods (a slow call, a starved host): the loop must not run the
     missed ticks back to back; it skips them, counts them and ticks on a fresh grid."""
