@@ -271,6 +271,12 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     except _NothingToDo as done:
         print(str(done))
         return 0
+    if command == "run" or prep.config.sim.realtime:
+        from drivers.priority import set_thread_niceness
+
+        # Before the devices open: their readers (the FT300's, whose guard stops the arm on a
+        # sample over the limit) inherit the tick loop's priority instead of waiting behind it.
+        set_thread_niceness(prep.config.cell.tick_niceness)
     try:
         backend = open_backend(prep, seed=seed, resume=plan.state)
     except ConfigError as exc:

@@ -254,6 +254,11 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise UserError(f"devices.camera.stream: {exc}") from None
         opened.append(camera.stop)
+        # The forked renderer keeps its own low priority; the device servers started from here
+        # on inherit the controller's, so a stop command is not read behind the cell's threads.
+        from drivers.priority import set_thread_niceness
+
+        set_thread_niceness(emu.step_niceness)
         settings = ControllerSettings(frequency=float(config.cell.control_hz))
         controller = URController(TwinArmBackend(robot.arm, robot.ft), settings)
         try:
