@@ -271,7 +271,8 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     except _NothingToDo as done:
         print(str(done))
         return 0
-    if command == "run" or prep.config.sim.realtime:
+    paced = command == "run" or prep.config.sim.realtime
+    if paced:
         from drivers.priority import set_thread_niceness
 
         # Before the devices open: their readers (the FT300's, whose guard stops the arm on a
@@ -328,7 +329,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         config.cell.control_hz,
         wrench=lambda: prep.ctx.devices.ft.wrench(),
         on_tick=on_tick,
-        realtime=(command == "run") or config.sim.realtime,
+        realtime=paced,
         state_file=config.log.state_file,
         taps=session.taps,
         monitor=session.live,
