@@ -11,10 +11,14 @@ on the emulated cell) and never reads the wrench meanwhile. The interpreter's th
 interval is the one ``cell run`` sets on hardware (``cell.hardware.SWITCH_INTERVAL_S``).
 
 Latency: from the first stream sample over the limit leaving the FT300 emulator to the stop
-command taken by the emulated controller's cycle, both stamped with ``time.monotonic()`` (one
-clock for every process of the machine, the one the emulator's real-time loop runs on). The stop
-comes from the cell's process (the FT300 driver's reader thread, :mod:`drivers.limit_guard`);
-nothing inside the emulators stops the arm.
+command reaching the emulated controller: the kernel's receive time of the RTDE message that
+carried it (SO_TIMESTAMPNS), both on ``time.monotonic()`` (one clock for every process of the
+machine, the one the emulator's real-time loop runs on). ``taken`` is the same to the
+emulator's cycle that acted on it: that adds the wait for the next 8 ms cycle and for the
+emulator's server thread, which shares Python's interpreter lock with the physics (a real
+controller takes its inputs every 2 ms). The stop comes from the cell's process (the FT300
+driver's reader thread, :mod:`drivers.limit_guard`); nothing inside the emulators stops the
+arm.
 
     python bench/guard_latency.py [--injections 60] [--seed 0] [--json F]
 
@@ -145,7 +149,7 @@ def run(injections: int, seed: int) -> dict[str, object]:
                         home.rotation)
             motion = arm_motion("moveL", arm, ft, clock, Guard(LIMIT_N, LIMIT_NM, 10.0),
                                 lambda g=goal: arm.move_to(g, 0.05, 0.5))
-            stops_before = len(emu.stop_times())
+            stops_before = len(emu.stop_arrivals())
             delay = rng.uniform(0.15, 0.6)
             result = motion.tick()  # starts the move, arms the limits
             timer = threading.Timer(delay, wrist.inject)
@@ -157,7 +161,7 @@ def run(injections: int, seed: int) -> dict[str, object]:
                 time.sleep(0.008)
                 result = motion.tick()
             timer.join()
-            stop_times = emu.stop_times()[stops_before:]
+            stop_times = emu.stop_arrivals()[stops_before:]
             first = wrist.first_over
             wrist.clear()
             if result.code is not Failure.FORCE_TORQUE or first is None or not stop_times:
@@ -270,6 +274,14 @@ def run_cell(injections: int, spacing: float, watchdog_hz: float | None,
         if f.get("latency_ms") is not None:
             modes.setdefault(str(p.get("arm_mode")), []).append(float(f["latency_ms"]))
     out["by_arm_mode"] = {m: summary(v) for m, v in sorted(modes.items())}
+    # To the cycle that acted on the stop: the emulator's own wait added (see the module doc).
+    out["taken"] = summary([float(f["taken_ms"]) for f in steps
+                            if f.get("taken_ms") is not None])
+    out["arm_at_rest"] = sum(bool(f.get("arm_at_rest")) for f in steps)
+    out["each"] = [{"t_s": f.get("t_s"), "arm_mode": p.get("arm_mode"),
+                    "latency_ms": f.get("latency_ms"), "taken_ms": f.get("taken_ms"),
+                    "arm_at_rest": f.get("arm_at_rest")}
+                   for p, f in zip(pulls, steps, strict=False)]
     out["runs"] = runs
     out["cell"] = {"cycles": data.get("cycles"), "realtime": data.get("realtime")}
     out["limit"] = "the running motion's (shipped configuration)"

@@ -160,8 +160,9 @@ def _lasts(fault: Any) -> float | None:
 
 def step_latency(first_stepped: float | None, stop_times: list[float],
                  within: float | None) -> float | None:
-    """ms from the first reading with a force step to the first stop the emulated controller
-    took after it (both ``time.monotonic()``), or None if none came within ``within`` s."""
+    """ms from the first reading with a force step to the first of ``stop_times`` after it
+    (both ``time.monotonic()``: the stops' arrivals at the emulated controller, or the cycles
+    that took them), or None if none came within ``within`` s."""
     if first_stepped is None or within is None:
         return None
     after = [t for t in stop_times if first_stepped <= t <= first_stepped + within]
@@ -379,9 +380,18 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
                     else:
                         wires.wrist.clear()
                         # The stop must come from the cell's process: nothing here stops the arm.
-                        entry["latency_ms"] = step_latency(
-                            wires.wrist.first_stepped, list(controller.log.stop_times),
-                            _lasts(fault))
+                        # latency: to the stop's arrival at the controller (its RTDE
+                        # message received); taken: to the cycle that acted on it (the
+                        # emulator's own scheduling added); at rest: the move had ended
+                        first, within = wires.wrist.first_stepped, _lasts(fault)
+                        log_ = controller.log
+                        acting = step_latency(first, list(log_.stop_arrivals), within)
+                        resting = step_latency(first, list(log_.rest_stop_arrivals), within)
+                        entry["latency_ms"] = min(
+                            (v for v in (acting, resting) if v is not None), default=None)
+                        entry["taken_ms"] = step_latency(first, list(log_.stop_times),
+                                                         within)
+                        entry["arm_at_rest"] = acting is None and resting is not None
                         entry["force_n"] = fault.force_n
                 elif what == "pull":
                     wires.pull(fault.device)

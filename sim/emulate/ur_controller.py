@@ -257,6 +257,13 @@ class ControllerLog:
     #: time.monotonic() of each speed slider set to 0 while the arm moved: the arm begins to
     #: stop in that cycle (counted with stop_times, kept apart from the script's stops)
     pauses: list[float] = field(default_factory=list)
+    #: time.monotonic() of each stop's arrival at the controller (stop_times' entries, in the
+    #: same order): when the RTDE message that carried it was received by the controller's
+    #: network stack (the kernel's receive time), before the emulator's cycle took it
+    stop_arrivals: list[float] = field(default_factory=list)
+    #: arrivals of speed slider 0 while nothing moved: a stop command that found the arm at
+    #: rest (its move had ended meanwhile); not a stop, but it did reach the controller
+    rest_stop_arrivals: list[float] = field(default_factory=list)
     uploads: int = 0
     watchdog_trips: int = 0
     watchdog_trips_at: list[float] = field(default_factory=list)  #: the controller's time, s
@@ -280,6 +287,8 @@ class URController:
         self._lock = threading.Lock()
         self._inputs: dict[str, Any] = {}
         self._input_stamp: dict[str, float] = {}
+        self._input_arrival: dict[str, float] = {}  #: each input's message's arrival
+        self._cycle_arrivals: dict[str, float] = {}  #: the cycle's copy of it
         self._outputs: dict[str, Any] = {}
         self._pending_upload: str | None = None
         self._pending_stop = False
@@ -293,16 +302,24 @@ class URController:
         self._publish()
 
     def _log_stop(self, stop: tuple[str, float]) -> None:
+        now = time.monotonic()
         self.log.stops.append(stop)
-        self.log.stop_times.append(time.monotonic())
+        self.log.stop_times.append(now)
+        prog = self._program
+        name = f"input_int_register_{prog.reg_offset}" if prog is not None else ""
+        self.log.stop_arrivals.append(self._cycle_arrivals.get(name, now))
 
     # --- thread-safe surface --------------------------------------------------------------
 
-    def write_inputs(self, values: dict[str, Any]) -> None:
+    def write_inputs(self, values: dict[str, Any], arrived: float | None = None) -> None:
+        """``arrived``: when the message carrying ``values`` reached the controller
+        (``time.monotonic()``; now if not given)."""
+        arrived = time.monotonic() if arrived is None else arrived
         with self._lock:
             self._inputs.update(values)
             for name in values:
                 self._input_stamp[name] = self.t
+                self._input_arrival[name] = arrived
 
     def outputs(self) -> dict[str, Any]:
         with self._lock:
@@ -381,6 +398,7 @@ class URController:
             unlock, self._unlock = self._unlock, False
             inputs = dict(self._inputs)
             stamps = dict(self._input_stamp)
+            self._cycle_arrivals = dict(self._input_arrival)
         self.t += self.dt
         self._speed_slider(inputs)
         if unlock and self._protective_since is not None:
@@ -420,10 +438,15 @@ class URController:
         fraction = min(max(float(inputs.get("speed_slider_fraction", 1.0)), 0.0), 1.0)
         if fraction == self._slider:
             return
-        if fraction == 0.0 and self.backend.motion_state() == "moving":
+        if fraction == 0.0:
             now = time.monotonic()
-            self.log.pauses.append(now)
-            self.log.stop_times.append(now)
+            arrived = self._cycle_arrivals.get("speed_slider_fraction", now)
+            if self.backend.motion_state() == "moving":
+                self.log.pauses.append(now)
+                self.log.stop_times.append(now)
+                self.log.stop_arrivals.append(arrived)
+            else:
+                self.log.rest_stop_arrivals.append(arrived)
         self._slider = fraction
         self.backend.speed_fraction(fraction)
 
@@ -754,6 +777,33 @@ def _read_exact(conn: socket.socket, n: int) -> bytes | None:
     return data
 
 
+#: Linux's SO_TIMESTAMPNS (socket(7); Python names it only on some builds): each read carries
+#: the kernel's receive time of its data
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+_STAMP_SPACE = socket.CMSG_SPACE(16)
+
+
+def _read_stamped(conn: socket.socket, n: int) -> tuple[bytes, float] | None:
+    """``n`` bytes and when the first of them reached this host's network stack, as
+    ``time.monotonic()``: the kernel's receive time (SO_TIMESTAMPNS, on the realtime clock,
+    carried over to the monotonic one), so a server thread that was scheduled late still
+    knows when a message arrived; its own clock where the kernel gives no stamp."""
+    try:
+        first, ancillary, _, _ = conn.recvmsg(n, _STAMP_SPACE)
+    except OSError:
+        return None
+    if not first:
+        return None
+    arrived = time.monotonic()
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS and len(data) >= 16:
+            sec, nsec = struct.unpack("qq", data[:16])
+            offset = time.time_ns() - time.monotonic_ns()
+            arrived = min(arrived, (sec * 1_000_000_000 + nsec - offset) / 1e9)
+    rest = _read_exact(conn, n - len(first)) if len(first) < n else b""
+    return None if rest is None else (first + rest, arrived)
+
+
 def _pack(kind: str, value: Any) -> bytes:
     fmt = FORMATS[kind]
     if isinstance(value, list | tuple | np.ndarray):
@@ -871,15 +921,20 @@ class RTDEServer:
             self._next_conn += 1
             cid = self._next_conn
         wlock = threading.Lock()
+        try:  # the inputs' arrival times (see _read_stamped)
+            conn.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        except OSError:
+            pass
         outputs: list[tuple[list[tuple[str, str]], float]] = []
         inputs: list[list[tuple[str, str]]] = []
         streaming = threading.Event()
         streamer: threading.Thread | None = None
         try:
             while True:
-                header = _read_exact(conn, 3)
-                if header is None:
+                stamped = _read_stamped(conn, 3)
+                if stamped is None:
                     return
+                header, arrived = stamped
                 size, kind = struct.unpack(">HB", header)
                 payload = _read_exact(conn, size - 3) if size > 3 else b""
                 if payload is None:
@@ -950,7 +1005,7 @@ class RTDEServer:
                         v = struct.unpack(fmt, payload[offset:offset + n])
                         values[name] = v[0] if len(v) == 1 else list(v)
                         offset += n
-                    self.controller.write_inputs(values)
+                    self.controller.write_inputs(values, arrived)
                 else:
                     log.error("UR emulator: RTDE message type %r not handled", chr(kind))
         finally:

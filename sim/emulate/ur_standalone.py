@@ -78,6 +78,11 @@ class URAloneProcess:
         command as the emulated controller's cycle took it."""
         return list(self._call(("stop_times",)))
 
+    def stop_arrivals(self) -> list[float]:
+        """The same stops' arrivals at the emulated controller (its RTDE messages received by
+        the network stack, :attr:`ControllerLog.stop_arrivals`), in the same order."""
+        return list(self._call(("stop_arrivals",)))
+
     def requested_frequencies(self) -> list[float]:
         return list(self._call(("requested",)))
 
@@ -151,6 +156,9 @@ def _child(pipe: Any, parent_end: Any, host: str, settings: dict[str, Any]) -> N
         elif kind == "stop_times":
             with lock:
                 pipe.send(list(controller.log.stop_times))
+        elif kind == "stop_arrivals":
+            with lock:
+                pipe.send(list(controller.log.stop_arrivals))
         elif kind == "requested":
             pipe.send([f for f, _ in servers.rtde.requested])
         elif kind == "stop":

@@ -308,3 +308,50 @@ def test_the_speed_slider_acts_in_the_next_cycle_without_a_handshake(ctl) -> Non
     c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 0.0})
     c.cycle()
     assert len(c.log.pauses) == 1  # nothing moved: no stop to count
+
+
+def test_each_stop_keeps_when_its_message_reached_the_controller(ctl) -> None:
+    """The stop's arrival (what the guard-latency bench times) is the message's, not the
+    cycle's that took it: a server thread or a cycle that runs late does not add to it."""
+    c, backend = ctl
+    move_l(c, 0.2)
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 0.0}, arrived=12.5)
+    c.cycle()
+    assert c.log.stop_arrivals == [12.5] and len(c.log.stop_times) == 1
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 1.0}, arrived=13.0)
+    c.cycle()
+    command(c, 33, double_0=2.0, int_1=1)  # stopL: its command register's message
+    assert len(c.log.stop_arrivals) == 2 and c.log.stop_arrivals[1] > 13.0
+    backend.state = "idle"
+    c.write_inputs({"speed_slider_mask": 1, "speed_slider_fraction": 0.0}, arrived=20.0)
+    c.cycle()
+    assert c.log.rest_stop_arrivals == [20.0]  # reached a controller with nothing to stop
+    assert len(c.log.stop_arrivals) == 2
+
+
+def test_a_read_carries_the_kernels_receive_time() -> None:
+    """The RTDE server's reads are stamped by the network stack: bytes that waited in the
+    socket while the reading thread was busy keep the time they came."""
+    import socket
+    import time
+
+    from sim.emulate.ur_controller import SO_TIMESTAMPNS, _read_stamped
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    client = socket.create_connection(server.getsockname())
+    conn, _ = server.accept()
+    try:
+        conn.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        sent = time.monotonic()
+        client.sendall(b"abcdef")
+        time.sleep(0.05)  # the server thread is late
+        got = _read_stamped(conn, 6)
+        assert got is not None
+        data, arrived = got
+        assert data == b"abcdef"
+        assert sent - 0.002 <= arrived < sent + 0.02  # not the read's time, 50 ms later
+    finally:
+        for s in (client, conn, server):
+            s.close()
