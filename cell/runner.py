@@ -346,12 +346,24 @@ class RunResult:
 
 
 def _period_stats(starts: list[float], period: float, skipped: int = 0,
-                  longest: list[tuple[float, int, str]] | None = None) -> dict[str, Any] | None:
+                  longest: list[tuple[float, int, str]] | None = None,
+                  works: list[float] | None = None) -> dict[str, Any] | None:
     if len(starts) < 3:
         return None
     d = np.diff(np.asarray(starts)) * 1e3
     j = np.abs(d - period * 1e3)
+    # Periods over twice the configured one, split by where the time went: the loop's own
+    # work (tick, log, devices) took over a period, or it waited past its wake-up (for a core
+    # or for the interpreter, behind the process's other threads).
+    over: dict[str, Any] = {"n": int(np.sum(d > 2e3 * period))}
+    if works is not None and len(works) >= len(d):
+        w = np.asarray(works[: len(d)]) * 1e3
+        late = d > 2e3 * period
+        over["busy"] = int(np.sum(late & (w > 1e3 * period)))
+        over["waited"] = over["n"] - over["busy"]
+        over["work_p999_ms"] = round(float(np.percentile(w, 99.9)), 3)
     return {
+        "over_2x_periods": over,
         "ticks": len(starts),
         "skipped_periods": skipped,
         "period_median_ms": round(float(np.median(d)), 3),
@@ -412,6 +424,7 @@ class TickLoop:
         tick = 0
         status = "out of time"
         starts: list[float] = []  # wall time of each tick's start (paced runs)
+        works: list[float] = []  # each iteration's own time before its sleep (paced runs)
         skipped = 0  # periods skipped after stalls (paced runs)
         longest: list[tuple[float, int, str]] = []  # a min-heap of the longest tree ticks
         priority: dict[str, Any] | None = None
@@ -477,6 +490,7 @@ class TickLoop:
                     next_wall += self.period
                     now = time.monotonic()
                     delay = next_wall - now
+                    works.append(now - starts[-1])
                     if delay > 0:
                         time.sleep(delay)  # the loop paces; behaviours never wait
                     elif delay <= -self.period:
@@ -496,7 +510,8 @@ class TickLoop:
                 self.state.save(self.state_file)
             for s, h in old.items():
                 signal.signal(s, h)
-        stats = _period_stats(starts, self.period, skipped, longest) if self.realtime else None
+        stats = (_period_stats(starts, self.period, skipped, longest, works)
+                 if self.realtime else None)
         if stats is not None:
             stats["priority"] = priority
         return RunResult(

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import Generic, TypeVar
 
 from drivers.clock import Clock
+from drivers.priority import yield_thread
 
 T = TypeVar("T")
 
@@ -39,9 +40,15 @@ class OffTick(Generic[T]):
 
     def start(self) -> None:
         if self.background:
-            threading.Thread(target=self._run, name=self.name, daemon=True).start()
+            threading.Thread(target=self._run_yielding, name=self.name, daemon=True).start()
         else:
             self._run()
+
+    def _run_yielding(self) -> None:
+        # Started from the tick loop's thread, it inherited the loop's raised priority: the
+        # work would take a core from the loop it is meant to keep on time.
+        yield_thread()
+        self._run()
 
     def _run(self) -> None:
         try:

@@ -47,8 +47,8 @@ def test_emulate_serves_the_arm_and_reports_on_sigterm(tmp_path: Path) -> None:
         # The camera's renderer (the emulator's one child process) yields to the twin.
         children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
         assert len(children) == 1
-        # Forked before the controller's threads are raised: CAMERA_NICENESS below the value
-        # the emulator started with (this test's), and below the raised emulator either way.
+        # CAMERA_NICENESS below the value the emulator started with (this test's), which its
+        # main thread keeps (only the stepping thread is raised).
         renderer = os.getpriority(os.PRIO_PROCESS, int(children[0]))
         assert renderer == os.getpriority(os.PRIO_PROCESS, 0) + CAMERA_NICENESS
         assert renderer > os.getpriority(os.PRIO_PROCESS, proc.pid)
