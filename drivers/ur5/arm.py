@@ -177,13 +177,18 @@ def describe_safety_bits(bits: int) -> str:
 
 @dataclass
 class _PathJob:
-    """A path's ``moveL`` on its worker thread (ur_rtde re-uploads its script for it)."""
+    """A move's command on its worker thread: a path's ``moveL`` (ur_rtde re-uploads its
+    script for it) or a single ``moveL`` / ``moveJ``, whose handshake with the control script
+    takes two to three controller cycles (16-24 ms on a CB3) that the tick must not wait."""
 
     started: float
     finished: threading.Event = field(default_factory=threading.Event)
     ok: bool = False
     error: str | None = None
     cancelled: bool = False
+    what: str = "moveL path"
+    #: a path's upload starts a fresh script, whose operations number from 0
+    fresh_script: bool = True
 
 
 #: s close() waits for the control side to see a drop the receive side has seen
@@ -496,24 +501,30 @@ class UR5Arm:
             if self._clock.now() - job.started <= self.settings.script_start_timeout:
                 return
             self._job = None
-            self._fault(f"moveL path: the control script did not start within "
-                        f"{self.settings.script_start_timeout:g} s")
-            self._lose_link("the control script did not start after a path's upload")
+            if job.fresh_script:
+                self._fault(f"moveL path: the control script did not start within "
+                            f"{self.settings.script_start_timeout:g} s")
+                self._lose_link("the control script did not start after a path's upload")
+            else:
+                self._fault(f"{job.what}: the control script did not take it within "
+                            f"{self.settings.script_start_timeout:g} s")
+                self._lose_link(f"the control script did not take a {job.what}")
             self._spawn(self._rtde.drop_control)
             return
         self._job = None
         if job.error is not None:
             self._lose_link(job.error)
-            self._fault(f"moveL path failed: {self._link_message()}")
+            self._fault(f"{job.what} failed: {self._link_message()}")
         elif not job.ok:
-            self._fault("moveL path rejected by the controller")
+            self._fault(f"{job.what} rejected by the controller")
         elif job.cancelled:
             self._mode = "hold"
             self._stop_sent = True
             if self._state is MotionState.MOVING:
                 self._latch(MotionState.STOPPED)
         else:
-            self._op_before, self._op_ours = 0, None  # a fresh script numbers from 0
+            if job.fresh_script:
+                self._op_before, self._op_ours = 0, None  # a fresh script numbers from 0
             self._poll_progress()
 
     def _check_goal(self) -> None:
@@ -561,6 +572,8 @@ class UR5Arm:
     def _begin(self, what: str) -> bool:
         """Before any command: refuse (FAULT) if the arm cannot move; else leave the mode
         that is running if the new command needs another one."""
+        if self._job is not None and not self._job.fresh_script:
+            self._settle_job()
         if self._job is not None:
             self._fault(f"{what} refused: a path's upload is still under way (stop first)")
             return False
@@ -614,8 +627,31 @@ class UR5Arm:
         self._stop_sent = False
         self._deferred = None
         self._op_before, self._op_ours = op, None
-        if self._send(what, call):
-            self._latch(MotionState.MOVING)
+        # The handshake off the tick (see _PathJob); status() polls the job, then the move.
+        self._last_command = self._clock.now()
+        job = _PathJob(self._clock.now(), what=what, fresh_script=False)
+        self._job = job
+        self._latch(MotionState.MOVING)
+        deceleration = self.settings.stop_deceleration
+
+        def send() -> None:
+            try:
+                job.ok = bool(call())
+                if job.cancelled and job.ok:
+                    self._rtde.stop_l(deceleration)  # stopped while it was being sent
+            except Exception as e:  # whatever ur_rtde raises: the command failed
+                job.error = f"{type(e).__name__}: {e}"
+            job.finished.set()
+
+        self._spawn(send)
+
+    def _settle_job(self) -> None:
+        """A command arrived while a move's handshake is under way (a few controller cycles):
+        wait for it, bounded, so the two never enter ur_rtde's control interface at once."""
+        job = self._job
+        assert job is not None
+        job.finished.wait(self.settings.script_start_timeout)
+        self._poll_job()
 
     @_serialized
     def move_to(self, pose: Pose, speed: float, acceleration: float) -> None:

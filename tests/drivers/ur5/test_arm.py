@@ -704,3 +704,67 @@ def test_a_slider_the_controller_does_not_take_back_refuses_the_next_command() -
     rtde.slider_ok = True
     arm.move_to(goal_at(rtde), 0.1, 0.5)
     assert rtde.names() == ["move_l"]
+
+
+def test_a_move_s_handshake_runs_off_the_tick_and_a_stop_meanwhile_follows_it() -> None:
+    """ur_rtde's ``moveL`` waits for the control script's handshake (two to three controller
+    cycles, 16-24 ms on a CB3): sent on a worker, the tick returns at once and polls it. A stop
+    while it is in flight is sent by the worker right after the command, never beside it."""
+    import threading
+
+    rtde, clock = RecordingAdapter(), FakeClock()
+    workers: list[threading.Thread] = []
+
+    def spawn(fn):  # type: ignore[no-untyped-def]
+        t = threading.Thread(target=fn, daemon=True)
+        workers.append(t)
+        t.start()
+
+    arm = UR5Arm(rtde, clock, spawn=spawn)
+    inside, release = threading.Event(), threading.Event()
+    plain_move_l = rtde.move_l
+
+    def slow_move_l(*args: object) -> bool:
+        inside.set()
+        release.wait(2.0)
+        return plain_move_l(*args)  # type: ignore[arg-type]
+
+    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)  # returns while the handshake is under way
+    assert inside.wait(2.0) and "move_l" not in rtde.names()
+    assert arm.status().state is MotionState.MOVING
+    arm.stop()  # from the tick or the guard: does not wait, sends nothing beside the move
+    assert "stop_l" not in rtde.names()
+    release.set()
+    workers[-1].join(2.0)
+    assert rtde.names()[-2:] == ["move_l", "stop_l"]
+    assert arm.status().state is MotionState.STOPPED
+
+
+def test_a_command_while_a_move_s_handshake_runs_waits_for_it() -> None:
+    """The next command (a new move, a servo) waits for the handshake in flight rather than
+    enter ur_rtde's control interface beside it; the new move then tracks its own operation."""
+    import threading
+
+    rtde, clock = RecordingAdapter(), FakeClock()
+    arm = UR5Arm(rtde, clock, spawn=lambda f: threading.Thread(target=f, daemon=True).start())
+    release = threading.Event()
+    plain_move_l = rtde.move_l
+
+    def slow_move_l(*args: object) -> bool:
+        release.wait(2.0)
+        return plain_move_l(*args)  # type: ignore[arg-type]
+
+    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    rtde.op = (True, 3)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    threading.Timer(0.05, release.set).start()
+    rtde.move_l = plain_move_l  # type: ignore[method-assign]
+    arm.move_to(goal_at(rtde), 0.1, 0.5)  # waits up to the first's end, then sends
+    for _ in range(100):
+        if rtde.names().count("move_l") == 2:
+            break
+        threading.Event().wait(0.01)
+    assert rtde.names().count("move_l") == 2
+    assert arm.status().state is MotionState.MOVING
