@@ -193,7 +193,12 @@ class _Schedule:
             if i in self._done:
                 continue
             if i not in self._pulled_at:
-                if since >= f.at_s and (moving or not f.mid_motion):
+                # One fault at a time on a device: two force steps overlapping would share a
+                # first reading and time neither (several fall due at once when the arm stood
+                # still past their times, e.g. while a stopped run was being resumed).
+                busy = any(j not in self._done and self.faults[j].device == f.device
+                           for j in self._pulled_at)
+                if since >= f.at_s and (moving or not f.mid_motion) and not busy:
                     self._pulled_at[i] = t
                     with self._lock:
                         self._due.append((i, "pull"))

@@ -15,6 +15,12 @@ How each command maps onto the controller, and why:
   timeout, for the program to run: that call runs on a worker thread, bounded by
   ``script_start_timeout``; the tick only polls it.
 * :meth:`move_joints`: ``moveJ`` asynchronous.
+* ur_rtde sends a command and waits for the control script's handshake (two to three
+  controller cycles: 16-24 ms on a CB3, longer than a tick). A move's command is therefore
+  sent on a worker, as a path's upload is: the move is MOVING at once and :meth:`status` polls
+  the worker, then the operation. A stop meanwhile is sent by the worker right after the
+  command; any other command meanwhile waits for it (at most the handshake), so ur_rtde's
+  control interface is never entered twice at once.
 * Completion comes from the async status word (``getAsyncOperationProgressEx``): the script
   numbers every async operation it starts and flags the running one. Our move is the first
   operation numbered after the one current when it was sent (after a path's re-upload: any

@@ -139,6 +139,16 @@ def test_a_force_step_lasts_its_default_and_is_timed_to_the_first_stop_after_it(
     assert s.take() == []
     s.check(1.0 + FORCE_STEP_S, moving=False)
     assert s.take() == [(step, "plug")]
+    # Steps that fall due together (the arm stood still past their times) take turns.
+    a, b = (EmulatedFault(device="ft", fault="force_step", at_s=t) for t in (1.0, 2.0))
+    s = _Schedule([a, b])
+    s.check(0.0, moving=True)
+    s.check(5.0, moving=True)
+    assert s.take() == [(a, "pull")]
+    s.check(5.0 + FORCE_STEP_S - 0.01, moving=True)
+    assert s.take() == []  # b waits while a lasts
+    s.check(5.0 + FORCE_STEP_S, moving=True)
+    assert s.take() == [(a, "plug"), (b, "pull")]
     # A stop before the step is not its stop; none within the step's time is a miss.
     assert step_latency(100.0, [99.0, 100.012, 100.2], 0.5) == 12.0
     assert step_latency(100.0, [99.0], 0.5) is None
