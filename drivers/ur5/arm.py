@@ -652,10 +652,12 @@ class UR5Arm:
         self._spawn(send)
 
     def _settle_job(self) -> None:
-        """A command arrived while a move's handshake is under way (a few controller cycles):
-        wait for it, bounded, so the two never enter ur_rtde's control interface at once."""
+        """A command arrived while a move's command is under way on its worker (a handshake:
+        a few controller cycles; a path's upload: longer): wait for it, bounded, so the two
+        never enter ur_rtde's control interface at once."""
         job = self._job
-        assert job is not None
+        if job is None:
+            return
         job.finished.wait(self.settings.script_start_timeout)
         self._poll_job()
 
@@ -839,6 +841,7 @@ class UR5Arm:
         on the dashboard and restart the control script. Blocking; not for a tick."""
         if self.dashboard is None:
             raise DeviceError(DEVICE, self.address, "recover() needs the dashboard client")
+        self._settle_job()
         self.dashboard.close_safety_popup()
         self.dashboard.unlock_protective_stop()
         if not self._rtde.reupload_script():
@@ -866,6 +869,8 @@ class UR5Arm:
         before: the start-up does not poll that often. Raises :class:`DeviceError` when the
         controller refuses it."""
         if self.settings.watchdog_hz and not self._watchdog_on:
+            # Called from the tick loop after its first tick, whose move may be on its worker.
+            self._settle_job()
             self._watchdog_on = True
             self._arm_watchdog()
 

@@ -768,3 +768,28 @@ def test_a_command_while_a_move_s_handshake_runs_waits_for_it() -> None:
         threading.Event().wait(0.01)
     assert rtde.names().count("move_l") == 2
     assert arm.status().state is MotionState.MOVING
+
+
+def test_the_watchdog_is_armed_after_the_move_in_flight_not_beside_it() -> None:
+    """The tick loop arms the watchdog after its first tick, whose move may still be in its
+    handshake on the worker: two commands at once in ur_rtde's control interface overwrite each
+    other (on the emulated cell the first move never ran and its leaf timed out after 10 s)."""
+    import threading
+
+    rtde, clock = RecordingAdapter(), FakeClock()
+    arm = UR5Arm(rtde, clock, UR5Settings(watchdog_hz=10.0),
+                 spawn=lambda f: threading.Thread(target=f, daemon=True).start())
+    release = threading.Event()
+    plain_move_l = rtde.move_l
+
+    def slow_move_l(*args: object) -> bool:
+        release.wait(2.0)
+        return plain_move_l(*args)  # type: ignore[arg-type]
+
+    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    rtde.op = (False, 0)
+    arm.move_to(goal_at(rtde), 0.1, 0.5)
+    threading.Timer(0.05, release.set).start()
+    arm.start_watchdog()
+    names = rtde.names()
+    assert "set_watchdog" in names and names.index("move_l") < names.index("set_watchdog")
