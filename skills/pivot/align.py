@@ -177,7 +177,7 @@ class Align(HoleGraspSkill):
             self._turn_path,
             lambda _: abs(self.turn_angle),
             p.align_speed,
-            4.0 * p.align_speed,
+            p.align_acceleration,
             ALONG_CLOSING,
         )
 

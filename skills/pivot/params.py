@@ -120,6 +120,9 @@ class PivotParams:
     align_speed: float = si(
         2.0, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
     )
+    align_acceleration: float = si(
+        8.0, "rad/s^2", 0.1, 40.0, "of Align's turn about the rim contact (in hand)"
+    )
     narrow_speed: float = si(
         0.05, "m/s", 0.001, 0.15, "of each finger closing on the wall and easing off it (Align)",
         actuator="finger_speed",
