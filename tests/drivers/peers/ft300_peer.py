@@ -20,22 +20,32 @@ from __future__ import annotations
 
 import os
 import select
+import struct
 import threading
 import time
 import tty
 from collections import deque
 from collections.abc import Callable, Sequence
 
-from drivers.ft300.protocol import (
-    FRAME_LEN,
-    HEADER,
-    STREAM_REGISTER,
-    STREAM_START_VALUE,
-    crc16_modbus,
-    encode_frame,
-    with_crc,
-    write_registers_request,
-)
+import numpy as np
+
+# The sensor's side of the protocol comes from the FT300 emulator (sim/emulate, written from the
+# manual, with its own CRC), never from the driver under test: a peer built on the driver's own
+# frames and CRC would check the driver against itself.
+from sim.emulate.ft300_stream import HEADER, STREAM_REGISTER, STREAM_START, stream_frame
+from sim.emulate.rtu import crc16, with_crc
+
+FRAME_LEN = 16  #: the manual's stream frame: header, six int16 values, CRC
+
+
+def encode_frame(wrench: Sequence[float]) -> bytes:
+    return stream_frame(np.asarray(wrench, float))
+
+
+def start_request(unit_id: int) -> bytes:
+    """The manual's "start stream": write 0x0200 into register 410 (function 16, one
+    register, two bytes)."""
+    return with_crc(struct.pack(">BBHHBH", unit_id, 0x10, STREAM_REGISTER, 1, 2, STREAM_START))
 
 Wrench = Sequence[float]
 
@@ -154,14 +164,14 @@ class FT300Peer:
         # The start request is 11 bytes: find any complete one with a valid CRC.
         while len(rx) >= 11:
             frame = bytes(rx[:11])
-            if crc16_modbus(frame[:9]) == int.from_bytes(frame[9:], "little") and frame[1] == 0x10:
+            if crc16(frame[:9]) == int.from_bytes(frame[9:], "little") and frame[1] == 0x10:
                 del rx[:11]
                 self._on_request(frame)
             else:
                 del rx[:1]
 
     def _on_request(self, frame: bytes) -> None:
-        expected = write_registers_request(frame[0], STREAM_REGISTER, [STREAM_START_VALUE])
+        expected = start_request(frame[0])
         if frame[0] != self.unit_id:
             self.ignored_requests.append(frame)
             return
