@@ -103,6 +103,9 @@ class SlotParams:
     hold_force: float = si(
         20.0, "N", 0.1, 235.0, "per finger of the hole grasp (pick)", actuator="grip_force"
     )
+    pinch_settle: float = si(
+        0.3, "s", 0.0, 2.0, "the pinch's fingers stand still this long before the check (pick)"
+    )
     view_height: float = si(
         0.20, "m", 0.05, 1.0, "of the camera above the rim when looking (pick)"
     )
@@ -549,7 +552,8 @@ class PickFromSlot(_SlotSkill):
         dev, p, g = self.dev, self.params, self.params.guard
         return [
             dev.move("beside the wall", p.descent_guard, self._beside_wall),
-            dev.grip("pinch the wall", g, lambda: dev.gripper.close(p.hold_force), settle=0.3),
+            dev.grip("pinch the wall", g, lambda: dev.gripper.close(p.hold_force),
+                     settle=p.pinch_settle),
             check("holding the part", dev, g, self._pinched, Failure.MISSED),
         ]
 

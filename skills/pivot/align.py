@@ -141,8 +141,8 @@ class Align(HoleGraspSkill):
         self._pad = np.zeros(3)  #: m, where the inner pad's face is held while the jaws move
         self._x = np.zeros(3)
         self._rotation = np.eye(3)
-        #: the jaws' moves end 0.2 s after the fingers stop (reset as each starts)
-        self._still = Settled(dev.gripper, dev.clock, 0.2)
+        #: the jaws' moves end ``close_settle`` after the fingers stop (reset as each starts)
+        self._still = Settled(dev.gripper, dev.clock, params.close_settle)
         outer, inner = pinched_span(part, dev.gripper.finger_width)
         self._wall_width = outer - inner  #: m across the wall between the pads' faces
         self.turn = self._turn_about_rim()
@@ -249,7 +249,7 @@ class Align(HoleGraspSkill):
 
     def _follow_pad(self) -> bool:
         """Keep the inner pad where it is while the jaws move (the TCP follows half the
-        closing); done once the fingers have been still for 0.2 s."""
+        closing); done once the fingers have been still for ``close_settle``."""
         position = self._pad + 0.5 * self.dev.gripper.width() * self._x
         self.dev.arm.servo(Pose(position, self._rotation))
         return self._still()

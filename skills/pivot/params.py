@@ -24,6 +24,10 @@ class PivotParams:
     hold_force: float = si(
         20.0, "N", 0.1, 235.0, "per finger of the hole grasp that lifts", actuator="grip_force"
     )
+    pinch_settle: float = si(
+        0.3, "s", 0.0, 2.0, "the pinch's fingers stand still this long before the part is lifted "
+        "(the recovery's pick from above)"
+    )
     touch_standoff: float = si(
         0.004, "m", 0.0, 0.03,
         "the outer tip stops this far above S before feeling for it (more than the height "

@@ -82,7 +82,8 @@ class PickFromAbove(HoleGraspSkill):
             dev.move("over the wall", g, self._over_wall),
             dev.grip("open over the wall", g, self._narrow),
             dev.move("into the hole", p.descent_guard, self._into_hole),
-            dev.grip(self.pinch_step, g, lambda: dev.gripper.close(p.hold_force), settle=0.3),
+            dev.grip(self.pinch_step, g, lambda: dev.gripper.close(p.hold_force),
+                     settle=p.pinch_settle),
             dev.move("lift", g, self._lift),
         ]
 
