@@ -27,7 +27,7 @@ from pydantic import (
 )
 
 from drivers.gripper_spec import DEFAULT_GRIPPER, GripperSpec, GripperSpecError, load_gripper
-from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
+from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE, MAX_FORCE_LIMIT
 from skills.params import apply_config, config_keys
 from trees.context import SECTION_DOCS, SKILL_SECTIONS
 from trees.yaml_lines import ConfigError, LinedDocument, load_yaml, parse_yaml
@@ -228,7 +228,8 @@ class SafetySection(_Section):
     both for the FT guard around the leaf and for every motion of its skill."""
 
     ft_abort_force_n: float = Field(
-        DEFAULT_MAX_FORCE, gt=0.0, le=300.0, description="|F| at the wrist that stops a motion (N)"
+        DEFAULT_MAX_FORCE, gt=0.0, le=MAX_FORCE_LIMIT,
+        description="|F| at the wrist that stops a motion (N)"
     )
     ft_abort_torque_nm: float = Field(
         DEFAULT_MAX_TORQUE,

@@ -33,6 +33,9 @@ from skills.status import RUNNING, Failure, SkillInputError, Status, StepResult
 DEFAULT_MAX_FORCE = 80.0
 DEFAULT_MAX_TORQUE = 8.0
 DEFAULT_MOTION_TIMEOUT = 10.0
+#: N, the highest force limit a motion may be given: the FT300's measuring range (+-300 N; its
+#: counts saturate at 327.67 N), above which a limit could never be seen crossed
+MAX_FORCE_LIMIT = 300.0
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from skills.motion import Guard
+from skills.motion import MAX_FORCE_LIMIT, Guard
 
 #: unit -> (suffix of the configuration key, factor from the configured value to SI)
 UNITS: dict[str, tuple[str, float]] = {
@@ -114,8 +114,9 @@ def config_keys(cls: type) -> tuple[ConfigKey, ...]:
             g = f.default_factory()  # type: ignore[misc]
             stem = f.name.removesuffix("_guard")
             keys.append(
-                ConfigKey(f"{stem}_max_force_n", f.name, "max_force", "N", 1.0, 1.0, 300.0,
-                          g.max_force, f"{meta['doc']}: abort force, capped by the node's limit")
+                ConfigKey(f"{stem}_max_force_n", f.name, "max_force", "N", 1.0, 1.0,
+                          MAX_FORCE_LIMIT, g.max_force,
+                          f"{meta['doc']}: abort force, capped by the node's limit")
             )
             keys.append(
                 ConfigKey(f"{stem}_timeout_s", f.name, "timeout", "s", 1.0, 0.1, 600.0,

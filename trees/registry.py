@@ -18,6 +18,7 @@ import py_trees
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
+from skills.motion import MAX_FORCE_LIMIT
 from skills.params import config_keys
 from trees import behaviours as lv
 from trees.context import SECTION_DOCS, SKILL_SECTIONS, CellContext
@@ -38,7 +39,9 @@ MOTION = {
     "timeout_s": Param(
         float, low=0.1, high=3600, doc="timeout (s); default safety.default_timeout_s"
     ),
-    "max_force_n": Param(float, low=1, high=300, doc="FT abort force (N); default safety's"),
+    "max_force_n": Param(
+        float, low=1, high=MAX_FORCE_LIMIT, doc="FT abort force (N); default safety's"
+    ),
     "max_torque_nm": Param(float, low=0.1, high=50, doc="FT abort torque (N*m); default safety's"),
 }
 NAME = {"name": Param(str, doc="shown in `cell tree` and the log")}
@@ -99,7 +102,7 @@ REGISTRY: dict[str, NodeType] = {
         "decorator",
         "fails the child within one tick of a wrench over the limits; stops the arm",
         {
-            "max_force_n": Param(float, low=1, high=300),
+            "max_force_n": Param(float, low=1, high=MAX_FORCE_LIMIT),
             "max_torque_nm": Param(float, low=0.1, high=50),
         },
     ),
