@@ -78,17 +78,9 @@ class CellRecorder:
         self.frames.append(np.asarray(frame))
 
     def save_gif(self, path: str | Path, fps: float = 12.0) -> Path:
-        from PIL import Image
+        from sim.gif import save_gif
 
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not self.frames:
-            raise ValueError("no frames were recorded")
-        images = [Image.fromarray(f) for f in self.frames]
-        images[0].save(
-            path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0
-        )
-        return path
+        return save_gif(self.frames, path, fps)
 
 
 def force_limit(node: Any, default: float) -> float:

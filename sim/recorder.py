@@ -41,17 +41,9 @@ class Recorder:
         self.frames.append(np.asarray(img, np.uint8).reshape(h, w, 4)[:, :, :3].copy())
 
     def save_gif(self, path: str | Path, fps: float = 15.0) -> Path:
-        from PIL import Image
+        from sim.gif import save_gif
 
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not self.frames:
-            raise ValueError("no frames were recorded")
-        images = [Image.fromarray(f) for f in self.frames]
-        images[0].save(
-            path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0
-        )
-        return path
+        return save_gif(self.frames, path, fps)
 
     def save_contact_sheet(self, path: str | Path, count: int = 12, columns: int = 4) -> Path:
         """The last ``count`` frames (or all, evenly picked) tiled into one PNG."""
