@@ -249,7 +249,6 @@ def _refuse(prep: Any, opened: dict[str, Any], why: str) -> ConfigError:
                        f"start-up checks failed, nothing moved: {why}")
 
 
-#: The skills' gripper forces (N per finger), as configuration keys: what `cell run` commands.
 def open_hardware(prep: Any) -> HardwareBackend:
     """Connect and check every device before anything moves; refuse with the reasons. (The
     configuration's gripper values were checked against the gripper's description when it was
