@@ -113,10 +113,12 @@ class HoleGraspSkill:
         self.sequence.halt()
 
 
-#: The pads may press on the part while the tool turns about the rim or slides down beside the
-#: wall; past a few newtons along the closing line the TCP gives way rather than shove the
-#: standing part.
-ALONG_CLOSING = Compliance(axes=(True, False, False), deadband=5.0, gain=0.002, limit=0.004)
+def along_closing(params: PivotParams) -> Compliance:
+    """The pads may press on the part while the tool turns about the rim or slides down beside
+    the wall; past ``align_press`` along the closing line the TCP gives way rather than shove
+    the standing part."""
+    return Compliance(axes=(True, False, False), deadband=params.align_press,
+                      gain=params.align_compliance, limit=params.align_backoff)
 
 
 class Align(HoleGraspSkill):
@@ -151,7 +153,7 @@ class Align(HoleGraspSkill):
             lambda path: float(np.linalg.norm(path(1.0).position - path(0.0).position)),
             params.slide_speed, params.acceleration,
             # as far as the jaws leave room: the two wall gaps
-            dataclasses.replace(ALONG_CLOSING, limit=2.0 * params.wall_gap),
+            dataclasses.replace(along_closing(params), limit=2.0 * params.wall_gap),
         )
         g = params.guard
         self.sequence = Sequence(
@@ -178,7 +180,7 @@ class Align(HoleGraspSkill):
             lambda _: abs(self.turn_angle),
             p.align_speed,
             p.align_acceleration,
-            ALONG_CLOSING,
+            along_closing(p),
         )
 
     def _jaws_move(self, name: str, command: Callable[[], None]) -> GuardedMotion:

@@ -124,6 +124,17 @@ class PivotParams:
     align_speed: float = si(
         2.0, "rad/s", 3.0 * DEG, 120.0 * DEG, "of Align's turn about the rim contact (in hand)"
     )
+    align_press: float = si(
+        5.0, "N", 0.5, 100.0, "the pads may press along the closing line in Align's turn and "
+        "slide before the TCP gives way (the standing part is not shoved)"
+    )
+    align_compliance: float = si(
+        0.002, "m/(N*s)", 0.0, 0.05, "the TCP gives way per newton over align_press"
+    )
+    align_backoff: float = si(
+        0.004, "m", 0.0, 0.02, "the most the TCP gives way along the closing line in the turn "
+        "(the slide: the two wall gaps)"
+    )
     align_acceleration: float = si(
         8.0, "rad/s^2", 0.1, 40.0, "of Align's turn about the rim contact (in hand)"
     )
