@@ -29,36 +29,9 @@ from typing import Any
 from trees.registry import MOTION, NAME, REGISTRY, Param, section_params
 from trees.yaml_lines import ConfigError
 
-#: Registry type -> (BehaviorTree.CPP node ID, its model category). The IDs of BehaviorTree.CPP's
-#: own nodes (``Sequence``, ``Fallback``) are not declared in the model; the others avoid
-#: BehaviorTree.CPP's built-in IDs (its ``Timeout`` counts milliseconds of wall time; ours counts
-#: seconds of the cell's clock, hence ``CellTimeout``).
-BTCPP_IDS: dict[str, tuple[str, str]] = {
-    "sequence": ("Sequence", "Control"),
-    "selector": ("Fallback", "Control"),
-    "retry": ("Retry", "Decorator"),
-    "timeout": ("CellTimeout", "Decorator"),
-    "ft_guard": ("FTGuard", "Decorator"),
-    "cycles": ("Cycles", "Decorator"),
-    "stop_on_failure": ("StopOnFailure", "Decorator"),
-    "perceive": ("Perceive", "Action"),
-    "plan_pick": ("PlanPick", "Action"),
-    "pivot_clears": ("PivotClears", "Condition"),
-    "reposition": ("Reposition", "Action"),
-    "grasp": ("Grasp", "Action"),
-    "tilt": ("Tilt", "Action"),
-    "align": ("Align", "Action"),
-    "pick_from_above": ("PickFromAbove", "Action"),
-    "put_back": ("PutBack", "Action"),
-    "feed_slot": ("FeedSlot", "Action"),
-    "slot_holds_part": ("SlotHoldsPart", "Condition"),
-    "holding_part": ("HoldingPart", "Condition"),
-    "slot_machined": ("SlotMachined", "Condition"),
-    "wait_machining": ("WaitMachining", "Action"),
-    "pick_from_slot": ("PickFromSlot", "Action"),
-    "pack_in_box": ("PackInBox", "Action"),
-    "go_home": ("GoHome", "Action"),
-}
+#: Registry type -> (BehaviorTree.CPP node ID, its model category), as each node declares it
+#: (:attr:`trees.registry.NodeType.btcpp`).
+BTCPP_IDS: dict[str, tuple[str, str]] = {kind: nt.btcpp for kind, nt in REGISTRY.items()}
 BUILTIN = frozenset({"Sequence", "Fallback"})
 _BY_ID = {xml_id: kind for kind, (xml_id, _) in BTCPP_IDS.items()}
 _CATEGORIES = frozenset({"Action", "Condition", "Control", "Decorator"})

@@ -13,23 +13,19 @@ from typing import Any
 import py_trees
 from py_trees.behaviour import Behaviour
 
-from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
+from trees.decorators import FTGuard, FTSampler, Timeout
 from trees.registry import REGISTRY
 
+#: Built class -> registry type, from what each node declares (its ``leaf`` or ``cls``), and
+#: the two nodes the cell adds around a tree's file (not types a file may name).
 _CLASSES: dict[type, str] = {
-    py_trees.composites.Sequence: "sequence",
-    py_trees.composites.Selector: "selector",
     py_trees.composites.Parallel: "parallel",
-    Retry: "retry",
-    Timeout: "timeout",
-    FTGuard: "ft_guard",
-    Cycles: "cycles",
-    StopOnFailure: "stop_on_failure",
     FTSampler: "ft_sampler",
 }
 for _kind, _nt in REGISTRY.items():
-    if _nt.leaf is not None:
-        _CLASSES[_nt.leaf] = _kind
+    _built = _nt.leaf if _nt.leaf is not None else _nt.cls
+    if _built is not None:
+        _CLASSES[_built] = _kind
 
 
 def node_type(node: Behaviour) -> str:

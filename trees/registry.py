@@ -53,6 +53,13 @@ class NodeType:
     doc: str
     params: dict[str, Param] = field(default_factory=dict)
     leaf: type[Behaviour] | None = None
+    #: its BehaviorTree.CPP node ID and model category (trees/btcpp.py). The IDs of
+    #: BehaviorTree.CPP's own nodes (``Sequence``, ``Fallback``) are not declared in the model;
+    #: the others avoid its built-in IDs (its ``Timeout`` counts milliseconds of wall time; ours
+    #: counts seconds of the cell's clock, hence ``CellTimeout``).
+    btcpp: tuple[str, str] = ("", "")
+    #: the class a composite or decorator builds (a leaf's is ``leaf``)
+    cls: type[Behaviour] | None = None
 
     @property
     def section(self) -> str | None:
@@ -81,8 +88,18 @@ def section_params(section: str) -> dict[str, Param]:
 
 
 REGISTRY: dict[str, NodeType] = {
-    "sequence": NodeType("composite", "children in order; fails at the first failure"),
-    "selector": NodeType("composite", "children in order until one succeeds (fallback)"),
+    "sequence": NodeType(
+        "composite",
+        "children in order; fails at the first failure",
+        btcpp=("Sequence", "Control"),
+        cls=py_trees.composites.Sequence,
+    ),
+    "selector": NodeType(
+        "composite",
+        "children in order until one succeeds (fallback)",
+        btcpp=("Fallback", "Control"),
+        cls=py_trees.composites.Selector,
+    ),
     "retry": NodeType(
         "decorator",
         "runs the child again after a failure",
@@ -92,11 +109,15 @@ REGISTRY: dict[str, NodeType] = {
                 float, low=0.0, high=60.0, doc="wait before each new attempt (s); default 0"
             ),
         },
+        btcpp=("Retry", "Decorator"),
+        cls=Retry,
     ),
     "timeout": NodeType(
         "decorator",
         "fails the child after a time (s, the cell's clock)",
         {"seconds": Param(float, required=True, low=0.01, high=86400)},
+        btcpp=("CellTimeout", "Decorator"),
+        cls=Timeout,
     ),
     "ft_guard": NodeType(
         "decorator",
@@ -105,77 +126,135 @@ REGISTRY: dict[str, NodeType] = {
             "max_force_n": Param(float, low=1, high=MAX_FORCE_LIMIT),
             "max_torque_nm": Param(float, low=0.1, high=50),
         },
+        btcpp=("FTGuard", "Decorator"),
+        cls=FTGuard,
     ),
-    "cycles": NodeType("decorator", "repeats the child until workflow.cycles or the bin is empty"),
+    "cycles": NodeType(
+        "decorator",
+        "repeats the child until workflow.cycles or the bin is empty",
+        btcpp=("Cycles", "Decorator"),
+        cls=Cycles,
+    ),
     "stop_on_failure": NodeType(
         "decorator",
         "a failure below needs a person: stops the cell with this reason",
         {"reason": Param(str, required=True)},
+        btcpp=("StopOnFailure", "Decorator"),
+        cls=StopOnFailure,
     ),
     "perceive": NodeType(
-        "leaf", "wrist camera over the bin, find the parts", dict(MOTION), lv.Perceive
+        "leaf",
+        "wrist camera over the bin, find the parts",
+        dict(MOTION),
+        lv.Perceive,
+        btcpp=("Perceive", "Action"),
     ),
-    "plan_pick": NodeType("leaf", "choose the part and its pivot frame", {}, lv.PlanPick),
+    "plan_pick": NodeType(
+        "leaf", "choose the part and its pivot frame", {}, lv.PlanPick, btcpp=("PlanPick", "Action")
+    ),
     "pivot_clears": NodeType(
         "leaf",
         "condition: the chosen part's pivot clears the walls and neighbours where it lies",
         {},
         lv.PivotClears,
+        btcpp=("PivotClears", "Condition"),
     ),
     "reposition": NodeType(
         "leaf",
         "drag the chosen part to where a pivot clears (counted apart as repositioned)",
         dict(MOTION),
         lv.RepositionBehaviour,
+        btcpp=("Reposition", "Action"),
     ),
-    "grasp": NodeType("leaf", "the pivot's Grasp (Sec. III-C)", dict(MOTION), lv.GraspBehaviour),
-    "tilt": NodeType("leaf", "the pivot's Tilt about P_c", dict(MOTION), lv.TiltBehaviour),
+    "grasp": NodeType(
+        "leaf",
+        "the pivot's Grasp (Sec. III-C)",
+        dict(MOTION),
+        lv.GraspBehaviour,
+        btcpp=("Grasp", "Action"),
+    ),
+    "tilt": NodeType(
+        "leaf",
+        "the pivot's Tilt about P_c",
+        dict(MOTION),
+        lv.TiltBehaviour,
+        btcpp=("Tilt", "Action"),
+    ),
     "align": NodeType(
         "leaf",
         "in-hand Align: turn about the rim into the hole grasp, no release (Sec. III-C)",
         dict(MOTION),
         lv.AlignBehaviour,
+        btcpp=("Align", "Action"),
     ),
     "pick_from_above": NodeType(
         "leaf",
         "recovery after a failed align: let go, look, pick from above (counted apart)",
         dict(MOTION),
         lv.PickFromAboveBehaviour,
+        btcpp=("PickFromAbove", "Action"),
     ),
     "put_back": NodeType(
         "leaf",
         "recovery: open, rise, home; then fails so a retry above tries again",
         dict(MOTION),
         lv.PutBack,
+        btcpp=("PutBack", "Action"),
     ),
     "feed_slot": NodeType(
-        "leaf", "part into the machine slot, release, drag away", dict(MOTION), lv.FeedSlotBehaviour
+        "leaf",
+        "part into the machine slot, release, drag away",
+        dict(MOTION),
+        lv.FeedSlotBehaviour,
+        btcpp=("FeedSlot", "Action"),
     ),
     "slot_holds_part": NodeType(
-        "leaf", "condition: the slot holds a part (fed or machined)", {}, lv.SlotHolds
+        "leaf",
+        "condition: the slot holds a part (fed or machined)",
+        {},
+        lv.SlotHolds,
+        btcpp=("SlotHoldsPart", "Condition"),
     ),
     "holding_part": NodeType(
         "leaf",
         "condition: the gripper holds something and reports no fault (gates a retry)",
         {},
         lv.HoldingPart,
+        btcpp=("HoldingPart", "Condition"),
     ),
     "slot_machined": NodeType(
-        "leaf", "condition: the part in the slot is machined", {}, lv.SlotMachined
+        "leaf",
+        "condition: the part in the slot is machined",
+        {},
+        lv.SlotMachined,
+        btcpp=("SlotMachined", "Condition"),
     ),
-    "wait_machining": NodeType("leaf", "start the machine, wait until done", {}, lv.WaitMachining),
+    "wait_machining": NodeType(
+        "leaf",
+        "start the machine, wait until done",
+        {},
+        lv.WaitMachining,
+        btcpp=("WaitMachining", "Action"),
+    ),
     "pick_from_slot": NodeType(
         "leaf",
         "the same hole grasp on the part in the slot",
         dict(MOTION),
         lv.PickFromSlotBehaviour,
+        btcpp=("PickFromSlot", "Action"),
     ),
     "pack_in_box": NodeType(
-        "leaf", "push -z, +x, +y until contact, release", dict(MOTION), lv.PackInBoxBehaviour
+        "leaf",
+        "push -z, +x, +y until contact, release",
+        dict(MOTION),
+        lv.PackInBoxBehaviour,
+        btcpp=("PackInBox", "Action"),
     ),
-    "go_home": NodeType("leaf", "arm to its home pose", dict(MOTION), lv.GoHome),
+    "go_home": NodeType(
+        "leaf", "arm to its home pose", dict(MOTION), lv.GoHome, btcpp=("GoHome", "Action")
+    ),
 }
-COMPOSITES = {"sequence": py_trees.composites.Sequence, "selector": py_trees.composites.Selector}
+COMPOSITES = {k: nt.cls for k, nt in REGISTRY.items() if nt.kind == "composite"}
 
 
 def _check_value(doc: LinedDocument, path: KeyPath, key: str, value: Any, p: Param) -> Any:

@@ -46,12 +46,23 @@ def built(spec: object) -> str:
 def test_every_registered_type_has_one_btcpp_id() -> None:
     assert set(BTCPP_IDS) == set(REGISTRY)
     ids = [i for i, _ in BTCPP_IDS.values()]
-    assert len(ids) == len(set(ids))
+    assert all(ids) and len(ids) == len(set(ids))  # each node declares its own, none shared
     for kind, (_, category) in BTCPP_IDS.items():
         expected = {"composite": {"Control"}, "decorator": {"Decorator"}}.get(
             REGISTRY[kind].kind, {"Action", "Condition"}
         )
         assert category in expected, kind
+
+
+def test_every_node_declares_the_class_it_builds() -> None:
+    """A node's facts sit in its registry entry: its class (a leaf's ``leaf``, else ``cls``)
+    is what the tick log's table names it by."""
+    from trees.nodes import node_type
+
+    for kind, nt in REGISTRY.items():
+        built = nt.leaf if nt.kind == "leaf" else nt.cls
+        assert built is not None, kind
+        assert node_type(object.__new__(built)) == kind
 
 
 def test_the_xml_is_btcpp_v4_with_one_tree_and_a_model_of_every_node_type() -> None:
