@@ -44,9 +44,9 @@ def main() -> None:
     ap.add_argument("--config", nargs="+", default=["0.01,1.0", "0.05,0.5"])
     args = ap.parse_args()
 
-    from cell.experiments.pivot_cmd import build_setup, pivot_args
-    from cell.experiments.pivot_run import run_trial
-    from cell.experiments.regrasp_run import GripperProbe, run_regrasp_trial
+    from lab.pivot_cmd import build_setup, pivot_args
+    from lab.pivot_run import run_trial
+    from lab.regrasp_run import GripperProbe, run_regrasp_trial
 
     seeds = [args.seed + i for i in range(args.trials)]
     for part in args.part:

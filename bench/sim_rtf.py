@@ -20,7 +20,7 @@ import time
 import sim.camera
 import sim.world
 from cell.catalogue import load_catalogue
-from cell.experiments.pivot_run import TrialSetup, run_trial
+from lab.pivot_run import TrialSetup, run_trial
 from skills.mechanics.planner import plan_pivot
 
 

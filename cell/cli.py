@@ -90,7 +90,7 @@ def cmd_analyze(args: argparse.Namespace) -> int:
 
     equation = resolve_equation(args.equation, frictions)
 
-    from cell.experiments.figures import plot_region_map
+    from cell.figures import plot_region_map
 
     tag = f"muS{args.mu_s:g}_muH{args.mu_h:g}_muG{args.mu_g:g}"
     try:
@@ -227,6 +227,19 @@ def version() -> str:
         return "0.1.0 (not installed)"
 
 
+#: The entry-point group through which packages above the cell (the lab: trials, sweeps,
+#: evaluations) add their subcommands to ``cell``: the cell never imports them.
+PLUGIN_GROUP = "pivot_cell.commands"
+
+
+def _add_plugins(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Subcommands of the installed plugins (pyproject.toml's ``[project.entry-points]``)."""
+    from importlib.metadata import entry_points
+
+    for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        ep.load()(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cell",
@@ -316,37 +329,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_physics_options(p)
     p.set_defaults(func=cmd_check_tilt)
 
-    from cell.experiments.pivot_cmd import add_parser as add_pivot
-
-    add_pivot(sub)
-
-    from cell.experiments.sweep_cmd import add_parser as add_sweep
-
-    add_sweep(sub)
-
-    from cell.experiments.calibrate_cmd import add_parser as add_calibrate
-
-    add_calibrate(sub)
-
-    from cell.experiments.perceive_cmd import add_parser as add_perceive
-
-    add_perceive(sub)
-
-    from cell.experiments.train_perception_cmd import add_parser as add_train_perception
-
-    add_train_perception(sub)
-
-    from cell.experiments.compare_cmd import add_parser as add_compare
-
-    add_compare(sub)
-
     from cell.cell_cmds import add_parser as add_cell
 
     add_cell(sub)
-
-    from cell.experiments.soak_cmd import add_parser as add_soak
-
-    add_soak(sub)
 
     from cell.init_cmd import add_parser as add_init
 
@@ -355,6 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     from cell.emulate_cmd import add_parser as add_emulate
 
     add_emulate(sub)
+    _add_plugins(sub)
 
     from cell.help import finish_parser
 

@@ -1,7 +1,7 @@
 """What every command writes the same way: its ``--json`` file and a configuration's errors.
 
 Why a module of its own: the production commands (``cell/cli.py``, ``cell/cell_cmds.py``) and the
-experiments (``cell/experiments/``) all write their JSON and report a configuration that fails
+experiments (``lab/``) all write their JSON and report a configuration that fails
 validation in one form, which scripts rely on; keeping that here lets each command module stay
 thin and none of them reach into another's private helpers. It imports no other command, so any
 command can use it without loading the rest.

@@ -1,5 +1,6 @@
-"""The arrows point down only: cell -> trees -> skills -> drivers; sim implements drivers'
-interfaces beside the real drivers. Read from the source (every import, also the ones inside
+"""The arrows point down only: lab -> cell -> trees -> skills -> drivers; sim implements drivers'
+interfaces beside the real drivers (the cell chooses it). The lab's commands join `cell` as
+plugins, so the cell never imports the lab. Read from the source (every import, also the ones inside
 functions), so a shortcut added anywhere fails here before it becomes a habit.
 
 Within drivers, the skills and the trees see only the device interfaces and the neutral modules
@@ -17,12 +18,13 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 #: package -> the packages of this project it may import
 ALLOWED = {
+    "cell": {"cell", "trees", "skills", "drivers", "sim"},
     "drivers": {"drivers"},
     "sim": {"drivers", "sim"},
     "skills": {"drivers", "skills"},
     "trees": {"drivers", "skills", "trees"},
 }
-PROJECT = {"cell", "trees", "skills", "drivers", "sim"}
+PROJECT = {"lab", "cell", "trees", "skills", "drivers", "sim"}
 #: packages that may use the device interfaces and neutral modules of drivers only
 NO_REAL_DRIVER = ("skills", "trees")
 #: the real drivers: every package under drivers/ (its neutral modules are plain files)

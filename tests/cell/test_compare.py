@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from cell.cli import main
-from cell.experiments.regrasp_run import Solid, SweptVolume
 from drivers.pose import Pose, rot_z
+from lab.regrasp_run import Solid, SweptVolume
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -99,14 +99,14 @@ def test_compare_one_trial(tmp_path: Path, capsys) -> None:
     ],
 )
 def test_bad_input_exits_2_before_any_trial(argv, needle, capsys, monkeypatch) -> None:
-    import cell.experiments.pivot_run
-    import cell.experiments.regrasp_run
+    import lab.pivot_run
+    import lab.regrasp_run
 
     def trap(*args, **kwargs):
         raise AssertionError("a trial was simulated")
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", trap)
-    monkeypatch.setattr(cell.experiments.regrasp_run, "run_regrasp_trial", trap)
+    monkeypatch.setattr(lab.pivot_run, "run_trial", trap)
+    monkeypatch.setattr(lab.regrasp_run, "run_regrasp_trial", trap)
     code, out, err = run_cli(["compare", *argv], capsys)
     assert code == 2
     assert err.startswith("cell compare: error:") and needle in err
@@ -116,9 +116,9 @@ def test_bad_input_exits_2_before_any_trial(argv, needle, capsys, monkeypatch) -
 @pytest.fixture
 def methods(monkeypatch: pytest.MonkeyPatch) -> list:
     """(method, setup) of each trial started; none is simulated."""
-    import cell.experiments.pivot_run
-    import cell.experiments.regrasp_run
-    from cell.experiments.pivot_run import TrialResult
+    import lab.pivot_run
+    import lab.regrasp_run
+    from lab.pivot_run import TrialResult
 
     seen: list = []
 
@@ -133,8 +133,8 @@ def methods(monkeypatch: pytest.MonkeyPatch) -> list:
 
         return run
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", fake("pivot"))
-    monkeypatch.setattr(cell.experiments.regrasp_run, "run_regrasp_trial", fake("regrasp"))
+    monkeypatch.setattr(lab.pivot_run, "run_trial", fake("pivot"))
+    monkeypatch.setattr(lab.regrasp_run, "run_regrasp_trial", fake("regrasp"))
     return seen
 
 

@@ -167,7 +167,7 @@ def test_cli_bad_skill_value_exits_2_without_traceback(tmp_path, capsys) -> None
 def test_the_experiments_take_the_skills_from_a_configuration(tmp_path, capsys) -> None:
     """`cell pivot --config` and `cell compare --config` run the skills with a file's
     skills.pivot section and safety limits; no code edit tunes a skill."""
-    from cell.experiments.pivot_cmd import pivot_overrides
+    from lab.pivot_cmd import pivot_overrides
 
     path = tmp_path / "cell.yaml"
     path.write_text("skills:\n  pivot: {tilt_speed_m_s: 0.015}\nsafety: {ft_abort_force_n: 70}\n")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-import cell.experiments.pivot_run
+import lab.pivot_run
 from cell.cli import main
 
 
@@ -30,7 +30,7 @@ def no_simulation(monkeypatch: pytest.MonkeyPatch) -> list[int]:
         started.append(1)
         raise AssertionError("a trial was simulated")
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", trap)
+    monkeypatch.setattr(lab.pivot_run, "run_trial", trap)
     return started
 
 
@@ -62,13 +62,13 @@ def test_contract_form_writes_the_summary(tmp_path: Path, capsys) -> None:
 
 def test_mu_ground_is_used_exactly(tmp_path: Path, capsys, monkeypatch) -> None:
     seen = []
-    real = cell.experiments.pivot_run.run_trial
+    real = lab.pivot_run.run_trial
 
     def spy(setup, seed, **kw):
         seen.append(setup.mu_ground)
         return real(setup, seed, **kw)
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
+    monkeypatch.setattr(lab.pivot_run, "run_trial", spy)
     out_json = tmp_path / "r.json"
     args = ["pivot", "--part", "bushing", "--trials", "1", "--seed", "11", "--mu-ground", "0.7"]
     code, _, err = run_cli([*args, "--json", str(out_json)], capsys)
@@ -170,7 +170,7 @@ def test_bad_options_are_refused(extra, word, tmp_path: Path, capsys, no_simulat
 def _fake_result(setup, seed: int):
     """A trial's result without simulating it (what the command does with the setup is tested,
     not the physics)."""
-    from cell.experiments.pivot_run import TrialResult
+    from lab.pivot_run import TrialResult
 
     return TrialResult(
         seed=seed, success=True, failure=None, phase="done", tilt_deg=0.0, height_m=0.05,
@@ -188,7 +188,7 @@ def setups(monkeypatch: pytest.MonkeyPatch) -> list:
         seen.append(setup)
         return _fake_result(setup, seed)
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
+    monkeypatch.setattr(lab.pivot_run, "run_trial", spy)
     return seen
 
 
@@ -246,13 +246,13 @@ def test_config_applies_mu_ground_and_the_sections_a_trial_uses(
     """sim.mu_ground reaches the simulated floor; skills.perceive, skills.reposition, the safety
     limits, cell.control_hz and cell.layout reach the trial's setup."""
     seen = []
-    real = cell.experiments.pivot_run.run_trial
+    real = lab.pivot_run.run_trial
 
     def spy(setup, seed, **kw):
         seen.append(setup)
         return real(setup, seed, **kw)
 
-    monkeypatch.setattr(cell.experiments.pivot_run, "run_trial", spy)
+    monkeypatch.setattr(lab.pivot_run, "run_trial", spy)
     path = _cell(
         tmp_path,
         {

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
-from cell.experiments.pivot_run import TrialSetup, run_trial
 from drivers.devices import Devices
 from drivers.parts import Gripper as GripperSpec
 from drivers.pose import Pose
+from lab.pivot_run import TrialSetup, run_trial
 from sim.uncertainty import Uncertainty
 from skills.mechanics.planner import plan_pivot
 from skills.motion import GuardedMotion, Sequence, wait

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
-from cell.experiments.pivot_run import TrialSetup, run_trial
 from drivers.arm import Arm, MotionState
 from drivers.camera import Camera
 from drivers.devices import Devices
@@ -20,6 +19,7 @@ from drivers.gripper import Gripper
 from drivers.parts import Gripper as GripperSpec
 from drivers.pose import Pose
 from drivers.ur5.kinematics import HOME_TCP
+from lab.pivot_run import TrialSetup, run_trial
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.robot import SimRobot

@@ -31,7 +31,7 @@ log:
 
 def _soak(cycles: int, on_twin: Callable[[Any], None], parts: int = 2) -> dict[str, Any]:
     from cell.assemble import prepare
-    from cell.experiments.soak_cmd import Soak
+    from lab.soak_cmd import Soak
     from sim.faults import no_faults
 
     config, doc = config_from_text(CONFIG.format(parts=parts))
@@ -278,7 +278,7 @@ def _report(**over: Any) -> dict[str, Any]:
 
 
 def test_shard_reports_add_up_into_one_report() -> None:
-    from cell.experiments.soak_cmd import merge_reports
+    from lab.soak_cmd import merge_reports
 
     a = _report()
     b = _report(
@@ -299,7 +299,7 @@ def test_shard_reports_add_up_into_one_report() -> None:
 
 def test_the_person_ships_a_box_whose_part_stands_off_its_place() -> None:
     from cell.assemble import prepare
-    from cell.experiments.soak_cmd import Soak
+    from lab.soak_cmd import Soak
     from sim.faults import no_faults
 
     config, doc = config_from_text(CONFIG.format(parts=1))

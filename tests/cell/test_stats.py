@@ -2,7 +2,7 @@
 
 import pytest
 
-from cell.experiments.stats import wilson_interval
+from lab.stats import wilson_interval
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-import cell.experiments.sweep_cmd
+import lab.sweep_cmd
 from cell.cli import main
 from cell.errors import UserError
 
@@ -97,8 +97,8 @@ def test_refused_part_is_in_the_table_not_run(sweep: dict[str, Any]) -> None:
 
 def test_same_seeds_same_results_as_a_serial_run(sweep: dict[str, Any]) -> None:
     """Every Ray trial equals run_trial(setup, seed) called here, one after another."""
-    from cell.experiments.pivot_cmd import build_setup
-    from cell.experiments.pivot_run import run_trial
+    from lab.pivot_cmd import build_setup
+    from lab.pivot_run import run_trial
 
     assert sweep["proc"].returncode == 0, sweep["proc"].stderr
     for part in sweep["json"]["parts"][:2]:
@@ -130,7 +130,7 @@ def no_ray(monkeypatch: pytest.MonkeyPatch) -> None:
     def trap(*args: object, **kwargs: object) -> bool:
         raise AssertionError("Ray was started")
 
-    monkeypatch.setattr(cell.experiments.sweep_cmd, "connect_ray", trap)
+    monkeypatch.setattr(lab.sweep_cmd, "connect_ray", trap)
 
 
 @pytest.mark.parametrize(
@@ -170,7 +170,7 @@ def test_config_and_set_reach_every_parts_setup(tmp_path: Path, no_ray: None) ->
     args = build_parser().parse_args(
         [*argv, "--config", str(path), "--set", "skills.pivot.approach_speed_m_s=0.07"]
     )
-    rows = cell.experiments.sweep_cmd.prepare(args)
+    rows = lab.sweep_cmd.prepare(args)
     assert [row.name for row in rows] == ["bushing", "wiring_duct"]
     for row in rows:
         assert row.setup is not None and row.setup.mu_ground == 0.6
@@ -223,12 +223,12 @@ def test_a_silent_cluster_is_given_up_after_the_timeout(monkeypatch: pytest.Monk
     import ray
 
     release = threading.Event()
-    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(lab.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", lambda **kw: release.wait(10))
     t0 = time.perf_counter()
     with pytest.raises(UserError, match=r"--address 10\.1\.2\.3:6379: no Ray cluster answered"):
-        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=0.5)
+        lab.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=0.5)
     assert time.perf_counter() - t0 < 3
     release.set()
 
@@ -239,12 +239,12 @@ def test_failed_handshake_is_one_line_naming_the_address(monkeypatch: pytest.Mon
     def refuse(**kw: object) -> None:
         raise ConnectionError("Failed to connect to Ray cluster at 10.1.2.3:6379\nmore detail")
 
-    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(lab.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", refuse)
     monkeypatch.setenv("RAY_AUTH_MODE", "token")
     with pytest.raises(UserError) as info:
-        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
+        lab.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
     assert str(info.value) == (
         "--address 10.1.2.3:6379: cannot connect to a Ray cluster there: "
         "Failed to connect to Ray cluster at 10.1.2.3:6379"
@@ -261,17 +261,17 @@ def test_a_refused_handshake_hints_at_token_authentication(
     def refuse(**kw: object) -> None:
         raise ConnectionError("Failed to connect to Ray cluster at 10.1.2.3:6379")
 
-    monkeypatch.setattr(cell.experiments.sweep_cmd, "_probe", lambda address, timeout: None)
+    monkeypatch.setattr(lab.sweep_cmd, "_probe", lambda address, timeout: None)
     monkeypatch.setattr(ray, "is_initialized", lambda: False)
     monkeypatch.setattr(ray, "init", refuse)
     monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
     with pytest.raises(UserError, match="set RAY_AUTH_MODE=token"):
-        cell.experiments.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
+        lab.sweep_cmd.connect_ray("10.1.2.3:6379", None, timeout=5)
 
 
 def test_spread_keeps_crowded_points_apart_in_order_around_their_mean() -> None:
     xs = [0.9, 0.5, 0.9, 0.9, 0.2]
-    out = cell.experiments.sweep_cmd.spread(xs, 0.02)
+    out = lab.sweep_cmd.spread(xs, 0.02)
     assert out[1] == 0.5 and out[4] == 0.2  # alone: not moved
     crowd = [out[0], out[2], out[3]]
     assert crowd == sorted(crowd) and sum(crowd) / 3 == pytest.approx(0.9)

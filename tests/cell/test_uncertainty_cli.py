@@ -65,7 +65,7 @@ def test_compare_meets_the_same_draws_with_both_methods(tmp_path: Path, capsys) 
 
 
 def test_sweep_passes_ideal_to_every_part() -> None:
-    from cell.experiments.sweep_cmd import prepare
+    from lab.sweep_cmd import prepare
 
     def rows(ideal: bool) -> list:
         args = argparse.Namespace(

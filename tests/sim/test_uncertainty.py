@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from cell.catalogue import load_catalogue
-from cell.experiments.pivot_cmd import build_setup, pivot_args
-from cell.experiments.pivot_run import TrialSetup, open_trial_world
 from drivers.layout import CellLayout
 from drivers.parts import Gripper
 from drivers.pose import Pose
 from drivers.ur5.kinematics import HOME_TCP, rotvec_to_matrix
+from lab.pivot_cmd import build_setup, pivot_args
+from lab.pivot_run import TrialSetup, open_trial_world
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.part_body import lying_pose, spawn_part

@@ -344,6 +344,12 @@ def test_a_read_carries_the_kernels_receive_time() -> None:
     conn, _ = server.accept()
     try:
         conn.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        # The kernel turns receive timestamps on a moment after the first socket asks (the
+        # emulator's first messages are stamped at their read, later); a first message waits
+        # for that here.
+        time.sleep(0.1)
+        client.sendall(b"x")
+        assert _read_stamped(conn, 1) is not None
         sent = time.monotonic()
         client.sendall(b"abcdef")
         time.sleep(0.05)  # the server thread is late

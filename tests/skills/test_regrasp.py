@@ -137,8 +137,8 @@ def test_a_part_wider_than_the_stroke_is_refused() -> None:
 def test_regrasp_trial_in_the_twin_ends_in_the_hole_grasp() -> None:
     import argparse
 
-    from cell.experiments.pivot_cmd import build_setup
-    from cell.experiments.regrasp_run import GripperProbe, run_regrasp_trial
+    from lab.pivot_cmd import build_setup
+    from lab.regrasp_run import GripperProbe, run_regrasp_trial
 
     ns = argparse.Namespace(
         trials=1, jobs=1, mu_ground=None, record=None, catalogue=None, part="bushing",

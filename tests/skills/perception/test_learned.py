@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from cell.experiments.train_perception_cmd import (
+from lab.train_perception_cmd import (
     DEFAULT_WEIGHTS,
     RenderedScene,
     add_parser,

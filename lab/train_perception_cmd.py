@@ -31,13 +31,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+import cell
+
 if TYPE_CHECKING:  # torch and the twin are imported only when training runs
     from skills.perception.heightmap import HeightMap
     from skills.perception.learned import SegNet
 
 #: Where the shipped weights live (``LearnedSegmenter(DEFAULT_WEIGHTS)``): the cell's data folder,
 #: ``cell/data``, beside the package data it is installed with.
-DEFAULT_WEIGHTS = Path(__file__).resolve().parents[1] / "data" / "perception_unet.pt"
+#: the shipped weights, in the cell's data folder
+DEFAULT_WEIGHTS = Path(cell.__file__).resolve().parent / "data" / "perception_unet.pt"
 #: Camera height above the bin floor's centre (m) and the jitter of the training views around it.
 VIEW_HEIGHT = 0.5
 VIEW_JITTER_XY = 0.02

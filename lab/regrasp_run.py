@@ -1,7 +1,7 @@
 """Regrasp trials in the twin, and what ``cell compare`` measures on any trial: tact time and the
 volume swept by the gripper.
 
-:func:`run_regrasp_trial` is :func:`cell.experiments.pivot_run.run_trial` with the baseline in
+:func:`run_regrasp_trial` is :func:`lab.pivot_run.run_trial` with the baseline in
 place of the pivot: the same :class:`TrialSetup`, the same seeded perturbation drawn in the same
 order (so a seed gives both methods the same true pose, frictions and mass), the same finger
 frictions, the same pose given to the skills (what the wrist camera's Look saw, or the nominal
@@ -34,7 +34,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cell.experiments.pivot_run import (
+from drivers.arm import MotionState
+from drivers.pose import Pose
+from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
+from lab.pivot_run import (
     TrialResult,
     TrialSetup,
     judge_trial,
@@ -42,9 +45,6 @@ from cell.experiments.pivot_run import (
     open_trial_world,
     run_skill,
 )
-from drivers.arm import MotionState
-from drivers.pose import Pose
-from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
 from sim.robot import SimRobot
 from sim.robot_model import FINGER_THICKNESS, FINGER_WIDTH
 from sim.world import SimWorld
@@ -238,7 +238,7 @@ def run_regrasp_trial(
 ) -> RegraspResult:
     """One perturbed regrasp trial (Regrasp, then Align), judged from the simulated state.
 
-    The perturbation is drawn exactly as :func:`cell.experiments.pivot_run.run_trial` draws it, in
+    The perturbation is drawn exactly as :func:`lab.pivot_run.run_trial` draws it, in
     the same order from ``numpy.random.default_rng(seed)``; the skills get the pose the wrist
     camera's Look reports near the nominal one (as the pivot's trial looks), or the nominal pose
     when ``setup.perceive`` is off.

@@ -29,13 +29,13 @@ from typing import Any
 
 import numpy as np
 
-from cell.experiments.stats import wilson_interval
 from cell.reach import ur5_reach
 from drivers.devices import Devices
 from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
 from drivers.parts import Part
 from drivers.pose import Pose
+from lab.stats import wilson_interval
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.judge import ForceWatch, PivotWatch, WatchSample, judge

@@ -83,8 +83,10 @@ def add_parser(sub: Any) -> None:
 
 
 def default_weights() -> Path:
-    """The shipped weights, in the cell's data folder (``cell/data``, one level up)."""
-    return Path(__file__).resolve().parents[1] / "data" / "perception_unet.pt"
+    """The shipped weights, in the cell's data folder (``cell/data``)."""
+    import cell
+
+    return Path(cell.__file__).resolve().parent / "data" / "perception_unet.pt"
 
 
 def make_segmenter(pipeline: str, weights: Path | None) -> object | None:

@@ -7,7 +7,7 @@
 
 Trial ``i`` uses seed ``S + i`` for both methods, so both meet the same perturbed part (true pose,
 frictions, mass). The pivot runs as ``cell pivot`` runs it (:func:`run_trial`); the baseline is
-:func:`cell.experiments.regrasp_run.run_regrasp_trial`. Both get the part's pose the same way:
+:func:`lab.regrasp_run.run_regrasp_trial`. Both get the part's pose the same way:
 by default from the twin's wrist camera (the Look skill, before the first grasp; its time counts
 in the tact time of both), with ``--nominal`` the nominal pose; the JSON's ``pose_source`` says
 which (``camera`` or ``nominal``). ``--config`` and ``--set`` apply a cell configuration as
@@ -30,8 +30,8 @@ from pathlib import Path
 from typing import Any
 
 from cell.errors import UserError
-from cell.experiments.pivot_cmd import add_config_argument, add_ideal_argument
 from cell.output import write_json
+from lab.pivot_cmd import add_config_argument, add_ideal_argument
 
 GOAL_RATIO = 0.70  #: pivot tact / regrasp tact the project aims at (at least 30 % faster)
 
@@ -78,7 +78,7 @@ def _stats(values: list[float]) -> dict[str, float | None]:
 
 def summarize_method(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Success k/N with its Wilson interval; tact time and swept volume over the successes."""
-    from cell.experiments.stats import wilson_interval
+    from lab.stats import wilson_interval
 
     ok = [r for r in rows if r["success"]]
     k, n = len(ok), len(rows)
@@ -100,9 +100,9 @@ def _ratio(a: float | None, b: float | None) -> float | None:
 
 def compare(setup: Any, seeds: list[int], progress: bool = True) -> dict[str, Any]:
     """Both methods on every seed; the summary dict ``cell compare --json`` writes."""
-    from cell.experiments.pivot_run import run_trial
-    from cell.experiments.regrasp_run import GripperProbe, run_regrasp_trial
     from cell.progress import Progress
+    from lab.pivot_run import run_trial
+    from lab.regrasp_run import GripperProbe, run_regrasp_trial
 
     rows: dict[str, list[dict[str, Any]]] = {"pivot": [], "regrasp": []}
     bar = Progress(len(seeds), "seeds", quiet=not progress)
@@ -195,7 +195,7 @@ def format_table(summary: dict[str, Any]) -> str:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from cell.experiments.pivot_cmd import PivotInputError, build_setup, pivot_args
+    from lab.pivot_cmd import PivotInputError, build_setup, pivot_args
     from sim.robot_model import FINGER_TRAVEL
     from skills.pivot import PivotParams
 

@@ -68,7 +68,7 @@ from skills.mechanics.planner import PivotPlan, jaw_opening, plan_pivot
 from skills.pivot import PivotParams
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only when a pivot runs
-    from cell.experiments.pivot_run import TrialResult, TrialSetup
+    from lab.pivot_run import TrialResult, TrialSetup
 
 
 class PivotInputError(ValueError):
@@ -162,7 +162,7 @@ def _progress(bar: Any, done: int, ok: int, wall: float) -> None:
 
 
 def _trial(args: tuple[TrialSetup, int]) -> TrialResult:
-    from cell.experiments.pivot_run import run_trial
+    from lab.pivot_run import run_trial
 
     setup, seed = args
     return run_trial(setup, seed)
@@ -298,8 +298,8 @@ def pivot_args(
 
 def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
     """Everything checked, nothing simulated: the trial setup, the plan, whether forced."""
-    from cell.experiments.pivot_run import TrialSetup
     from drivers.layout import CellLayout
+    from lab.pivot_run import TrialSetup
 
     if args.trials < 1:
         raise PivotInputError(f"--trials: must be >= 1, got {args.trials}")
@@ -400,7 +400,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
 
 
 def cmd_pivot(args: argparse.Namespace) -> int:
-    from cell.experiments.pivot_run import summarize
+    from lab.pivot_run import summarize
 
     try:
         setup, plan, forced = build_setup(args)
@@ -467,7 +467,7 @@ def cmd_pivot(args: argparse.Namespace) -> int:
 
 
 def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
-    from cell.experiments.pivot_run import run_trial
+    from lab.pivot_run import run_trial
     from sim.recorder import Recorder
 
     rec: dict[str, Recorder] = {}
@@ -490,7 +490,7 @@ def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
     if "r" in rec:
         rec["r"].save_gif(path, fps=12)
     if traced.get("samples"):
-        from cell.experiments.figures import plot_contact_trace
+        from cell.figures import plot_contact_trace
 
         verdict = "success" if result.success else f"failed: {result.failure}"
         plot_contact_trace(

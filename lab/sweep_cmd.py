@@ -8,11 +8,11 @@ Contract (scripts rely on it)::
 Why Ray: the same command runs on this machine (a local Ray instance it starts and stops itself,
 nothing to set up) and on an existing Ray cluster (``--address``), so a sweep too large for one
 box needs no other code. Each trial is one task running
-:func:`cell.experiments.pivot_run.run_trial` with seed ``S + i`` for trial ``i`` of every part,
+:func:`lab.pivot_run.run_trial` with seed ``S + i`` for trial ``i`` of every part,
 exactly as ``cell pivot`` seeds them: a seed fixes a trial, so the sweep's outcomes equal a
 serial run's whatever the order the tasks finish in. ``--config`` and ``--set`` apply a cell
 configuration to every trial exactly as ``cell pivot`` does
-(:func:`cell.experiments.pivot_cmd.trial_config`), and each ``per_trial`` entry carries
+(:func:`lab.pivot_cmd.trial_config`), and each ``per_trial`` entry carries
 ``cell pivot``'s keys (``grip_force_n``, ``peak_force_n``, ``shove_mm`` included).
 
 Parts the planner declines are not run; they appear in the table as refused, with the reason.
@@ -40,14 +40,14 @@ from typing import TYPE_CHECKING, Any
 
 from cell.catalogue import load_catalogue
 from cell.errors import UserError
-from cell.experiments.stats import wilson_interval
 from drivers.gripper_spec import default_gripper
 from drivers.parts import Gripper
+from lab.stats import wilson_interval
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan, plan_pivot
 
 if TYPE_CHECKING:  # the twin (pybullet) is imported only where trials run
-    from cell.experiments.pivot_run import TrialResult, TrialSetup
+    from lab.pivot_run import TrialResult, TrialSetup
 
 #: Longest wait (s) for an existing cluster to answer ``--address``: a TCP probe first (refused,
 #: unroutable, unknown host), then Ray's own handshake, which otherwise retries for minutes.
@@ -113,7 +113,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--catalogue", type=Path, default=None, metavar="FILE", help="part catalogue YAML"
     )
-    from cell.experiments.pivot_cmd import add_config_argument, add_ideal_argument
+    from lab.pivot_cmd import add_config_argument, add_ideal_argument
 
     add_config_argument(p)
     add_ideal_argument(p)
@@ -136,7 +136,7 @@ class PartSweep:
 
 
 def _pivot_namespace(args: argparse.Namespace, part: str) -> argparse.Namespace:
-    from cell.experiments.pivot_cmd import pivot_args
+    from lab.pivot_cmd import pivot_args
 
     return pivot_args(
         part, args.trials, args.catalogue, args.cell, args.nominal,
@@ -147,7 +147,7 @@ def _pivot_namespace(args: argparse.Namespace, part: str) -> argparse.Namespace:
 
 def prepare(args: argparse.Namespace) -> list[PartSweep]:
     """Everything checked, nothing simulated, Ray not started: one :class:`PartSweep` per part."""
-    from cell.experiments.pivot_cmd import PivotInputError, build_setup, trial_config
+    from lab.pivot_cmd import PivotInputError, build_setup, trial_config
 
     if args.trials < 1:
         raise UserError(f"--trials: must be >= 1, got {args.trials}")
@@ -181,7 +181,7 @@ def prepare(args: argparse.Namespace) -> list[PartSweep]:
 
 def _trial_task(setup: TrialSetup, seed: int) -> TrialResult:
     """The body of one Ray task; module level so workers import it by name."""
-    from cell.experiments.pivot_run import run_trial
+    from lab.pivot_run import run_trial
 
     return run_trial(setup, seed)
 
