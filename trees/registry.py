@@ -20,7 +20,25 @@ from py_trees.behaviour import Behaviour
 
 from skills.motion import MAX_FORCE_LIMIT
 from skills.params import config_keys
-from trees import behaviours as lv
+from trees.behaviours import (
+    AlignBehaviour,
+    FeedSlotBehaviour,
+    GoHome,
+    GraspBehaviour,
+    HoldingPart,
+    PackInBoxBehaviour,
+    Perceive,
+    PickFromAboveBehaviour,
+    PickFromSlotBehaviour,
+    PivotClears,
+    PlanPick,
+    PutBack,
+    RepositionBehaviour,
+    SlotHolds,
+    SlotMachined,
+    TiltBehaviour,
+    WaitMachining,
+)
 from trees.context import SECTION_DOCS, SKILL_SECTIONS, CellContext
 from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
 from trees.yaml_lines import ConfigError, KeyPath, LinedDocument, load_yaml
@@ -146,112 +164,112 @@ REGISTRY: dict[str, NodeType] = {
         "leaf",
         "wrist camera over the bin, find the parts",
         dict(MOTION),
-        lv.Perceive,
+        Perceive,
         btcpp=("Perceive", "Action"),
     ),
     "plan_pick": NodeType(
-        "leaf", "choose the part and its pivot frame", {}, lv.PlanPick, btcpp=("PlanPick", "Action")
+        "leaf", "choose the part and its pivot frame", {}, PlanPick, btcpp=("PlanPick", "Action")
     ),
     "pivot_clears": NodeType(
         "leaf",
         "condition: the chosen part's pivot clears the walls and neighbours where it lies",
         {},
-        lv.PivotClears,
+        PivotClears,
         btcpp=("PivotClears", "Condition"),
     ),
     "reposition": NodeType(
         "leaf",
         "drag the chosen part to where a pivot clears (counted apart as repositioned)",
         dict(MOTION),
-        lv.RepositionBehaviour,
+        RepositionBehaviour,
         btcpp=("Reposition", "Action"),
     ),
     "grasp": NodeType(
         "leaf",
         "the pivot's Grasp (Sec. III-C)",
         dict(MOTION),
-        lv.GraspBehaviour,
+        GraspBehaviour,
         btcpp=("Grasp", "Action"),
     ),
     "tilt": NodeType(
         "leaf",
         "the pivot's Tilt about P_c",
         dict(MOTION),
-        lv.TiltBehaviour,
+        TiltBehaviour,
         btcpp=("Tilt", "Action"),
     ),
     "align": NodeType(
         "leaf",
         "in-hand Align: turn about the rim into the hole grasp, no release (Sec. III-C)",
         dict(MOTION),
-        lv.AlignBehaviour,
+        AlignBehaviour,
         btcpp=("Align", "Action"),
     ),
     "pick_from_above": NodeType(
         "leaf",
         "recovery after a failed align: let go, look, pick from above (counted apart)",
         dict(MOTION),
-        lv.PickFromAboveBehaviour,
+        PickFromAboveBehaviour,
         btcpp=("PickFromAbove", "Action"),
     ),
     "put_back": NodeType(
         "leaf",
         "recovery: open, rise, home; then fails so a retry above tries again",
         dict(MOTION),
-        lv.PutBack,
+        PutBack,
         btcpp=("PutBack", "Action"),
     ),
     "feed_slot": NodeType(
         "leaf",
         "part into the machine slot, release, drag away",
         dict(MOTION),
-        lv.FeedSlotBehaviour,
+        FeedSlotBehaviour,
         btcpp=("FeedSlot", "Action"),
     ),
     "slot_holds_part": NodeType(
         "leaf",
         "condition: the slot holds a part (fed or machined)",
         {},
-        lv.SlotHolds,
+        SlotHolds,
         btcpp=("SlotHoldsPart", "Condition"),
     ),
     "holding_part": NodeType(
         "leaf",
         "condition: the gripper holds something and reports no fault (gates a retry)",
         {},
-        lv.HoldingPart,
+        HoldingPart,
         btcpp=("HoldingPart", "Condition"),
     ),
     "slot_machined": NodeType(
         "leaf",
         "condition: the part in the slot is machined",
         {},
-        lv.SlotMachined,
+        SlotMachined,
         btcpp=("SlotMachined", "Condition"),
     ),
     "wait_machining": NodeType(
         "leaf",
         "start the machine, wait until done",
         {},
-        lv.WaitMachining,
+        WaitMachining,
         btcpp=("WaitMachining", "Action"),
     ),
     "pick_from_slot": NodeType(
         "leaf",
         "the same hole grasp on the part in the slot",
         dict(MOTION),
-        lv.PickFromSlotBehaviour,
+        PickFromSlotBehaviour,
         btcpp=("PickFromSlot", "Action"),
     ),
     "pack_in_box": NodeType(
         "leaf",
         "push -z, +x, +y until contact, release",
         dict(MOTION),
-        lv.PackInBoxBehaviour,
+        PackInBoxBehaviour,
         btcpp=("PackInBox", "Action"),
     ),
     "go_home": NodeType(
-        "leaf", "arm to its home pose", dict(MOTION), lv.GoHome, btcpp=("GoHome", "Action")
+        "leaf", "arm to its home pose", dict(MOTION), GoHome, btcpp=("GoHome", "Action")
     ),
 }
 COMPOSITES = {k: nt.cls for k, nt in REGISTRY.items() if nt.kind == "composite"}
