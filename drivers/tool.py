@@ -20,6 +20,10 @@ GRIPPER_BODY_HEIGHT = 0.090  #: the 2F-85's body, from the puck to where the fin
 #: the 2F-85's body as a box: x (closing axis), y, z (approach)
 GRIPPER_BODY_SIZE = (0.075, 0.035, GRIPPER_BODY_HEIGHT)
 FINGER_LENGTH = 0.055  #: the fingers, hanging below the gripper body fully open
+#: The arm above the flange that a tool's sweep must clear too, as a box (x, y, z; z from the
+#: flange up): the UR5's wrist 3 and the end of wrist 2 (their links are 75 mm across; a margin
+#: each side)
+WRIST_SIZE = (0.09, 0.09, 0.10)
 FINGER_BASE_Z = FT_HEIGHT + GRIPPER_BODY_HEIGHT  #: where the fingers leave the body
 #: How far the tips advance from fully open to closed (the 2F-85's linkage, 13.2 mm): the
 #: fingers hang ``FINGER_LENGTH`` below the body open and this much more closed.
@@ -41,4 +45,5 @@ __all__ = [
     "GRIPPER_BODY_SIZE",
     "TCP_Z",
     "TIP_TRAVEL",
+    "WRIST_SIZE",
 ]

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.pose import Pose
-from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE
+from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, WRIST_SIZE
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -39,7 +39,7 @@ Reach = Callable[[Sequence[Pose]], int | None]
 _FINGER_TOP = -FINGER_LENGTH  # relative to the fingertips
 _BODY = GRIPPER_BODY_SIZE  #: the 2F-85's body, x along the closing axis
 _PUCK = (2.0 * FT_RADIUS, 2.0 * FT_RADIUS, FT_HEIGHT)  #: the FT300, its cylinder's bounding box
-_WRIST = (0.09, 0.09, 0.10)  #: the UR5's wrist 3 and the end of wrist 2 above the flange
+_WRIST = WRIST_SIZE  #: the UR5's wrist 3 and the end of wrist 2 above the flange
 
 
 @dataclass(frozen=True)
