@@ -355,10 +355,10 @@ def _period_stats(starts: list[float], period: float, skipped: int = 0,
     # Periods over twice the configured one, split by where the time went: the loop's own
     # work (tick, log, devices) took over a period, or it waited past its wake-up (for a core
     # or for the interpreter, behind the process's other threads).
-    over: dict[str, Any] = {"n": int(np.sum(d > 2e3 * period))}
+    late = d > 2e3 * period
+    over: dict[str, Any] = {"n": int(np.sum(late))}
     if works is not None and len(works) >= len(d):
         w = np.asarray(works[: len(d)]) * 1e3
-        late = d > 2e3 * period
         over["busy"] = int(np.sum(late & (w > 1e3 * period)))
         over["waited"] = over["n"] - over["busy"]
         over["work_p999_ms"] = round(float(np.percentile(w, 99.9)), 3)

@@ -182,7 +182,7 @@ def describe_safety_bits(bits: int) -> str:
 
 
 @dataclass
-class _PathJob:
+class _CommandJob:
     """A move's command on its worker thread: a path's ``moveL`` (ur_rtde re-uploads its
     script for it) or a single ``moveL`` / ``moveJ``, whose handshake with the control script
     takes two to three controller cycles (16-24 ms on a CB3) that the tick must not wait."""
@@ -262,7 +262,7 @@ class UR5Arm:
         self._stop_sent = False
         self._deferred: tuple[str, Callable[[], bool]] | None = None
         # A path's upload on its worker thread (see move_path).
-        self._job: _PathJob | None = None
+        self._job: _CommandJob | None = None
         self._goal: Pose | None = None
         self._goal_q: NDArray[np.float64] | None = None
         self.last_servo_target: Pose | None = None
@@ -633,9 +633,9 @@ class UR5Arm:
         self._stop_sent = False
         self._deferred = None
         self._op_before, self._op_ours = op, None
-        # The handshake off the tick (see _PathJob); status() polls the job, then the move.
+        # The handshake off the tick (see _CommandJob); status() polls the job, then the move.
         self._last_command = self._clock.now()
-        job = _PathJob(self._clock.now(), what=what, fresh_script=False)
+        job = _CommandJob(self._clock.now(), what=what, fresh_script=False)
         self._job = job
         self._latch(MotionState.MOVING)
         deceleration = self.settings.stop_deceleration
@@ -696,7 +696,7 @@ class UR5Arm:
         ]
         self._mode, self._goal, self._goal_q = "path", waypoints[-1], None
         self._deferred = None
-        job = _PathJob(self._clock.now())
+        job = _CommandJob(self._clock.now())
         self._job = job
         self._latch(MotionState.MOVING)
         watchdog = self.settings.watchdog_hz if self._watchdog_on else None

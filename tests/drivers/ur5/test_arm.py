@@ -706,67 +706,78 @@ def test_a_slider_the_controller_does_not_take_back_refuses_the_next_command() -
     assert rtde.names() == ["move_l"]
 
 
+class _SlowMoves:
+    """An arm whose commands run on real worker threads, its ``moveL`` held in the handshake
+    until :attr:`release` is set; counts the ``moveL`` calls inside ur_rtde at once."""
+
+    def __init__(self, settings: UR5Settings | None = None) -> None:
+        import threading
+
+        self.rtde, self.clock = RecordingAdapter(), FakeClock()
+        self.workers: list[threading.Thread] = []
+        self.inside, self.release = threading.Event(), threading.Event()
+        self.at_once = self.most_at_once = 0
+        self._lock = threading.Lock()
+        self.plain_move_l = self.rtde.move_l
+        self.rtde.move_l = self._slow_move_l  # type: ignore[method-assign]
+        self.arm = UR5Arm(self.rtde, self.clock, settings, spawn=self._spawn)
+
+    def _spawn(self, fn):  # type: ignore[no-untyped-def]
+        import threading
+
+        t = threading.Thread(target=fn, daemon=True)
+        self.workers.append(t)
+        t.start()
+
+    def _slow_move_l(self, *args: object) -> bool:
+        with self._lock:
+            self.at_once += 1
+            self.most_at_once = max(self.most_at_once, self.at_once)
+        self.inside.set()
+        self.release.wait(2.0)
+        try:
+            return self.plain_move_l(*args)  # type: ignore[arg-type]
+        finally:
+            with self._lock:
+                self.at_once -= 1
+
+    def release_soon(self, delay: float = 0.05) -> None:
+        import threading
+
+        threading.Timer(delay, self.release.set).start()
+
+
 def test_a_move_s_handshake_runs_off_the_tick_and_a_stop_meanwhile_follows_it() -> None:
     """ur_rtde's ``moveL`` waits for the control script's handshake (two to three controller
     cycles, 16-24 ms on a CB3): sent on a worker, the tick returns at once and polls it. A stop
     while it is in flight is sent by the worker right after the command, never beside it."""
-    import threading
-
-    rtde, clock = RecordingAdapter(), FakeClock()
-    workers: list[threading.Thread] = []
-
-    def spawn(fn):  # type: ignore[no-untyped-def]
-        t = threading.Thread(target=fn, daemon=True)
-        workers.append(t)
-        t.start()
-
-    arm = UR5Arm(rtde, clock, spawn=spawn)
-    inside, release = threading.Event(), threading.Event()
-    plain_move_l = rtde.move_l
-
-    def slow_move_l(*args: object) -> bool:
-        inside.set()
-        release.wait(2.0)
-        return plain_move_l(*args)  # type: ignore[arg-type]
-
-    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    m = _SlowMoves()
+    arm, rtde = m.arm, m.rtde
     rtde.op = (False, 0)
     arm.move_to(goal_at(rtde), 0.1, 0.5)  # returns while the handshake is under way
-    assert inside.wait(2.0) and "move_l" not in rtde.names()
+    assert m.inside.wait(2.0) and "move_l" not in rtde.names()
     assert arm.status().state is MotionState.MOVING
     arm.stop()  # from the tick or the guard: does not wait, sends nothing beside the move
     assert "stop_l" not in rtde.names()
-    release.set()
-    workers[-1].join(2.0)
+    m.release.set()
+    m.workers[-1].join(2.0)
     assert rtde.names()[-2:] == ["move_l", "stop_l"]
     assert arm.status().state is MotionState.STOPPED
 
 
 def test_a_command_while_a_move_s_handshake_runs_waits_for_it() -> None:
     """The next command (a new move, a servo) waits for the handshake in flight rather than
-    enter ur_rtde's control interface beside it; the new move then tracks its own operation."""
-    import threading
-
-    rtde, clock = RecordingAdapter(), FakeClock()
-    arm = UR5Arm(rtde, clock, spawn=lambda f: threading.Thread(target=f, daemon=True).start())
-    release = threading.Event()
-    plain_move_l = rtde.move_l
-
-    def slow_move_l(*args: object) -> bool:
-        release.wait(2.0)
-        return plain_move_l(*args)  # type: ignore[arg-type]
-
-    rtde.move_l = slow_move_l  # type: ignore[method-assign]
+    enter ur_rtde's control interface beside it, and is not refused."""
+    m = _SlowMoves()
+    arm, rtde = m.arm, m.rtde
     rtde.op = (True, 3)
     arm.move_to(goal_at(rtde), 0.1, 0.5)
-    threading.Timer(0.05, release.set).start()
-    rtde.move_l = plain_move_l  # type: ignore[method-assign]
+    assert m.inside.wait(2.0)
+    m.release_soon()
     arm.move_to(goal_at(rtde), 0.1, 0.5)  # waits up to the first's end, then sends
-    for _ in range(100):
-        if rtde.names().count("move_l") == 2:
-            break
-        threading.Event().wait(0.01)
-    assert rtde.names().count("move_l") == 2
+    for w in m.workers:
+        w.join(2.0)
+    assert rtde.names().count("move_l") == 2 and m.most_at_once == 1
     assert arm.status().state is MotionState.MOVING
 
 
@@ -774,22 +785,10 @@ def test_the_watchdog_is_armed_after_the_move_in_flight_not_beside_it() -> None:
     """The tick loop arms the watchdog after its first tick, whose move may still be in its
     handshake on the worker: two commands at once in ur_rtde's control interface overwrite each
     other (on the emulated cell the first move never ran and its leaf timed out after 10 s)."""
-    import threading
-
-    rtde, clock = RecordingAdapter(), FakeClock()
-    arm = UR5Arm(rtde, clock, UR5Settings(watchdog_hz=10.0),
-                 spawn=lambda f: threading.Thread(target=f, daemon=True).start())
-    release = threading.Event()
-    plain_move_l = rtde.move_l
-
-    def slow_move_l(*args: object) -> bool:
-        release.wait(2.0)
-        return plain_move_l(*args)  # type: ignore[arg-type]
-
-    rtde.move_l = slow_move_l  # type: ignore[method-assign]
-    rtde.op = (False, 0)
-    arm.move_to(goal_at(rtde), 0.1, 0.5)
-    threading.Timer(0.05, release.set).start()
-    arm.start_watchdog()
-    names = rtde.names()
+    m = _SlowMoves(UR5Settings(watchdog_hz=10.0))
+    m.rtde.op = (False, 0)
+    m.arm.move_to(goal_at(m.rtde), 0.1, 0.5)
+    m.release_soon()
+    m.arm.start_watchdog()
+    names = m.rtde.names()
     assert "set_watchdog" in names and names.index("move_l") < names.index("set_watchdog")
