@@ -200,7 +200,7 @@ def cell_config(directory: Path, injections: int, spacing: float, watchdog_hz: f
                 first_at: float = 3.0) -> Path:
     """The shipped emulated cell with its tree path made absolute and ``injections`` force
     steps scheduled; written to ``directory``."""
-    from cell.emulate_cmd import EXAMPLE
+    from lab.emulate_cmd import EXAMPLE
 
     config = yaml.safe_load(EXAMPLE.read_text())
     config["tree"]["file"] = str(EXAMPLE.parent / config["tree"]["file"])

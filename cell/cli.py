@@ -337,9 +337,6 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_init(sub)
 
-    from cell.emulate_cmd import add_parser as add_emulate
-
-    add_emulate(sub)
     _add_plugins(sub)
 
     from cell.help import finish_parser

@@ -7,7 +7,7 @@ from __future__ import annotations
 import socket
 from pathlib import Path
 
-from cell.emulate_cmd import EXAMPLE
+from lab.emulate_cmd import EXAMPLE
 from sim.emulate.ur_standalone import loopback_host
 
 

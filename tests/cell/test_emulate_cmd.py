@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("rtde_control")
 
-from cell.emulate_cmd import EXAMPLE  # noqa: E402
+from lab.emulate_cmd import EXAMPLE  # noqa: E402
 from sim.emulate.camera_process import CAMERA_NICENESS  # noqa: E402
 from tests.cell.emulated import emulated_config  # noqa: E402
 
@@ -90,7 +90,7 @@ def test_print_config_names_the_shipped_example() -> None:
 
 def test_the_fault_schedule_counts_from_the_first_motion_and_waits_for_motion() -> None:
     from cell.config import EmulatedFault
-    from cell.emulate_cmd import _Schedule
+    from lab.emulate_cmd import _Schedule
 
     pull = EmulatedFault(device="arm", at_s=1.0, duration_s=0.5)
     ft = EmulatedFault(device="ft", at_s=0.2, mid_motion=False)
@@ -129,7 +129,7 @@ def test_a_fault_on_a_device_that_has_no_such_fault_is_refused(
 
 def test_a_force_step_lasts_its_default_and_is_timed_to_the_first_stop_after_it() -> None:
     from cell.config import EmulatedFault
-    from cell.emulate_cmd import FORCE_STEP_S, _Schedule, step_latency
+    from lab.emulate_cmd import FORCE_STEP_S, _Schedule, step_latency
 
     step = EmulatedFault(device="ft", fault="force_step", at_s=0.0)
     s = _Schedule([step])

@@ -40,7 +40,7 @@ from typing import Any
 
 from cell.errors import UserError
 
-EXAMPLE = Path(__file__).resolve().parent / "data" / "emulated_cell.yaml"
+EXAMPLE = Path(__file__).resolve().parents[1] / "cell" / "data" / "emulated_cell.yaml"
 
 
 def add_parser(sub: Any) -> None:
