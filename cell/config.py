@@ -27,7 +27,12 @@ from pydantic import (
 )
 
 from drivers.gripper_spec import DEFAULT_GRIPPER, GripperSpec, GripperSpecError, load_gripper
-from skills.motion import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE, MAX_FORCE_LIMIT
+from skills.motion import (
+    DEFAULT_MAX_FORCE,
+    DEFAULT_MAX_TORQUE,
+    MAX_FORCE_LIMIT,
+    MAX_TORQUE_LIMIT,
+)
 from skills.params import apply_config, config_keys
 from trees.context import SECTION_DOCS, SKILL_SECTIONS
 from trees.yaml_lines import ConfigError, LinedDocument, load_yaml, parse_yaml
@@ -234,7 +239,7 @@ class SafetySection(_Section):
     ft_abort_torque_nm: float = Field(
         DEFAULT_MAX_TORQUE,
         gt=0.0,
-        le=50.0,
+        le=MAX_TORQUE_LIMIT,
         description="|T| at the wrist that stops a motion (N*m)",
     )
     default_timeout_s: float = Field(

@@ -36,6 +36,9 @@ DEFAULT_MOTION_TIMEOUT = 10.0
 #: N, the highest force limit a motion may be given: the FT300's measuring range (+-300 N; its
 #: counts saturate at 327.67 N), above which a limit could never be seen crossed
 MAX_FORCE_LIMIT = 300.0
+#: N*m, the highest torque limit a motion may be given: the FT300's torque range (+-30 N*m; its
+#: counts saturate at 32.767 N*m), for the same reason
+MAX_TORQUE_LIMIT = 30.0
 
 
 @dataclass(frozen=True)

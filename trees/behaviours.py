@@ -10,9 +10,9 @@ Blackboard keys, each written by one behaviour only:
 * ``/ft/wrench`` -- :class:`~trees.decorators.FTSampler`
 * ``/part/detections``, ``/part/seen`` -- :class:`Perceive`
 * ``/part/target``, ``/cell/bin_empty`` -- :class:`PlanPick`
-* ``/part/pivot_frame`` -- :class:`TiltBehaviour`
+* ``/part/pivot_frame`` -- :class:`Tilt`
 * ``/cell/cycles_done`` -- :class:`~trees.decorators.Cycles`
-* ``/cell/place`` -- :class:`PackInBoxBehaviour`
+* ``/cell/place`` -- :class:`PackInBox`
 """
 
 from __future__ import annotations
@@ -33,12 +33,18 @@ from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look
 from skills.perception.pick_order import freest_first
-from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, Tilt
+from skills.pivot import Align as AlignSkill
+from skills.pivot import Grasp as GraspSkill
+from skills.pivot import PickFromAbove as PickFromAboveSkill
+from skills.pivot import PivotFrame
+from skills.pivot import Tilt as TiltSkill
 from skills.pivot.clearance import bin_walls, choose_end, lying_part
-from skills.reposition import Reposition, RepositionPlan, plan_reposition
+from skills.reposition import Reposition as RepositionSkill
+from skills.reposition import RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
+from trees.node_type import MOTION, declare
 
 Status = common.Status
 
@@ -149,6 +155,7 @@ class SkillBehaviour(Behaviour):
 
 
 # ---------------------------------------------------------------------------------- leaves
+@declare("perceive", "wrist camera over the bin, find the parts", "Action", MOTION)
 class Perceive(SkillBehaviour):
     """Look down on the bin with the wrist camera; publish what it found."""
 
@@ -205,6 +212,7 @@ def location_key(xy: Any) -> tuple[int, int]:
     return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
 
 
+@declare("plan_pick", "choose the part and its pivot frame", "Action")
 class PlanPick(Behaviour):
     """Choose the part to pick from the detections and the pivot frame the skills use.
 
@@ -392,6 +400,11 @@ def _target_frame(bb: Any) -> PivotFrame:
     return bb.get("/part/target")["frame"]
 
 
+@declare(
+    "pivot_clears",
+    "condition: the chosen part's pivot clears the walls and neighbours where it lies",
+    "Condition",
+)
 class PivotClears(Behaviour):
     """Condition: SUCCESS when plan_pick found the chosen part pickable where it lies; FAILURE
     when it needs a drag first (or nothing was chosen)."""
@@ -415,7 +428,13 @@ class PivotClears(Behaviour):
         return Status.SUCCESS
 
 
-class RepositionBehaviour(SkillBehaviour):
+@declare(
+    "reposition",
+    "drag the chosen part to where a pivot clears (counted apart as repositioned)",
+    "Action",
+    MOTION,
+)
+class Reposition(SkillBehaviour):
     """Drag the chosen part by plan_pick's plan; the part is then looked at again."""
 
     section = "reposition"
@@ -430,7 +449,7 @@ class RepositionBehaviour(SkillBehaviour):
         if move is None:
             raise SetupError("the chosen part needs no drag")
         self.move = move
-        return Reposition(move, self.ctx.part, self.ctx.devices, self.settings())
+        return RepositionSkill(move, self.ctx.part, self.ctx.devices, self.settings())
 
     def on_success(self) -> None:
         c = self.move.target.center
@@ -442,33 +461,41 @@ class RepositionBehaviour(SkillBehaviour):
         )
 
 
-class GraspBehaviour(SkillBehaviour):
+@declare("grasp", "the pivot's Grasp (Sec. III-C)", "Action", MOTION)
+class Grasp(SkillBehaviour):
     section = "pivot"
 
     def keys(self) -> dict[str, common.Access]:
         return {"/part/target": common.Access.READ}
 
     def make_skill(self) -> Skill:
-        return Grasp(_target_frame(self.bb), self.settings(), self.ctx.devices)
+        return GraspSkill(_target_frame(self.bb), self.settings(), self.ctx.devices)
 
 
-class TiltBehaviour(SkillBehaviour):
+@declare("tilt", "the pivot's Tilt about P_c", "Action", MOTION)
+class Tilt(SkillBehaviour):
     section = "pivot"
 
     def keys(self) -> dict[str, common.Access]:
         return {"/part/target": common.Access.READ, "/part/pivot_frame": common.Access.WRITE}
 
     def make_skill(self) -> Skill:
-        self.tilt = Tilt(_target_frame(self.bb), self.settings(), self.ctx.devices)
+        self.tilt = TiltSkill(_target_frame(self.bb), self.settings(), self.ctx.devices)
         return self.tilt
 
     def on_success(self) -> None:
         self.bb.set("/part/pivot_frame", self.tilt.frame)
 
 
-class AlignBehaviour(SkillBehaviour):
+@declare(
+    "align",
+    "in-hand Align: turn about the rim into the hole grasp, no release (Sec. III-C)",
+    "Action",
+    MOTION,
+)
+class Align(SkillBehaviour):
     section = "pivot"
-    skill_type: type[Align] | type[PickFromAbove] = Align
+    skill_type: type[AlignSkill] | type[PickFromAboveSkill] = AlignSkill
     recovered = False  #: picks journaled as the recovery's, counted apart
 
     def keys(self) -> dict[str, common.Access]:
@@ -488,15 +515,27 @@ class AlignBehaviour(SkillBehaviour):
         self.ctx.events.event(EventKind.PICKED, **data)
 
 
-class PickFromAboveBehaviour(AlignBehaviour):
+@declare(
+    "pick_from_above",
+    "recovery after a failed align: let go, look, pick from above (counted apart)",
+    "Action",
+    MOTION,
+)
+class PickFromAbove(Align):
     """The recovery after a failed in-hand Align: let go, look, pick the standing part from
     above. Its picks are journaled with ``recovered: true`` and counted apart: a regrasp, not
     the paper's pivot."""
 
-    skill_type = PickFromAbove
+    skill_type = PickFromAboveSkill
     recovered = True
 
 
+@declare(
+    "put_back",
+    "recovery: open, rise, home; then fails so a retry above tries again",
+    "Action",
+    MOTION,
+)
 class PutBack(SkillBehaviour):
     """Recovery after a failed pick: open the jaws (the part stays in the bin), rise, go home,
     remember the failure against the part's location -- then FAIL, so a Retry above tries again
@@ -524,6 +563,7 @@ class PutBack(SkillBehaviour):
         return status
 
 
+@declare("go_home", "arm to its home pose", "Action", MOTION)
 class GoHome(SkillBehaviour):
     section = "go_home"
 
@@ -531,6 +571,7 @@ class GoHome(SkillBehaviour):
         return go_home(self.ctx.devices, self.ctx.geometry.home_joints, self.settings())
 
 
+@declare("wait_machining", "start the machine, wait until done", "Action")
 class WaitMachining(Behaviour):
     """Start the machine on the fed part and wait for it (polls once per tick)."""
 
@@ -559,7 +600,8 @@ class WaitMachining(Behaviour):
         return Status.SUCCESS
 
 
-class SlotHolds(Behaviour):
+@declare("slot_holds_part", "condition: the slot holds a part (fed or machined)", "Condition")
+class SlotHoldsPart(Behaviour):
     """Condition: SUCCESS when the slot holds a part in one of ``states`` (default: fed or
     machined). Lets a resumed cell go on with the part in the slot instead of feeding a second
     one."""
@@ -577,6 +619,11 @@ class SlotHolds(Behaviour):
         return Status.SUCCESS if slot in self.states else Status.FAILURE
 
 
+@declare(
+    "holding_part",
+    "condition: the gripper holds something and reports no fault (gates a retry)",
+    "Condition",
+)
 class HoldingPart(Behaviour):
     """Condition: SUCCESS while the gripper holds something and reports no fault.
 
@@ -607,19 +654,21 @@ class HoldingPart(Behaviour):
         return Status.SUCCESS if held else Status.FAILURE
 
 
-class SlotMachined(SlotHolds):
+@declare("slot_machined", "condition: the part in the slot is machined", "Condition")
+class SlotMachined(SlotHoldsPart):
     states = frozenset({SlotState.MACHINED})
 
 
 # ------------------------------------------------------------------ slot and box (skills/)
-class FeedSlotBehaviour(SkillBehaviour):
+@declare("feed_slot", "part into the machine slot, release, drag away", "Action", MOTION)
+class FeedSlot(SkillBehaviour):
     section = "slot"
 
     def make_skill(self) -> Skill:
-        from skills.slot import FeedSlot
+        from skills.slot import FeedSlot as FeedSlotSkill
 
         g = self.ctx.geometry
-        return FeedSlot(
+        return FeedSlotSkill(
             np.asarray(g.slot_center, float),
             self.ctx.part,
             self.ctx.devices,
@@ -631,14 +680,15 @@ class FeedSlotBehaviour(SkillBehaviour):
         self.ctx.events.event(EventKind.FED)
 
 
-class PickFromSlotBehaviour(SkillBehaviour):
+@declare("pick_from_slot", "the same hole grasp on the part in the slot", "Action", MOTION)
+class PickFromSlot(SkillBehaviour):
     section = "slot"
 
     def make_skill(self) -> Skill:
-        from skills.slot import PickFromSlot
+        from skills.slot import PickFromSlot as PickFromSlotSkill
 
         g = self.ctx.geometry
-        return PickFromSlot(
+        return PickFromSlotSkill(
             np.asarray(g.slot_center, float),
             self.ctx.part,
             self.ctx.devices,
@@ -650,14 +700,15 @@ class PickFromSlotBehaviour(SkillBehaviour):
         self.ctx.events.event(EventKind.PICKED_FROM_SLOT)
 
 
-class PackInBoxBehaviour(SkillBehaviour):
+@declare("pack_in_box", "push -z, +x, +y until contact, release", "Action", MOTION)
+class PackInBox(SkillBehaviour):
     section = "pack_in_box"
 
     def keys(self) -> dict[str, common.Access]:
         return {"/cell/place": common.Access.WRITE}
 
     def make_skill(self) -> Skill:
-        from skills.packing import PackInBox
+        from skills.packing import PackInBox as PackInBoxSkill
 
         places = self.ctx.geometry.tray_places
         free = [i for i in range(len(places)) if i not in self.ctx.filled]
@@ -665,7 +716,7 @@ class PackInBoxBehaviour(SkillBehaviour):
             raise SetupError(f"the box is full ({len(places)} places)")
         self.index = free[0]
         self.bb.set("/cell/place", self.index)
-        return PackInBox(
+        return PackInBoxSkill(
             np.asarray(places[self.index], float),
             self.ctx.part,
             self.ctx.devices,
@@ -678,17 +729,17 @@ class PackInBoxBehaviour(SkillBehaviour):
 
 
 __all__ = [
-    "AlignBehaviour",
-    "PickFromAboveBehaviour",
-    "FeedSlotBehaviour",
+    "Align",
+    "PickFromAbove",
+    "FeedSlot",
     "GoHome",
-    "GraspBehaviour",
-    "PackInBoxBehaviour",
+    "Grasp",
+    "PackInBox",
     "Perceive",
-    "PickFromSlotBehaviour",
+    "PickFromSlot",
     "PlanPick",
     "PutBack",
     "SkillBehaviour",
-    "TiltBehaviour",
+    "Tilt",
     "WaitMachining",
 ]

@@ -29,11 +29,18 @@ from typing import Any
 from trees.registry import MOTION, NAME, REGISTRY, Param, section_params
 from trees.yaml_lines import ConfigError
 
-#: Registry type -> (BehaviorTree.CPP node ID, its model category), as each node declares it
-#: (:attr:`trees.registry.NodeType.btcpp`).
-BTCPP_IDS: dict[str, tuple[str, str]] = {kind: nt.btcpp for kind, nt in REGISTRY.items()}
 BUILTIN = frozenset({"Sequence", "Fallback"})
-_BY_ID = {xml_id: kind for kind, (xml_id, _) in BTCPP_IDS.items()}
+
+
+def btcpp_ids() -> dict[str, tuple[str, str]]:
+    """Registry type -> (BehaviorTree.CPP node ID, its model category), as each node declares
+    it (:attr:`trees.node_type.NodeType.btcpp`); read when asked, so a node declared after this
+    module was imported is in it."""
+    return {kind: nt.btcpp for kind, nt in REGISTRY.items()}
+
+
+def _by_id() -> dict[str, str]:
+    return {xml_id: kind for kind, (xml_id, _) in btcpp_ids().items()}
 _CATEGORIES = frozenset({"Action", "Condition", "Control", "Decorator"})
 _CPP_TYPES = {int: "int", float: "double", str: "std::string"}
 TREE_ID = "CellTree"
@@ -77,7 +84,7 @@ def to_xml(
     bt = ET.SubElement(root, "BehaviorTree", {"ID": tree_id})
     bt.append(_element(spec))
     model = ET.SubElement(root, "TreeNodesModel")
-    for kind, (xml_id, category) in BTCPP_IDS.items():
+    for kind, (xml_id, category) in btcpp_ids().items():
         if xml_id in BUILTIN:
             continue
         node = ET.SubElement(model, category, {"ID": xml_id})
@@ -110,7 +117,7 @@ def _default_of(
 
 def _element(spec: dict[str, Any]) -> ET.Element:
     kind = spec["type"]
-    xml_id, _ = BTCPP_IDS[kind]
+    xml_id, _ = REGISTRY[kind].btcpp
     attrs = {k: _text(v) for k, v in spec.items() if k not in ("type", "child", "children")}
     el = ET.Element(xml_id, attrs)
     for child in spec.get("children", []) or []:
@@ -216,9 +223,10 @@ def from_xml(text: str, source: str) -> dict[str, Any]:
                 return tree_body(xml_id, stack, el)
         else:
             xml_id = el.tag
-        kind = _BY_ID.get(xml_id)
+        by_id = _by_id()
+        kind = by_id.get(xml_id)
         if kind is None:
-            valid = ", ".join(_BY_ID)
+            valid = ", ".join(by_id)
             raise err(el, f"unknown node {xml_id!r}; the cell's nodes: {valid}")
         nt = REGISTRY[kind]
         allowed = dict(NAME) | nt.all_params()
@@ -293,7 +301,7 @@ def to_yaml(spec: dict[str, Any], source: str = "") -> str:
 
 
 __all__ = [
-    "BTCPP_IDS",
+    "btcpp_ids",
     "BtcppError",
     "from_xml",
     "read_xml",

@@ -26,6 +26,7 @@ from drivers.events import EventKind, StopKind
 from drivers.health import DeviceError
 from skills.status import Failure
 from trees.context import CellContext
+from trees.node_type import MOTION, Param, declare
 
 Status = common.Status
 WRENCH_KEY = "/ft/wrench"
@@ -152,6 +153,12 @@ class _CheckFirst(_LeanDecorator):
         return child.status
 
 
+@declare(
+    "ft_guard",
+    "fails the child within one tick of a wrench over the limits; stops the arm",
+    "Decorator",
+    {k: MOTION[k] for k in ("max_force_n", "max_torque_nm")},
+)
 class FTGuard(_CheckFirst):
     """Fail the child within one tick of the wrench passing ``max_force`` (N) or
     ``max_torque`` (N*m): the child is halted, the arm stopped, and the reason recorded.
@@ -168,6 +175,15 @@ class FTGuard(_CheckFirst):
         self.trip_code = Failure.FORCE_TORQUE  #: why the last trip (set by check())
         self.bb = self.attach_blackboard_client(name=name)
         self._wrench = _BoardKey(self.bb, WRENCH_KEY, common.Access.READ)
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> FTGuard:
+        """From a tree file's node; a limit it does not give is the safety section's."""
+        force = params.get("max_force_n", defaults["max_force_n"])
+        return cls(name, child, ctx, force, params.get("max_torque_nm", defaults["max_torque_nm"]))
 
     def _over_limits(self, raw: Any) -> tuple[float, float] | None:
         """(|F|, |T|) when the wrench is over either limit, else None. Squared magnitudes
@@ -231,6 +247,13 @@ class FTGuard(_CheckFirst):
         self.ctx.events.abort(reason, self.trip_code, leaf_name(self))
 
 
+@declare(
+    "timeout",
+    "fails the child after a time (s, the cell's clock)",
+    "Decorator",
+    {"seconds": Param(float, required=True, low=0.01, high=86400)},
+    btcpp_id="CellTimeout",
+)
 class Timeout(_CheckFirst):
     """Fail the child when it runs longer than ``seconds`` of the injected clock."""
 
@@ -238,6 +261,13 @@ class Timeout(_CheckFirst):
         super().__init__(name=name, child=child)
         self.ctx, self.seconds = ctx, seconds
         self._t0 = 0.0
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> Timeout:
+        return cls(name, child, ctx, params["seconds"])
 
     @property
     def clock(self) -> Clock:
@@ -258,6 +288,17 @@ class Timeout(_CheckFirst):
         self.ctx.events.abort(reason, Failure.TIMEOUT, leaf_name(self))
 
 
+@declare(
+    "retry",
+    "runs the child again after a failure",
+    "Decorator",
+    {
+        "attempts": Param(int, required=True, low=1, high=100, doc="runs in all"),
+        "pause_s": Param(
+            float, low=0.0, high=60.0, doc="wait before each new attempt (s); default 0"
+        ),
+    },
+)
 class Retry(_LeanDecorator):
     """Run the child again after a failure, up to ``attempts`` runs in all.
 
@@ -265,6 +306,13 @@ class Retry(_LeanDecorator):
     re-perceive inside it sees the bin as it is now. It gives up early when the cell was told to
     stop.
     """
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> Retry:
+        return cls(name, child, ctx, params["attempts"], params.get("pause_s", 0.0))
 
     def __init__(
         self, name: str, child: Behaviour, ctx: CellContext, attempts: int, pause_s: float = 0.0
@@ -319,6 +367,12 @@ class Retry(_LeanDecorator):
         return status
 
 
+@declare(
+    "stop_on_failure",
+    "a failure below needs a person: stops the cell with this reason",
+    "Decorator",
+    {"reason": Param(str, required=True)},
+)
 class StopOnFailure(_LeanDecorator):
     """A failure here needs a person (a part stuck in the slot, a part dropped outside the bin):
     tell the cell to stop, with the reason."""
@@ -326,6 +380,13 @@ class StopOnFailure(_LeanDecorator):
     def __init__(self, name: str, child: Behaviour, ctx: CellContext, reason: str) -> None:
         super().__init__(name=name, child=child)
         self.ctx, self.reason = ctx, reason
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> StopOnFailure:
+        return cls(name, child, ctx, params["reason"])
 
     def update(self) -> Status:
         status = self.decorated.status
@@ -349,6 +410,7 @@ class StopOnFailure(_LeanDecorator):
         return status
 
 
+@declare("cycles", "repeats the child until workflow.cycles or the bin is empty", "Decorator")
 class Cycles(_LeanDecorator):
     """Run the workflow's cycle again and again: SUCCESS when the count is reached or the bin is
     empty; FAILURE when the cell was told to stop or too many cycles in a row failed."""
@@ -362,6 +424,13 @@ class Cycles(_LeanDecorator):
         self._cycles_done = _BoardKey(self.bb, "/cell/cycles_done", common.Access.WRITE)
         self._bin_empty = _BoardKey(self.bb, "/cell/bin_empty", common.Access.READ)
         self._cycles_done.set(0)
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> Cycles:
+        return cls(name, child, ctx)
 
     def initialise(self) -> None:
         self.done = self.ctx.limits.cycles_done  # a resumed cell goes on counting

@@ -16,21 +16,20 @@ from py_trees.behaviour import Behaviour
 from trees.decorators import FTGuard, FTSampler, Timeout
 from trees.registry import REGISTRY
 
-#: Built class -> registry type, from what each node declares (its ``leaf`` or ``cls``), and
-#: the two nodes the cell adds around a tree's file (not types a file may name).
-_CLASSES: dict[type, str] = {
+#: The two nodes the cell adds around a tree's file (not types a file may name).
+_ADDED: dict[type, str] = {
     py_trees.composites.Parallel: "parallel",
     FTSampler: "ft_sampler",
 }
-for _kind, _nt in REGISTRY.items():
-    _built = _nt.leaf if _nt.leaf is not None else _nt.cls
-    if _built is not None:
-        _CLASSES[_built] = _kind
 
 
 def node_type(node: Behaviour) -> str:
-    """The registry's type of a built node (its exact class: a subclass is another type)."""
-    return _CLASSES.get(type(node), type(node).__name__)
+    """The registry's type of a built node (its exact class: a subclass is another type), from
+    what each class declared (trees/node_type.py)."""
+    cls = type(node)
+    if cls in _ADDED:
+        return _ADDED[cls]
+    return next((k for k, nt in REGISTRY.items() if nt.built is cls), cls.__name__)
 
 
 def preorder(root: Behaviour) -> list[Behaviour]:

@@ -1,4 +1,5 @@
-"""Trees from YAML: a registry of behaviour types, each with its checked parameters.
+"""Trees from YAML: built from the node types the classes declare (trees/node_type.py), each
+node's parameters checked against its type's.
 
 A node is a mapping with ``type`` and that type's parameters; composites take ``children``,
 decorators one ``child``. Motion leaves take ``timeout_s``, ``max_force_n`` and
@@ -10,7 +11,6 @@ an error naming the file, the line, the key and the valid choices.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -18,261 +18,40 @@ import py_trees
 from py_trees import common
 from py_trees.behaviour import Behaviour
 
-from skills.motion import MAX_FORCE_LIMIT
-from skills.params import config_keys
-from trees.behaviours import (
-    AlignBehaviour,
-    FeedSlotBehaviour,
-    GoHome,
-    GraspBehaviour,
-    HoldingPart,
-    PackInBoxBehaviour,
-    Perceive,
-    PickFromAboveBehaviour,
-    PickFromSlotBehaviour,
-    PivotClears,
-    PlanPick,
-    PutBack,
-    RepositionBehaviour,
-    SlotHolds,
-    SlotMachined,
-    TiltBehaviour,
-    WaitMachining,
-)
+# The modules that declare the cell's own node types (each class carries its declaration).
+import trees.behaviours  # noqa: F401
+import trees.decorators  # noqa: F401
 from trees.context import SECTION_DOCS, SKILL_SECTIONS, CellContext
-from trees.decorators import Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
+from trees.decorators import FTGuard, FTSampler, Timeout
+from trees.node_type import (
+    MOTION,
+    NAME,
+    REGISTRY,
+    NodeType,
+    Param,
+    declare,
+    section_params,
+)
 from trees.yaml_lines import ConfigError, KeyPath, LinedDocument, load_yaml
 
-
-@dataclass(frozen=True)
-class Param:
-    kind: type | tuple[type, ...]
-    required: bool = False
-    low: float | None = None
-    high: float | None = None
-    doc: str = ""
+declare("sequence", "children in order; fails at the first failure", "Control")(
+    py_trees.composites.Sequence
+)
+declare(
+    "selector", "children in order until one succeeds (fallback)", "Control", btcpp_id="Fallback"
+)(py_trees.composites.Selector)
 
 
-MOTION = {
-    "timeout_s": Param(
-        float, low=0.1, high=3600, doc="timeout (s); default safety.default_timeout_s"
-    ),
-    "max_force_n": Param(
-        float, low=1, high=MAX_FORCE_LIMIT, doc="FT abort force (N); default safety's"
-    ),
-    "max_torque_nm": Param(float, low=0.1, high=50, doc="FT abort torque (N*m); default safety's"),
-}
-NAME = {"name": Param(str, doc="shown in `cell tree` and the log")}
+def _in_order() -> None:
+    """Composites, then decorators, then leaves, each in declaration order: how `cell tree
+    --types`, the BT.CPP model and the docs list them."""
+    rank = {"composite": 0, "decorator": 1, "leaf": 2}
+    ordered = sorted(REGISTRY.items(), key=lambda kv: rank[kv[1].kind])
+    REGISTRY.clear()
+    REGISTRY.update(ordered)
 
 
-@dataclass(frozen=True)
-class NodeType:
-    kind: str  # "leaf" | "composite" | "decorator"
-    doc: str
-    params: dict[str, Param] = field(default_factory=dict)
-    leaf: type[Behaviour] | None = None
-    #: its BehaviorTree.CPP node ID and model category (trees/btcpp.py). The IDs of
-    #: BehaviorTree.CPP's own nodes (``Sequence``, ``Fallback``) are not declared in the model;
-    #: the others avoid its built-in IDs (its ``Timeout`` counts milliseconds of wall time; ours
-    #: counts seconds of the cell's clock, hence ``CellTimeout``).
-    btcpp: tuple[str, str] = ("", "")
-    #: the class a composite or decorator builds (a leaf's is ``leaf``)
-    cls: type[Behaviour] | None = None
-
-    @property
-    def section(self) -> str | None:
-        """The ``skills:`` section whose keys this leaf takes as per-node overrides."""
-        return getattr(self.leaf, "section", None)
-
-    def all_params(self) -> dict[str, Param]:
-        """Its own parameters and, for a skill leaf, its section's keys."""
-        if self.section is None:
-            return dict(self.params)
-        return self.params | section_params(self.section)
-
-
-def section_params(section: str) -> dict[str, Param]:
-    """A ``skills:`` section's keys as node parameters (configured units, e.g. degrees)."""
-    out: dict[str, Param] = {}
-    for k in config_keys(SKILL_SECTIONS[section]):
-        unit = k.shown_unit
-        out[k.key] = Param(
-            float,
-            low=k.shown(k.low),
-            high=k.shown(k.high),
-            doc=f"{k.doc} ({unit}; default {k.shown(k.default):g})",
-        )
-    return out
-
-
-REGISTRY: dict[str, NodeType] = {
-    "sequence": NodeType(
-        "composite",
-        "children in order; fails at the first failure",
-        btcpp=("Sequence", "Control"),
-        cls=py_trees.composites.Sequence,
-    ),
-    "selector": NodeType(
-        "composite",
-        "children in order until one succeeds (fallback)",
-        btcpp=("Fallback", "Control"),
-        cls=py_trees.composites.Selector,
-    ),
-    "retry": NodeType(
-        "decorator",
-        "runs the child again after a failure",
-        {
-            "attempts": Param(int, required=True, low=1, high=100, doc="runs in all"),
-            "pause_s": Param(
-                float, low=0.0, high=60.0, doc="wait before each new attempt (s); default 0"
-            ),
-        },
-        btcpp=("Retry", "Decorator"),
-        cls=Retry,
-    ),
-    "timeout": NodeType(
-        "decorator",
-        "fails the child after a time (s, the cell's clock)",
-        {"seconds": Param(float, required=True, low=0.01, high=86400)},
-        btcpp=("CellTimeout", "Decorator"),
-        cls=Timeout,
-    ),
-    "ft_guard": NodeType(
-        "decorator",
-        "fails the child within one tick of a wrench over the limits; stops the arm",
-        {
-            "max_force_n": Param(float, low=1, high=MAX_FORCE_LIMIT),
-            "max_torque_nm": Param(float, low=0.1, high=50),
-        },
-        btcpp=("FTGuard", "Decorator"),
-        cls=FTGuard,
-    ),
-    "cycles": NodeType(
-        "decorator",
-        "repeats the child until workflow.cycles or the bin is empty",
-        btcpp=("Cycles", "Decorator"),
-        cls=Cycles,
-    ),
-    "stop_on_failure": NodeType(
-        "decorator",
-        "a failure below needs a person: stops the cell with this reason",
-        {"reason": Param(str, required=True)},
-        btcpp=("StopOnFailure", "Decorator"),
-        cls=StopOnFailure,
-    ),
-    "perceive": NodeType(
-        "leaf",
-        "wrist camera over the bin, find the parts",
-        dict(MOTION),
-        Perceive,
-        btcpp=("Perceive", "Action"),
-    ),
-    "plan_pick": NodeType(
-        "leaf", "choose the part and its pivot frame", {}, PlanPick, btcpp=("PlanPick", "Action")
-    ),
-    "pivot_clears": NodeType(
-        "leaf",
-        "condition: the chosen part's pivot clears the walls and neighbours where it lies",
-        {},
-        PivotClears,
-        btcpp=("PivotClears", "Condition"),
-    ),
-    "reposition": NodeType(
-        "leaf",
-        "drag the chosen part to where a pivot clears (counted apart as repositioned)",
-        dict(MOTION),
-        RepositionBehaviour,
-        btcpp=("Reposition", "Action"),
-    ),
-    "grasp": NodeType(
-        "leaf",
-        "the pivot's Grasp (Sec. III-C)",
-        dict(MOTION),
-        GraspBehaviour,
-        btcpp=("Grasp", "Action"),
-    ),
-    "tilt": NodeType(
-        "leaf",
-        "the pivot's Tilt about P_c",
-        dict(MOTION),
-        TiltBehaviour,
-        btcpp=("Tilt", "Action"),
-    ),
-    "align": NodeType(
-        "leaf",
-        "in-hand Align: turn about the rim into the hole grasp, no release (Sec. III-C)",
-        dict(MOTION),
-        AlignBehaviour,
-        btcpp=("Align", "Action"),
-    ),
-    "pick_from_above": NodeType(
-        "leaf",
-        "recovery after a failed align: let go, look, pick from above (counted apart)",
-        dict(MOTION),
-        PickFromAboveBehaviour,
-        btcpp=("PickFromAbove", "Action"),
-    ),
-    "put_back": NodeType(
-        "leaf",
-        "recovery: open, rise, home; then fails so a retry above tries again",
-        dict(MOTION),
-        PutBack,
-        btcpp=("PutBack", "Action"),
-    ),
-    "feed_slot": NodeType(
-        "leaf",
-        "part into the machine slot, release, drag away",
-        dict(MOTION),
-        FeedSlotBehaviour,
-        btcpp=("FeedSlot", "Action"),
-    ),
-    "slot_holds_part": NodeType(
-        "leaf",
-        "condition: the slot holds a part (fed or machined)",
-        {},
-        SlotHolds,
-        btcpp=("SlotHoldsPart", "Condition"),
-    ),
-    "holding_part": NodeType(
-        "leaf",
-        "condition: the gripper holds something and reports no fault (gates a retry)",
-        {},
-        HoldingPart,
-        btcpp=("HoldingPart", "Condition"),
-    ),
-    "slot_machined": NodeType(
-        "leaf",
-        "condition: the part in the slot is machined",
-        {},
-        SlotMachined,
-        btcpp=("SlotMachined", "Condition"),
-    ),
-    "wait_machining": NodeType(
-        "leaf",
-        "start the machine, wait until done",
-        {},
-        WaitMachining,
-        btcpp=("WaitMachining", "Action"),
-    ),
-    "pick_from_slot": NodeType(
-        "leaf",
-        "the same hole grasp on the part in the slot",
-        dict(MOTION),
-        PickFromSlotBehaviour,
-        btcpp=("PickFromSlot", "Action"),
-    ),
-    "pack_in_box": NodeType(
-        "leaf",
-        "push -z, +x, +y until contact, release",
-        dict(MOTION),
-        PackInBoxBehaviour,
-        btcpp=("PackInBox", "Action"),
-    ),
-    "go_home": NodeType(
-        "leaf", "arm to its home pose", dict(MOTION), GoHome, btcpp=("GoHome", "Action")
-    ),
-}
-COMPOSITES = {k: nt.cls for k, nt in REGISTRY.items() if nt.kind == "composite"}
+_in_order()
 
 
 def _check_value(doc: LinedDocument, path: KeyPath, key: str, value: Any, p: Param) -> Any:
@@ -336,12 +115,14 @@ class TreeBuilder:
             if not isinstance(children, list) or not children:
                 raise doc.error((*path, "children"), f"'{kind}' needs a non-empty list 'children'")
             kids = [self.build(c, (*path, "children", i)) for i, c in enumerate(children)]
-            return COMPOSITES[kind](name=name, memory=True, children=kids)
+            return nt.built(name=name, memory=True, children=kids)  # type: ignore[call-arg]
         if nt.kind == "decorator":
             if "child" not in spec:
                 raise doc.error(path, f"'{kind}' needs a 'child' node")
             child = self.build(spec["child"], (*path, "child"))
-            return self._decorator(kind, name, child, params)
+            return nt.built.from_spec(  # type: ignore[attr-defined,no-any-return]
+                name, child, self.ctx, params, self.defaults
+            )
         assert nt.leaf is not None
         motion = {k: params.pop(k) for k in list(params) if k in MOTION}
         if not getattr(nt.leaf, "moves", False):
@@ -354,28 +135,6 @@ class TreeBuilder:
         timeout = motion.get("timeout_s", self.defaults["timeout_s"])
         node = Timeout(self._name(f"{name} timeout"), node, self.ctx, timeout)
         return FTGuard(self._name(f"{name} ft guard"), node, self.ctx, force, torque)
-
-    def _decorator(
-        self, kind: str, name: str, child: Behaviour, params: dict[str, Any]
-    ) -> Behaviour:
-        ctx = self.ctx
-        if kind == "retry":
-            return Retry(name, child, ctx, params["attempts"], params.get("pause_s", 0.0))
-        if kind == "timeout":
-            return Timeout(name, child, ctx, params["seconds"])
-        if kind == "ft_guard":
-            return FTGuard(
-                name,
-                child,
-                ctx,
-                params.get("max_force_n", self.defaults["max_force_n"]),
-                params.get("max_torque_nm", self.defaults["max_torque_nm"]),
-            )
-        if kind == "cycles":
-            return Cycles(name, child, ctx)
-        if kind == "stop_on_failure":
-            return StopOnFailure(name, child, ctx, params["reason"])
-        raise AssertionError(kind)
 
 
 def resolve_tree_spec(
@@ -452,7 +211,12 @@ def _range(p: Param) -> str:
 
 
 __all__ = [
+    "MOTION",
+    "NAME",
     "REGISTRY",
+    "NodeType",
+    "Param",
+    "section_params",
     "ConfigError",
     "TreeBuilder",
     "build_root",

@@ -51,12 +51,12 @@ def _kind(node: Behaviour) -> str:
 def _condition_leaves() -> tuple[type[Behaviour], ...]:
     """The leaf classes whose node type BehaviorTree.CPP's model declares a Condition: one list
     for the picture and the Groot2 export, so a new check is drawn as one without a second edit."""
-    from trees.btcpp import BTCPP_IDS
+    from trees.btcpp import btcpp_ids
     from trees.registry import REGISTRY
 
     return tuple(
         leaf
-        for kind, (_, category) in BTCPP_IDS.items()
+        for kind, (_, category) in btcpp_ids().items()
         if category == "Condition" and (leaf := REGISTRY[kind].leaf) is not None
     )
 

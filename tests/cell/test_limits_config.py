@@ -46,9 +46,9 @@ def test_a_node_limit_is_the_skills_guard_and_caps_its_stricter_guards(tmp_path)
     - {type: align, max_force_n: 20, max_torque_nm: 3}
 """
     prep = _prep(HEAD + tree, tmp_path)
-    tilt = _leaf(prep, lv.TiltBehaviour).settings()
+    tilt = _leaf(prep, lv.Tilt).settings()
     assert (tilt.guard.max_force, tilt.guard.max_torque) == (90.0, 8.0)  # torque: safety's
-    align = _leaf(prep, lv.AlignBehaviour).settings()
+    align = _leaf(prep, lv.Align).settings()
     assert (align.guard.max_force, align.guard.max_torque) == (20.0, 3.0)
     # the slide into the hole stops at 25 N on its own, but never above the node's 20 N
     assert align.descent_guard.max_force == 20.0
@@ -59,7 +59,7 @@ def test_a_node_limit_is_the_skills_guard_and_caps_its_stricter_guards(tmp_path)
 def test_the_safety_section_is_the_default_of_every_guard(tmp_path) -> None:
     text = HEAD + "safety: {ft_abort_force_n: 42, ft_abort_torque_nm: 5}\n"
     prep = _prep(text + "tree:\n  type: pack_in_box\n", tmp_path)
-    pack = _leaf(prep, lv.PackInBoxBehaviour).settings()
+    pack = _leaf(prep, lv.PackInBox).settings()
     assert (pack.guard.max_force, pack.guard.max_torque) == (42.0, 5.0)
     assert pack.push_guard.max_force == 30.0 and pack.push_guard.max_torque == 5.0
 
@@ -108,13 +108,13 @@ tree:
     prep = _prep(text, tmp_path)
     assert prep.ctx.params.tilt_speed == 0.015
     assert prep.ctx.params.tilt_past_tip == pytest.approx(math.radians(6))
-    tilt = _leaf(prep, lv.TiltBehaviour).settings()
+    tilt = _leaf(prep, lv.Tilt).settings()
     assert tilt.tilt_speed == 0.005  # the node's own
-    align = _leaf(prep, lv.AlignBehaviour).settings()
+    align = _leaf(prep, lv.Align).settings()
     assert align.tilt_speed == 0.015 and align.descent_guard.max_force == 18.0
     # one hole grasp for the whole cell: the slot's depth is Align's and the packing's
     assert align.wall_depth == 0.025
-    pack = _leaf(prep, lv.PackInBoxBehaviour).settings()
+    pack = _leaf(prep, lv.PackInBox).settings()
     assert pack.grip_depth == 0.025 and pack.push_speed == 0.005
     home = _leaf(prep, lv.GoHome).settings()
     assert home.joint_speed == pytest.approx(math.radians(30))

@@ -220,7 +220,7 @@ def test_plan_pick_on_an_empty_bin_fails_and_marks_it_empty(ctx) -> None:
 
 
 def test_a_leaf_without_its_input_fails_with_a_reason_not_a_crash(ctx) -> None:
-    node = lv.GraspBehaviour("grasp", ctx)
+    node = lv.Grasp("grasp", ctx)
     node.tick_once()
     assert node.status == Status.FAILURE
     assert "cannot start" in node.feedback_message and "/part/target" in node.feedback_message

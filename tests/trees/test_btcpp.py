@@ -17,7 +17,7 @@ import pytest
 
 from tests.trees.helpers import fresh_ctx
 from trees import behaviours as lv
-from trees.btcpp import BTCPP_IDS, BUILTIN, BtcppError, from_xml, to_xml, to_yaml
+from trees.btcpp import BUILTIN, BtcppError, btcpp_ids, from_xml, to_xml, to_yaml
 from trees.registry import NAME, REGISTRY, TreeBuilder
 from trees.yaml_lines import load_yaml, parse_yaml
 
@@ -44,10 +44,10 @@ def built(spec: object) -> str:
 
 
 def test_every_registered_type_has_one_btcpp_id() -> None:
-    assert set(BTCPP_IDS) == set(REGISTRY)
-    ids = [i for i, _ in BTCPP_IDS.values()]
+    assert set(btcpp_ids()) == set(REGISTRY)
+    ids = [i for i, _ in btcpp_ids().values()]
     assert all(ids) and len(ids) == len(set(ids))  # each node declares its own, none shared
-    for kind, (_, category) in BTCPP_IDS.items():
+    for kind, (_, category) in btcpp_ids().items():
         expected = {"composite": {"Control"}, "decorator": {"Decorator"}}.get(
             REGISTRY[kind].kind, {"Action", "Condition"}
         )
@@ -76,7 +76,7 @@ def test_the_xml_is_btcpp_v4_with_one_tree_and_a_model_of_every_node_type() -> N
     declared = {el.get("ID"): el for el in model}
     used = {el.tag for el in trees[0].iter()} - {"BehaviorTree"}
     assert used - BUILTIN <= set(declared)
-    assert set(declared) == {i for i, _ in BTCPP_IDS.values()} - BUILTIN
+    assert set(declared) == {i for i, _ in btcpp_ids().values()} - BUILTIN
     grasp = declared["Grasp"]
     assert grasp.tag == "Action"
     ports = {p.get("name"): p for p in grasp.findall("input_port")}

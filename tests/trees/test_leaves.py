@@ -264,7 +264,7 @@ def test_tilt_publishes_the_pivot_frame_it_located_for_the_align(ctx) -> None:
     p = ctx.params
     ctx.devices.arm.pose = tgt["frame"].grasp_pose(p.l_a, p.alpha, p.tip_offset)
     ctx.devices.gripper._width = tgt["frame"].opening(p.l_a, p.alpha) - 0.004  # closed on H
-    node = lv.TiltBehaviour("tilt", ctx)
+    node = lv.Tilt("tilt", ctx)
     assert run(node, ctx)[-1] == Status.SUCCESS
     frame = bb.get("/part/pivot_frame")
     assert frame is node.tilt.frame
@@ -275,7 +275,7 @@ def test_tilt_publishes_the_pivot_frame_it_located_for_the_align(ctx) -> None:
 
 
 def test_tilt_without_a_chosen_part_cannot_start_and_moves_nothing(ctx) -> None:
-    node = lv.TiltBehaviour("tilt", ctx)
+    node = lv.Tilt("tilt", ctx)
     node.tick_once()
     assert node.status == Status.FAILURE
     assert not ctx.devices.arm.commands and not blackboard().exists("/part/pivot_frame")
@@ -287,7 +287,7 @@ def test_tilt_halted_mid_arc_stops_the_arm_and_publishes_nothing(ctx) -> None:
     bb.set("/part/target", tgt)
     p = ctx.params
     ctx.devices.arm.pose = tgt["frame"].grasp_pose(p.l_a, p.alpha, p.tip_offset)
-    node = lv.TiltBehaviour("tilt", ctx)
+    node = lv.Tilt("tilt", ctx)
     for _ in range(50):
         node.tick_once()
         ctx.devices.clock.t += ctx.devices.clock.dt
@@ -313,7 +313,7 @@ def standing(ctx):  # type: ignore[no-untyped-def]
 
 def test_align_success_reports_the_pick_with_where_the_part_lay(ctx) -> None:
     _, tgt = standing(ctx)
-    node = lv.AlignBehaviour("align", ctx)
+    node = lv.Align("align", ctx)
     assert run(node, ctx)[-1] == Status.SUCCESS
     picked = [d for k, d in ctx.events.events if k == "picked"]
     assert len(picked) == 1
@@ -325,13 +325,13 @@ def test_align_success_reports_the_pick_with_where_the_part_lay(ctx) -> None:
 def test_align_on_nothing_fails_with_an_abort_and_no_pick(ctx) -> None:
     standing(ctx)
     ctx.devices.gripper.object_width = None  # the part is gone from between the fingers
-    node = lv.AlignBehaviour("align", ctx)
+    node = lv.Align("align", ctx)
     assert run(node, ctx)[-1] == Status.FAILURE
     assert "picked" not in ctx.events.kinds() and len(ctx.events.aborts) == 1
 
 
 def test_align_without_a_pivot_frame_cannot_start(ctx) -> None:
-    node = lv.AlignBehaviour("align", ctx)
+    node = lv.Align("align", ctx)
     node.tick_once()
     assert node.status == Status.FAILURE and not ctx.devices.arm.commands
     assert "picked" not in ctx.events.kinds()
@@ -339,7 +339,7 @@ def test_align_without_a_pivot_frame_cannot_start(ctx) -> None:
 
 def test_align_halted_mid_turn_stops_the_arm(ctx) -> None:
     standing(ctx)
-    node = lv.AlignBehaviour("align", ctx)
+    node = lv.Align("align", ctx)
     for _ in range(20):
         node.tick_once()
         ctx.devices.clock.t += ctx.devices.clock.dt
@@ -439,7 +439,7 @@ def test_put_back_halted_mid_motion_stops_the_arm(ctx) -> None:
 # ------------------------------------------------------------------- FeedSlot, PickFromSlot
 def test_feed_slot_lets_the_part_go_on_the_slot_floor_and_marks_the_slot_fed(ctx) -> None:
     holding(ctx)
-    node = lv.FeedSlotBehaviour("feed slot", ctx)
+    node = lv.FeedSlot("feed slot", ctx)
     world = World(ctx, node, {"into the slot": (0.0, 0.0, 10.0)})
     assert run(node, ctx, world)[-1] == Status.SUCCESS
     assert ctx.slot_state == "fed" and ctx.events.kinds() == ["fed"]
@@ -449,7 +449,7 @@ def test_feed_slot_lets_the_part_go_on_the_slot_floor_and_marks_the_slot_fed(ctx
 
 def test_feed_slot_fails_when_the_part_comes_out_with_the_gripper(ctx) -> None:
     holding(ctx)
-    node = lv.FeedSlotBehaviour("feed slot", ctx)
+    node = lv.FeedSlot("feed slot", ctx)
     # the jaws open, but the part's weight stays on the wrist: it did not stay in the slot
     world = World(ctx, node, {"into the slot": (0.0, 0.0, 10.0)}, held=lambda: True)
     assert run(node, ctx, world)[-1] == Status.FAILURE
@@ -459,7 +459,7 @@ def test_feed_slot_fails_when_the_part_comes_out_with_the_gripper(ctx) -> None:
 
 def test_feed_slot_force_spike_fails_stops_the_arm_and_leaves_the_slot_empty(ctx) -> None:
     holding(ctx)
-    node = lv.FeedSlotBehaviour("feed slot", ctx)
+    node = lv.FeedSlot("feed slot", ctx)
     world = World(ctx, node, {"into the slot": (0.0, 0.0, 10.0)})
     assert run(node, ctx, world, on_tick=spike_on(world, "down to the slot"))[-1] == (
         Status.FAILURE
@@ -471,14 +471,14 @@ def test_feed_slot_force_spike_fails_stops_the_arm_and_leaves_the_slot_empty(ctx
 
 def test_feed_slot_halted_mid_motion_stops_the_arm(ctx) -> None:
     holding(ctx)
-    node = lv.FeedSlotBehaviour("feed slot", ctx)
+    node = lv.FeedSlot("feed slot", ctx)
     stops = start_then_halt(node, ctx)
     assert ctx.devices.arm.stops == stops + 1 and ctx.slot_state == "empty"
 
 
 def test_pick_from_slot_takes_the_part_out_and_empties_the_slot(ctx) -> None:
     ctx.slot_state = "machined"
-    node = lv.PickFromSlotBehaviour("pick from slot", ctx)
+    node = lv.PickFromSlot("pick from slot", ctx)
     world = World(ctx, node)
     assert run(node, ctx, world)[-1] == Status.SUCCESS
     assert ctx.slot_state == "empty" and ctx.events.kinds() == ["picked_from_slot"]
@@ -487,7 +487,7 @@ def test_pick_from_slot_takes_the_part_out_and_empties_the_slot(ctx) -> None:
 
 def test_pick_from_slot_without_the_parts_weight_fails_and_the_slot_keeps_it(ctx) -> None:
     ctx.slot_state = "machined"
-    node = lv.PickFromSlotBehaviour("pick from slot", ctx)
+    node = lv.PickFromSlot("pick from slot", ctx)
     world = World(ctx, node, weight=False)  # pinched something, but the part stayed behind
     assert run(node, ctx, world)[-1] == Status.FAILURE
     assert ctx.slot_state == "machined" and "picked_from_slot" not in ctx.events.kinds()
@@ -496,7 +496,7 @@ def test_pick_from_slot_without_the_parts_weight_fails_and_the_slot_keeps_it(ctx
 
 def test_pick_from_slot_force_spike_and_halt_stop_the_arm(ctx) -> None:
     ctx.slot_state = "machined"
-    node = lv.PickFromSlotBehaviour("pick from slot", ctx)
+    node = lv.PickFromSlot("pick from slot", ctx)
     world = World(ctx, node)
     assert run(node, ctx, world, on_tick=spike_on(world, "down to the rim"))[-1] == (
         Status.FAILURE
@@ -506,7 +506,7 @@ def test_pick_from_slot_force_spike_and_halt_stop_the_arm(ctx) -> None:
 
     py_trees.blackboard.Blackboard.clear()
     ctx2 = make_ctx()
-    node2 = lv.PickFromSlotBehaviour("pick from slot", ctx2)
+    node2 = lv.PickFromSlot("pick from slot", ctx2)
     stops = start_then_halt(node2, ctx2)
     assert ctx2.devices.arm.stops == stops + 1 and not ctx2.events.aborts
 
@@ -522,7 +522,7 @@ PUSHES = {
 def test_pack_in_box_fills_the_first_free_place_and_reports_it(ctx) -> None:
     ctx.filled.add(0)  # a resumed cell: place 0 is taken
     holding(ctx)
-    node = lv.PackInBoxBehaviour("pack in box", ctx)
+    node = lv.PackInBox("pack in box", ctx)
     world = World(ctx, node, PUSHES)
     assert run(node, ctx, world)[-1] == Status.SUCCESS
     assert ctx.filled == {0, 1}
@@ -535,7 +535,7 @@ def test_pack_in_box_fills_the_first_free_place_and_reports_it(ctx) -> None:
 def test_pack_in_box_with_the_box_full_cannot_start_and_moves_nothing(ctx) -> None:
     ctx.filled.update({0, 1})
     holding(ctx)
-    node = lv.PackInBoxBehaviour("pack in box", ctx)
+    node = lv.PackInBox("pack in box", ctx)
     node.tick_once()
     assert node.status == Status.FAILURE
     assert not ctx.devices.arm.commands and "packed" not in ctx.events.kinds()
@@ -543,7 +543,7 @@ def test_pack_in_box_with_the_box_full_cannot_start_and_moves_nothing(ctx) -> No
 
 def test_pack_in_box_with_nothing_to_push_on_fails_with_an_abort_and_fills_nothing(ctx) -> None:
     holding(ctx)
-    node = lv.PackInBoxBehaviour("pack in box", ctx)
+    node = lv.PackInBox("pack in box", ctx)
     world = World(ctx, node, {"push -z onto the floor": (0.0, 0.0, 10.0)})  # no walls
     assert run(node, ctx, world)[-1] == Status.FAILURE
     assert ctx.filled == set() and "packed" not in ctx.events.kinds()
@@ -552,7 +552,7 @@ def test_pack_in_box_with_nothing_to_push_on_fails_with_an_abort_and_fills_nothi
 
 def test_pack_in_box_force_spike_and_halt_stop_the_arm(ctx) -> None:
     holding(ctx)
-    node = lv.PackInBoxBehaviour("pack in box", ctx)
+    node = lv.PackInBox("pack in box", ctx)
     world = World(ctx, node, PUSHES)
     assert run(node, ctx, world, on_tick=spike_on(world, "over the place"))[-1] == (
         Status.FAILURE
@@ -563,7 +563,7 @@ def test_pack_in_box_force_spike_and_halt_stop_the_arm(ctx) -> None:
     py_trees.blackboard.Blackboard.clear()
     ctx2 = make_ctx()
     holding(ctx2)
-    node2 = lv.PackInBoxBehaviour("pack in box", ctx2)
+    node2 = lv.PackInBox("pack in box", ctx2)
     stops = start_then_halt(node2, ctx2)
     assert ctx2.devices.arm.stops == stops + 1 and ctx2.filled == set()
 
@@ -639,7 +639,7 @@ def test_plan_pick_plans_a_drag_when_no_part_clears_and_the_drag_leaf_needs_one(
     clears = lv.PivotClears("clears", ctx)
     clears.tick_once()
     assert clears.status == Status.FAILURE
-    drag = lv.RepositionBehaviour("drag", ctx)
+    drag = lv.Reposition("drag", ctx)
     statuses = run(drag, ctx)
     assert statuses[-1] == Status.SUCCESS, drag.feedback_message
     assert [e for e in ctx.events.events if e[0] == EventKind.REPOSITIONED]

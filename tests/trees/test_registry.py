@@ -114,7 +114,7 @@ def test_the_shipped_tree_has_the_limits_its_yaml_states(ctx) -> None:
     assert guards["grasp"] == (60.0, 8.0, 20.0)
     assert guards["tilt"] == (90.0, 8.0, 40.0)
     assert guards["align"] == (60.0, 8.0, 40.0)
-    assert guards["put back"] == (250.0, 50.0, 20.0)  # opens under load after an abort
+    assert guards["put back"] == (250.0, 30.0, 20.0)  # opens under load after an abort
     assert guards["via home"] == (80.0, 8.0, 20.0)
     assert guards["pack in box"] == (60.0, 8.0, 40.0)
     assert guards["reposition"] == (60.0, 8.0, 30.0)
@@ -172,7 +172,7 @@ children:
     assert isinstance(seq, py_trees.composites.Sequence) and seq.name == "cycle"
     assert seq.memory
     first, sel = seq.children
-    assert isinstance(first, lv.SlotHolds)
+    assert isinstance(first, lv.SlotHoldsPart)
     assert isinstance(sel, py_trees.composites.Selector) and sel.memory
     assert [type(c) for c in sel.children] == [lv.SlotMachined, lv.WaitMachining]
 
@@ -204,7 +204,7 @@ def test_the_root_runs_the_sampler_beside_the_body_and_ends_with_the_body(ctx) -
     root = build_root({"type": "slot_holds_part"}, parse_yaml("", "t.yaml"), (), ctx, DEFAULTS)
     assert isinstance(root, py_trees.composites.Parallel)
     sampler, body = root.children
-    assert isinstance(sampler, FTSampler) and isinstance(body, lv.SlotHolds)
+    assert isinstance(sampler, FTSampler) and isinstance(body, lv.SlotHoldsPart)
     ctx.slot_state = "fed"  # the sampler never ends; the body's success ends the tree
     root.tick_once()
     assert root.status == Status.SUCCESS
@@ -256,7 +256,7 @@ def test_a_leaf_without_parameters_refuses_any(ctx) -> None:
         ("{type: go_home, max_force_n: 301}", "max_force_n", "300"),
         ("{type: go_home, max_force_n: 0.5}", "max_force_n", "1"),
         ("{type: go_home, timeout_s: 0.05}", "timeout_s", "0.1"),
-        ("{type: go_home, max_torque_nm: 51}", "max_torque_nm", "50"),
+        ("{type: go_home, max_torque_nm: 31}", "max_torque_nm", "30"),
         ("{type: retry, attempts: 101, child: {type: plan_pick}}", "attempts", "100"),
         ("{type: retry, attempts: 2, pause_s: -1, child: {type: plan_pick}}", "pause_s", "60"),
         ("{type: timeout, seconds: 0, child: {type: plan_pick}}", "seconds", "0.01"),
@@ -374,5 +374,5 @@ def test_the_shipped_trees_limits_are_listed_for_cell_tree(ctx) -> None:
     doc = load_yaml(SHIPPED / "bushing_machining.yaml")
     root = TreeBuilder(ctx, doc, DEFAULTS).build(doc.data, ())
     lines = limits_table(root)
-    assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 50 N*m, 20 s" in lines
+    assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 30 N*m, 20 s" in lines
     assert len(lines) == 13  # every guarded motion leaf, once
