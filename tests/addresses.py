@@ -10,6 +10,14 @@ the loopback interface), in a range no emulator or peer of this project binds.
 from __future__ import annotations
 
 import os
+import socket
+
+
+def free_port() -> int:
+    """A localhost port nothing listens on (bound, then released): a refused connection."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def quiet_host() -> str:

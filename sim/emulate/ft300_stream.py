@@ -39,6 +39,16 @@ frames back 0.1-3 s while loopback TCP delivered them in under 2 ms at the 99th 
 Wire faults: :meth:`FT300Emulator.pull_cable` takes the sensor off the line (its cable carries
 power: nothing is sent, what arrives is lost); :meth:`FT300Emulator.restore` plugs it back, and
 it comes up as after power-up: a Modbus slave with a new offset, silent until a start request.
+:meth:`FT300Emulator.go_silent` / :meth:`FT300Emulator.resume` break only what the sensor sends
+(it stays powered and streaming, its bytes are lost). Line noise between two stream frames:
+:meth:`FT300Emulator.inject` (any bytes), :meth:`FT300Emulator.inject_damaged_frame` (a frame
+whose CRC fails), :meth:`FT300Emulator.inject_partial_frame` (a frame cut short).
+
+What it received and sent, for tests: :attr:`FT300Emulator.received` (every valid request for
+its unit), :attr:`FT300Emulator.ignored` (those for another unit), :attr:`FT300Emulator.ff_bytes`
+(the ``0xFF`` bytes that end a stream), byte counts of its replies and of the injected noise,
+and with ``log_frames=True`` every stream frame's six values and write time
+(:attr:`FT300Emulator.sent`).
 """
 
 from __future__ import annotations
@@ -114,9 +124,17 @@ def counts(reading: NDArray[np.float64]) -> list[int]:
     return [int(v) for v in c]
 
 
+FRAME_LEN = 16  #: bytes of a stream frame: the header, six int16 values, the CRC
+
+
+def frame_of(values: list[int]) -> bytes:
+    """The 16-byte stream frame carrying six int16 ``values`` (counts)."""
+    return with_crc(HEADER + struct.pack("<6h", *values))
+
+
 def stream_frame(reading: NDArray[np.float64]) -> bytes:
     """One 16-byte stream frame for ``reading`` (N, N*m)."""
-    return with_crc(HEADER + struct.pack("<6h", *counts(reading)))
+    return frame_of(counts(reading))
 
 
 class FT300Emulator(LineDevice):
@@ -125,7 +143,8 @@ class FT300Emulator(LineDevice):
     ``backend``: the load; ``unit_id``: its Modbus id; ``rate_hz``: stream frames a second;
     ``force_noise`` / ``moment_noise``: standard deviations (N, N*m) per axis;
     ``force_offset`` / ``moment_offset``: the power-up offset is uniform within +-these per axis;
-    ``seed``: the noise and offsets' generator.
+    ``seed``: the noise and offsets' generator; ``log_frames``: keep :attr:`sent`, every stream
+    frame's values and write time (it grows by the stream rate: for tests, not for a long run).
     """
 
     def __init__(
@@ -139,6 +158,7 @@ class FT300Emulator(LineDevice):
         moment_offset: float = 0.1,
         seed: int = 0,
         listen: tuple[str, int] | None = None,
+        log_frames: bool = False,
     ) -> None:
         if rate_hz <= 0:
             raise ValueError("rate_hz must be > 0")
@@ -165,6 +185,17 @@ class FT300Emulator(LineDevice):
         self.late_frames = 0  #: frames sent more than two periods after the one before
         self.requests = 0  #: valid Modbus requests for this unit, answered
         self.power_ups = 1
+        self.received: list[bytes] = []  #: every valid request for this unit, in order
+        self.ignored: list[bytes] = []  #: valid requests for another unit (left unanswered)
+        self.ff_bytes = 0  #: 0xFF bytes received (a run of them ends the stream)
+        self.reply_bytes = 0  #: bytes of Modbus replies written to the line
+        self.injected_bytes = 0  #: bytes of injected noise written to the line
+        #: with ``log_frames``: (the six values, time.monotonic() just before the write) of each
+        #: stream frame written, in order
+        self.sent: list[tuple[list[int], float]] | None = [] if log_frames else None
+        self._silent = threading.Event()
+        self._noise: list[bytes] = []
+        self._noise_lock = threading.Lock()
 
     def _power_up_offset(self) -> NDArray[np.float64]:
         return self._rng.uniform(-self._offset_range, self._offset_range)
@@ -189,6 +220,33 @@ class FT300Emulator(LineDevice):
             self.offset = self._power_up_offset()
             self.power_ups += 1
         super().restore()
+
+    def go_silent(self) -> None:
+        """Break what the sensor sends (a broken transmit wire): it stays powered, keeps its
+        state and keeps streaming, and every byte it sends is lost until :meth:`resume`."""
+        self._silent.set()
+
+    def resume(self) -> None:
+        self._silent.clear()
+
+    def inject(self, data: bytes) -> None:
+        """Line noise: ``data`` goes on the line before the next stream frame (while streaming)."""
+        with self._noise_lock:
+            self._noise.append(bytes(data))
+
+    def inject_damaged_frame(self, reading: NDArray[np.float64]) -> None:
+        """A whole frame for ``reading`` with one payload bit flipped: its CRC fails."""
+        frame = bytearray(stream_frame(np.asarray(reading, float)))
+        frame[5] ^= 0x01
+        if HEADER in frame[1:]:
+            raise ValueError("the damaged frame would hide a second header; pick other values")
+        self.inject(bytes(frame))
+
+    def inject_partial_frame(self, reading: NDArray[np.float64], n: int) -> None:
+        """The first ``n`` bytes (2 <= n < 16) of the frame for ``reading``: a frame cut short."""
+        if not 2 <= n < FRAME_LEN:
+            raise ValueError(f"a partial frame has 2..{FRAME_LEN - 1} bytes, not {n}")
+        self.inject(stream_frame(np.asarray(reading, float))[:n])
 
     def reading(self) -> NDArray[np.float64]:
         """What the sensor measures now: the load, its offset and a draw of noise (N, N*m)."""
@@ -225,8 +283,8 @@ class FT300Emulator(LineDevice):
 
     def _write(self, data: bytes) -> bool:
         fd = self._line()
-        if fd < 0:
-            return False  # no client on the gateway: the bytes go nowhere
+        if fd < 0 or self._silent.is_set():
+            return False  # no client on the gateway, or a broken wire: the bytes go nowhere
         view = memoryview(data)
         deadline = time.monotonic() + 0.2
         while view:
@@ -269,6 +327,7 @@ class FT300Emulator(LineDevice):
                     self._hang_up()  # the client left (EOF); the sensor itself is unaffected
                 if self._cut.is_set():
                     data = b""
+                self.ff_bytes += data.count(0xFF)
                 for byte in data:
                     ff_run = ff_run + 1 if byte == 0xFF else 0
                     if ff_run >= STOP_RUN and self.streaming.is_set():
@@ -285,7 +344,20 @@ class FT300Emulator(LineDevice):
             if now < next_t:
                 continue
             next_t = max(next_t + period, now - period)  # late: no burst to catch up
-            if self._write(stream_frame(self.reading())):
+            with self._noise_lock:
+                noise, self._noise = self._noise, []
+            for data in noise:
+                if self._write(data):
+                    self.injected_bytes += len(data)
+            values = counts(self.reading())
+            if self.sent is not None:
+                # Logged before the write: a reader fast enough holds the frame before this
+                # thread runs again, and would otherwise find it not yet sent.
+                self.sent.append((values, time.monotonic()))
+            if not self._write(frame_of(values)):
+                if self.sent is not None:
+                    self.sent.pop()
+            else:
                 self.frames_sent += 1
                 sent = time.monotonic()
                 if last_sent is not None:
@@ -307,11 +379,14 @@ class FT300Emulator(LineDevice):
                 continue
             del rx[:n]
             if frame[0] != self.unit_id:
+                self.ignored.append(frame)
                 continue
             self.requests += 1
+            self.received.append(frame)
             reply, start = self._reply(frame)
             time.sleep(len(reply) * 10 / BAUDRATE)  # the reply's time on the line
-            self._write(reply)
+            if self._write(reply):
+                self.reply_bytes += len(reply)
             if start:
                 self.streaming.set()
 

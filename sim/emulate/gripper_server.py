@@ -18,6 +18,8 @@ Backend interface (:class:`FingerBackend`), what the fingers must offer::
 
 :class:`TwinFingers` implements it on the twin's :class:`sim.gripper.SimGripper`. All methods are
 called from the servers' threads; the twin's are safe for that (see the class).
+:class:`LinearFingers` implements it without physics (fingers that move at the commanded speed
+and stop on an object of a set width), for the protocol alone: the driver tests' gripper.
 
 Pieces, usable alone:
 
@@ -34,6 +36,10 @@ Pieces, usable alone:
 Wire faults: :meth:`ModbusRtuServer.pull_cable` / :meth:`UrcapServer.pull_cable` make the server
 read and drop everything (nothing answers, as with the cable out) until ``restore()``;
 :meth:`Gripper2F85.inject_fault` puts a gFLT code in the status until the next reset.
+
+What arrived, for tests: :attr:`Gripper2F85.requests` (every action request as the gripper read
+it), :attr:`ModbusRtuServer.functions` (the function codes it served), its byte and frame counts,
+:attr:`UrcapServer.lines` (every command line).
 """
 
 from __future__ import annotations
@@ -44,7 +50,9 @@ import socket
 import socketserver
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 from sim.emulate.rtu import LineDevice, close_fds, crc_ok, open_pty, with_crc
@@ -145,8 +153,73 @@ class TwinFingers:
                 self._width = snapshot[0]
 
 
+class LinearFingers:
+    """:class:`FingerBackend` without physics: the opening changes at twice the commanded finger
+    speed (both fingers move) and, closing past an object of :attr:`object_width` m, stops on
+    it. ``clock``: monotonic seconds (a faster clock runs the fingers faster: short tests).
+    :attr:`commands` records every command (width, speed, force)."""
+
+    stroke = 0.085
+
+    def __init__(self, width: float = 0.085, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
+        self.object_width: float | None = None
+        self.commands: list[tuple[float, float, float]] = []
+        self._lock = threading.Lock()
+        self._w0, self._t0, self._target, self._rate = width, clock(), width, 0.0
+        self._stop_at = width
+
+    def command(self, width: float, speed: float, force: float) -> None:
+        with self._lock:
+            now = self.clock()
+            w = self._at(now)
+            self.commands.append((width, speed, force))
+            self._w0, self._t0, self._target = w, now, width
+            self._rate = 2 * speed
+            self._stop_at = width
+            ow = self.object_width
+            if ow is not None and width < w and width < ow <= w:
+                self._stop_at = ow
+
+    def _at(self, now: float) -> float:
+        span = self._stop_at - self._w0
+        moved = self._rate * (now - self._t0)
+        return self._stop_at if abs(span) <= moved else self._w0 + moved * (1 if span > 0 else -1)
+
+    def width(self) -> float:
+        with self._lock:
+            return self._at(self.clock())
+
+    def moving(self) -> bool:
+        with self._lock:
+            return self._at(self.clock()) != self._stop_at
+
+    def object_detected(self) -> bool:
+        with self._lock:
+            return self._stop_at != self._target and self._at(self.clock()) == self._stop_at
+
+
 def _bit(byte: int, n: int) -> int:
     return byte >> n & 1
+
+
+@dataclass(frozen=True)
+class ActionRequest:
+    """One action request as the gripper reads its six output bytes (manual, "Control")."""
+
+    act: bool
+    gto: bool
+    atr: bool
+    ard: bool
+    position: int  #: rPR
+    speed: int  #: rSP
+    force: int  #: rFR
+
+    @classmethod
+    def of(cls, out: bytes) -> ActionRequest:
+        return cls(act=bool(_bit(out[0], _ACT)), gto=bool(_bit(out[0], _GTO)),
+                   atr=bool(_bit(out[0], _ATR)), ard=bool(_bit(out[0], _ARD)),
+                   position=out[3], speed=out[4], force=out[5])
 
 
 class Gripper2F85:
@@ -183,6 +256,7 @@ class Gripper2F85:
         self.output = bytearray(6)  #: the action request bytes as last written
         self.writes = 0  #: action requests received (any path)
         self.reads = 0  #: status reads served
+        self.requests: list[ActionRequest] = []  #: every action request written, in order
         self._act = self._sta = self._obj = self._flt = 0
         self._injected = 0
         self._leg: str | None = None  # activation stroke: "closing", then "opening"
@@ -212,6 +286,7 @@ class Gripper2F85:
             old = bytes(self.output)
             self.output[offset:offset + len(data)] = data
             self.writes += 1
+            self.requests.append(ActionRequest.of(self.output))
             self._on_request(old, bytes(self.output))
 
     def output_bytes(self) -> bytes:
@@ -387,8 +462,10 @@ class ModbusRtuServer(LineDevice):
         self.baudrate, self.turnaround = baudrate, turnaround
         self._master, self._slave, self.port = open_pty()
         self.requests = 0  #: valid frames for this unit (answered or broadcast)
+        self.functions: Counter[int] = Counter()  #: those frames by function code
         self.crc_errors = 0  #: frames dropped for a bad CRC
         self.other_units = 0  #: valid frames for another unit, left unanswered
+        self.received_bytes = 0  #: every byte that reached the line's end (cable out or not)
         self.dropped_bytes = 0  #: bytes read and dropped while the cable was out
 
     def _close_line(self) -> None:
@@ -412,6 +489,7 @@ class ModbusRtuServer(LineDevice):
             except (BlockingIOError, OSError):
                 continue
             last = now
+            self.received_bytes += len(data)
             if self._cut.is_set():
                 self.dropped_bytes += len(data)
                 buf.clear()
@@ -447,6 +525,7 @@ class ModbusRtuServer(LineDevice):
             self.other_units += 1
             return
         self.requests += 1
+        self.functions[fc] += 1
         reply = self._reply(fc, frame[2:-2])
         if unit == 0 or reply is None:
             return  # a broadcast is never answered

@@ -19,9 +19,12 @@ their own, 127.x.y.z):
   it. Anything else is refused loudly (logged, the running program stopped): there is no URScript
   interpreter here.
 * **Dashboard, 29999** (:class:`DashboardServer`): greeting, ``stop``, ``PolyscopeVersion``,
-  ``robotmode``, ``safetystatus``/``safetymode``, ``unlock protective stop`` (refused within
-  ``unlock_delay`` of the stop, as the controller does), ``close safety popup``, ``power on``,
-  ``brake release``, ``get serial number``, ``get robot model``, ``programState``, ``running``.
+  ``robotmode``, ``safetystatus`` (from software 3.11/5.4) and ``safetymode``, ``unlock
+  protective stop`` (refused within ``unlock_delay`` of the stop, as the controller does),
+  ``close safety popup``, ``close popup``, ``power on`` (POWER_OFF -> IDLE), ``brake release``
+  (IDLE -> RUNNING), ``power off``, ``get serial number``, ``get robot model``,
+  ``programState``, ``running``, ``quit``; anything else ``could not understand``. The robot
+  mode it changes is the one RTDE publishes, and a program starts only in RUNNING.
 
 :class:`URController` is the control script's behaviour, cycle by cycle (one
 ``sync()`` per controller cycle): the command word ``input_int_register_0`` with the ready (1) /
@@ -50,7 +53,9 @@ lasts the deceleration time computed from the TCP speed at the stop); force mode
 frame (type 2), which is all this cell's driver sends; no IK failures beyond the twin's reach check.
 
 Backend interface (:class:`ArmBackend`), called from the thread that owns the physics only.
-:class:`TwinArmBackend` implements it on the twin's :class:`sim.arm.SimArm`.
+:class:`TwinArmBackend` implements it on the twin's :class:`sim.arm.SimArm`; :class:`StillArm`
+without physics (an arm that stays where it is put), for the wires alone: the driver tests' RTDE
+receive side and dashboard.
 """
 
 from __future__ import annotations
@@ -133,6 +138,12 @@ for _i in range(48):
 READY, DONE = 1, 2  #: output_int_register_0: ready for a command, done with it
 RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2  #: runtime_state
 ROBOT_MODE_RUNNING = 7
+#: robot_mode: the dashboard's names and the RTDE numbers (UR's RTDE guide)
+ROBOT_MODES = {
+    "NO_CONTROLLER": -1, "DISCONNECTED": 0, "CONFIRM_SAFETY": 1, "BOOTING": 2, "POWER_OFF": 3,
+    "POWER_ON": 4, "IDLE": 5, "BACKDRIVE": 6, "RUNNING": ROBOT_MODE_RUNNING,
+}
+_POWERED = ("POWER_ON", "IDLE", "BACKDRIVE", "RUNNING")
 SAFETY_MODE_NORMAL, SAFETY_MODE_PROTECTIVE = 1, 3
 SAFETY_BIT_NORMAL, SAFETY_BIT_PROTECTIVE = 1 << 0, 1 << 2
 ROBOT_STATUS_POWER_ON, ROBOT_STATUS_PROGRAM_RUNNING = 1 << 0, 1 << 1
@@ -217,6 +228,19 @@ class ControllerSettings:
     unlock_delay: float = 5.0  #: s after a protective stop before the dashboard unlocks it
     serial: str = "2018300001"
     model: str = "UR5"
+    #: the robot at start: RUNNING (powered, brakes released, as the emulated cell starts), or
+    #: e.g. POWER_OFF (a controller just booted: ``power on``, then ``brake release``)
+    robot_mode: str = "RUNNING"
+
+    def __post_init__(self) -> None:
+        if self.robot_mode not in ROBOT_MODES:
+            raise ValueError(f"robot_mode {self.robot_mode!r}: one of {sorted(ROBOT_MODES)}")
+
+    def has_safetystatus(self) -> bool:
+        """Whether the dashboard knows ``safetystatus`` (software 3.11 on a CB3, 5.4 on an
+        e-Series; older ones answer only ``safetymode``)."""
+        major, minor = self.version[:2]
+        return (major, minor) >= ((3, 11) if major < 5 else (5, 4))
 
 
 @dataclass
@@ -297,7 +321,7 @@ class URController:
         self._registers: dict[str, Any] = {}  # output registers the script wrote
         self._protective_since: float | None = None
         self._protective_reason = ""
-        self._unlock = False
+        self._robot_mode = self.settings.robot_mode  #: changed by the dashboard only
         self._slider = 1.0  #: the speed slider (see _speed_slider)
         self._publish()
 
@@ -340,12 +364,19 @@ class URController:
             self._pending_protective = reason
 
     def dashboard(self, command: str) -> str:
-        """One dashboard command -> its reply line (UR's dashboard server replies)."""
+        """One dashboard command -> its reply line (UR's dashboard server replies).
+
+        What it changes takes effect at once (the RTDE outputs show it from the next cycle):
+        ``power on`` (POWER_OFF -> IDLE), ``brake release`` (IDLE -> RUNNING), ``power off``
+        (the program, if one runs, ends in the next cycle), ``unlock protective stop`` (refused
+        within ``unlock_delay`` of the stop, in the controller's time). ``stop`` ends the
+        program in the next cycle."""
         c = command.strip().lower()
         s = self.settings
         with self._lock:
             out = self._outputs
             protective = self._protective_since is not None
+            mode = self._robot_mode
             if c == "stop":
                 self._pending_stop = True
                 return "Stopped"
@@ -355,24 +386,33 @@ class URController:
                 if self.t - (self._protective_since or 0.0) < s.unlock_delay:
                     return ("Cannot unlock protective stop until 5s after occurrence. Always "
                             "inspect cause of protective stop before unlocking")
-                self._unlock = True
+                self._protective_since = None
+                log.info("UR emulator: protective stop unlocked")
                 return "Protective stop releasing"
+            if c == "power on":
+                if mode in ("POWER_OFF", "NO_CONTROLLER", "DISCONNECTED"):
+                    self._robot_mode = "IDLE"
+                return "Powering on"
+            if c == "power off":
+                self._robot_mode = "POWER_OFF"
+                self._pending_stop = True
+                return "Powering off"
+            if c == "brake release":
+                if mode in ("IDLE", "POWER_ON"):
+                    self._robot_mode = "RUNNING"
+                return "Brake releasing"
         if c == "polyscopeversion":
             major, minor, bugfix, build = s.version
             return f"URSoftware {major}.{minor}.{bugfix}.{build} (Jun 08 2021)"
         if c == "robotmode":
-            return "Robotmode: RUNNING"
-        if c in ("safetystatus", "safetymode"):
+            return f"Robotmode: {mode}"
+        if c == "safetymode" or (c == "safetystatus" and s.has_safetystatus()):
             label = "Safetystatus" if c == "safetystatus" else "Safetymode"
             return f"{label}: {'PROTECTIVE_STOP' if protective else 'NORMAL'}"
         if c == "close safety popup":
             return "closing safety popup"
         if c == "close popup":
             return "closing popup"
-        if c == "power on":
-            return "Powering on"
-        if c == "brake release":
-            return "Brake releasing"
         if c == "get serial number":
             return s.serial
         if c == "get robot model":
@@ -395,15 +435,11 @@ class URController:
             upload, self._pending_upload = self._pending_upload, None
             stop, self._pending_stop = self._pending_stop, False
             tripped, self._pending_protective = self._pending_protective, None
-            unlock, self._unlock = self._unlock, False
             inputs = dict(self._inputs)
             stamps = dict(self._input_stamp)
             self._cycle_arrivals = dict(self._input_arrival)
         self.t += self.dt
         self._speed_slider(inputs)
-        if unlock and self._protective_since is not None:
-            self._protective_since = None
-            log.info("UR emulator: protective stop unlocked")
         if tripped is None:
             tripped = self.backend.protective_stop()
         if tripped is not None and self._protective_since is None:
@@ -416,6 +452,8 @@ class URController:
         if prog is not None and not prog.running and self.t >= prog.start_at:
             if self._protective_since is not None:
                 self._fail("cannot start the program during a protective stop")
+            elif self._robot_mode != "RUNNING":
+                self._fail(f"cannot start the program: robot mode {self._robot_mode}")
             else:
                 self._start(prog)
         prog = self._program
@@ -452,7 +490,8 @@ class URController:
 
     def _protective(self, reason: str) -> None:
         self.backend.stop()
-        self._protective_since = self.t
+        with self._lock:
+            self._protective_since = self.t
         self._protective_reason = reason
         self.log.protective_stops.append(reason)
         log.warning("UR emulator: protective stop (%s)", reason)
@@ -691,6 +730,7 @@ class URController:
         prog = self._program
         running = prog is not None and prog.running
         protective = self._protective_since is not None
+        mode = self._robot_mode
         q = b.joint_positions()
         tcp = b.tcp_pose()
         out: dict[str, Any] = {
@@ -702,11 +742,11 @@ class URController:
             "target_TCP_pose": tcp,
             "actual_TCP_speed": b.tcp_speed(),
             "actual_TCP_force": b.tcp_force(),
-            "robot_mode": ROBOT_MODE_RUNNING,
+            "robot_mode": ROBOT_MODES[mode],
             "safety_mode": SAFETY_MODE_PROTECTIVE if protective else SAFETY_MODE_NORMAL,
             "safety_status": SAFETY_MODE_PROTECTIVE if protective else SAFETY_MODE_NORMAL,
             "safety_status_bits": SAFETY_BIT_NORMAL | (SAFETY_BIT_PROTECTIVE if protective else 0),
-            "robot_status_bits": ROBOT_STATUS_POWER_ON
+            "robot_status_bits": (ROBOT_STATUS_POWER_ON if mode in _POWERED else 0)
             | (ROBOT_STATUS_PROGRAM_RUNNING if running else 0),
             "runtime_state": RUNTIME_PLAYING if running else RUNTIME_STOPPED,
             "speed_scaling": self._slider,
@@ -725,6 +765,7 @@ class URController:
             "program_running": bool(prog and prog.running),
             "watchdog_hz": prog.watchdog if prog else None,
             "protective_stop": self._protective_since is not None,
+            "robot_mode": self._robot_mode,
             "uploads": self.log.uploads,
             "stops": list(self.log.stops),
             "commands": [c for _, c in self.log.commands],
@@ -835,6 +876,7 @@ class _Listener:
         server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         server.bind((self.host, self.port))
+        self.port = server.getsockname()[1]  # port 0 picked a free one: kept for a replug
         server.listen(8)
         server.settimeout(0.05)
         self._server = server
@@ -907,6 +949,7 @@ class RTDEServer:
         self.controller = controller
         self.listener = _Listener(host, port, self._serve, "rtde")
         self.requested: list[tuple[float, list[str]]] = []  #: (frequency, names) per recipe
+        self.protocol_versions: list[int] = []  #: every protocol version a client asked for
         self._owners: dict[str, int] = {}  # input name -> connection id
         self._lock = threading.Lock()
         self._next_conn = 0
@@ -941,6 +984,8 @@ class RTDEServer:
                     return
                 if kind == REQUEST_PROTOCOL_VERSION:
                     (v,) = struct.unpack(">H", payload[:2])
+                    with self._lock:
+                        self.protocol_versions.append(v)
                     self._send(conn, kind, struct.pack(">B", int(v == 2)), wlock)
                 elif kind == GET_URCONTROL_VERSION:
                     self._send(conn, kind, struct.pack(">4I", *self.controller.settings.version),
@@ -1073,7 +1118,13 @@ class ScriptServer:
 
 
 class DashboardServer:
-    """The dashboard server (29999): one reply line per command line."""
+    """The dashboard server (29999): one reply line per command line.
+
+    Faults and scripted replies, for tests: :attr:`replies` (a command, lower case, -> the reply
+    line sent instead of the controller's, e.g. ``Not in remote control``), :attr:`silent`
+    (greets, then reads every command and answers none), :attr:`no_greeting` (accepts and says
+    nothing). :attr:`received` records every command line. Alone (port 0 picks a free one):
+    :meth:`start` / :meth:`stop`."""
 
     GREETING = "Connected: Universal Robots Dashboard Server"
 
@@ -1081,17 +1132,60 @@ class DashboardServer:
         self.controller = controller
         self.listener = _Listener(host, port, self._serve, "dashboard")
         self.received: list[str] = []
+        self.replies: dict[str, str] = {}
+        self.silent = False
+        self.no_greeting = False
+
+    @property
+    def host(self) -> str:
+        return self.listener.host
+
+    @property
+    def port(self) -> int:
+        return self.listener.port
+
+    def start(self) -> DashboardServer:
+        self.listener.open()
+        return self
+
+    def stop(self) -> None:
+        self.listener.shutdown()
+
+    def __enter__(self) -> DashboardServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
 
     def _serve(self, conn: socket.socket) -> None:
-        conn.sendall((self.GREETING + "\n").encode())
-        rfile = conn.makefile("rb")
-        for raw in rfile:
-            command = raw.decode("utf-8", "replace").strip()
-            self.received.append(command)
-            reply = self.controller.dashboard(command)
-            conn.sendall((reply + "\n").encode())
-            if command.lower() == "quit":
+        if self.no_greeting:
+            _drain(conn)
+            return
+        try:
+            conn.sendall((self.GREETING + "\n").encode())
+            for raw in conn.makefile("rb"):
+                command = raw.decode("utf-8", "replace").strip()
+                self.received.append(command)
+                if self.silent:
+                    continue
+                reply = self.replies.get(command.lower())
+                if reply is None:
+                    reply = self.controller.dashboard(command)
+                conn.sendall((reply + "\n").encode())
+                if command.lower() == "quit":
+                    return
+        except OSError:  # the client or the cable went away
+            return
+
+
+def _drain(conn: socket.socket) -> None:
+    """Read and drop until the peer or the server closes the connection."""
+    while True:
+        try:
+            if not conn.recv(4096):
                 return
+        except OSError:
+            return
 
 
 @dataclass
@@ -1137,7 +1231,76 @@ class URServers:
             listener.shutdown()
 
 
-# --- the twin's arm as the backend -----------------------------------------------------------
+# --- backends -------------------------------------------------------------------------------
+
+
+class StillArm:
+    """:class:`ArmBackend` without physics: an arm that stays where it is put (:meth:`place`),
+    for the controller's wires alone (the RTDE outputs, the dashboard). A motion command is
+    recorded in :attr:`commands` and ends at once, the arm unmoved; it never trips."""
+
+    def __init__(self, q: Sequence[float] = (0.0, -1.57, 1.57, -1.57, -1.57, 0.0),
+                 tcp: Sequence[float] = (0.4, 0.1, 0.3, 0.0, 3.14159, 0.0)) -> None:
+        self._lock = threading.Lock()
+        self._q, self._tcp = [float(v) for v in q], [float(v) for v in tcp]
+        self.commands: list[str] = []
+
+    def place(self, q: Sequence[float] | None = None, tcp: Sequence[float] | None = None
+              ) -> None:
+        """Put the arm at joints ``q`` and/or TCP pose ``tcp`` (any thread)."""
+        with self._lock:
+            if q is not None:
+                self._q = [float(v) for v in q]
+            if tcp is not None:
+                self._tcp = [float(v) for v in tcp]
+
+    def joint_positions(self) -> list[float]:
+        with self._lock:
+            return list(self._q)
+
+    def joint_velocities(self) -> list[float]:
+        return [0.0] * 6
+
+    def tcp_pose(self) -> list[float]:
+        with self._lock:
+            return list(self._tcp)
+
+    def tcp_speed(self) -> list[float]:
+        return [0.0] * 6
+
+    def tcp_force(self) -> list[float]:
+        return [0.0] * 6
+
+    def move_joints(self, q: Sequence[float], speed: float, acceleration: float) -> None:
+        self.commands.append("move_joints")
+
+    def move_linear(self, poses: Sequence[Sequence[float]], speed: float,
+                    acceleration: float) -> None:
+        self.commands.append("move_linear")
+
+    def servo(self, pose: Sequence[float]) -> None:
+        self.commands.append("servo")
+
+    def force_mode(self, selection: Sequence[int], wrench: Sequence[float],
+                   limits: Sequence[float]) -> None:
+        self.commands.append("force_mode")
+
+    def stop(self) -> None:
+        self.commands.append("stop")
+
+    def speed_fraction(self, fraction: float) -> None:
+        self.commands.append("speed_fraction")
+
+    def motion_state(self) -> str:
+        return "idle"
+
+    def protective_stop(self) -> str | None:
+        return None
+
+    def zero_ft(self) -> None:
+        self.commands.append("zero_ft")
+
+
 
 
 class TwinArmBackend:

@@ -1,6 +1,7 @@
-"""`cell check-hardware` against real protocol peers on this machine: the gripper's URCap socket
-(TCP) and a pseudo-terminal FT300 pass; the UR5 (nothing listens) and the D435 (no camera) fail
-with their addresses. Nothing is moved."""
+"""`cell check-hardware` against protocol peers on this machine (the emulated devices of
+sim/emulate, tests/drivers/peers.py): the gripper's URCap socket (TCP) and a pseudo-terminal
+FT300 pass; the UR5 (nothing listens) and the D435 (no camera) fail with their addresses.
+Nothing is moved."""
 
 from __future__ import annotations
 
@@ -12,17 +13,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.addresses import quiet_host
-from tests.drivers.peers.ft300_peer import FT300Peer
-from tests.drivers.peers.gripper_modbus_peer import GripperModel
-from tests.drivers.peers.urcap_peer import UrcapPeer, free_port
+from sim.emulate.gripper_server import UrcapServer
+from tests.addresses import free_port, quiet_host
+from tests.drivers.peers import ft300_peer, gripper
 
 
 @pytest.fixture
 def peers():
-    model = GripperModel()
-    urcap = UrcapPeer(model, quiet_host())  # the URCap is on the arm's host
-    ft = FT300Peer().start()
+    urcap = UrcapServer(gripper(), quiet_host(), port=0)  # the URCap is on the arm's host
+    ft = ft300_peer().start()
     yield urcap, ft
     urcap.stop()
     ft.close()

@@ -15,8 +15,7 @@ import sys
 from pathlib import Path
 
 import cell
-from tests.addresses import quiet_host
-from tests.drivers.peers.urcap_peer import free_port
+from tests.addresses import free_port, quiet_host
 
 SHIPPED = Path(cell.__file__).resolve().parent / "data" / "bushing_cell.yaml"
 

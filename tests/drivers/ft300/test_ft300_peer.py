@@ -1,4 +1,5 @@
-"""The FT300 driver against a pseudo-terminal FT300 (tests/drivers/peers/ft300_peer.py).
+"""The FT300 driver against a pseudo-terminal FT300: the emulator (sim/emulate/ft300_stream.py)
+without noise or offset, each frame's values known (tests/drivers/peers.py).
 
 Timing margins are generous (seconds where the stream needs tens of milliseconds) so the tests
 hold on two busy CI cores; only the stale-stream test depends on a sample getting old.
@@ -15,9 +16,11 @@ import pytest
 from drivers.ft300 import FT300
 from drivers.ft_sensor import ForceTorqueSensor
 from drivers.health import DeviceError
-from tests.drivers.peers.ft300_peer import FT300Peer
+from sim.emulate.ft300_stream import FT300Emulator
+from tests.drivers.peers import ft300_peer
 
 BASE = [1.0, -2.0, 3.5, 0.1, -0.2, 0.3]
+GARBAGE = b"\x00\x13\x37\xaa\x55"  #: line noise between frames, no header in it
 
 
 def seq_wrench(seq: int) -> list[float]:
@@ -38,49 +41,55 @@ def wait_for_more(seen: list[np.ndarray], k: int) -> None:
     wait_for(lambda: len(seen) > n + k)
 
 
+def sent_seqs(peer: FT300Emulator) -> list[int]:
+    """The sequence numbers of the frames the peer wrote, in order (Tz in counts)."""
+    assert peer.sent is not None
+    return [values[5] for values, _ in peer.sent]
+
+
 @pytest.fixture
-def peer() -> Iterator[FT300Peer]:
-    with FT300Peer(wrench_of=seq_wrench) as p:
+def peer() -> Iterator[FT300Emulator]:
+    with ft300_peer(wrench_of=seq_wrench) as p:
         yield p
 
 
-def test_stream_values_scaled_and_protocol_followed(peer: FT300Peer) -> None:
+def test_stream_values_scaled_and_protocol_followed(peer: FT300Emulator) -> None:
     with FT300(peer.port, stale_after=1.0) as ft:
         assert isinstance(ft, ForceTorqueSensor)
-        assert peer.requests == [bytes.fromhex("09 10 01 9A 00 01 02 02 00 CD CA")]
+        assert peer.received == [bytes.fromhex("09 10 01 9A 00 01 02 02 00 CD CA")]
         w = ft.wrench()
         np.testing.assert_allclose(w[:5], BASE[:5], atol=1e-9)
         assert w[5] == pytest.approx(round(w[5] * 1000) / 1000)
         assert ft.age() < 1.0
     # stop(): the reader is joined and the sensor was told to stop streaming.
     assert not ft.running
-    wait_for(lambda: peer.stop_bytes_seen >= 50 and not peer.streaming.is_set())
+    wait_for(lambda: peer.ff_bytes >= 50 and not peer.streaming.is_set())
 
 
-def test_damaged_frames_are_skipped_counted_and_never_read(peer: FT300Peer) -> None:
+def test_damaged_frames_are_skipped_counted_and_never_read(peer: FT300Emulator) -> None:
     seen: list[np.ndarray] = []
     with FT300(peer.port, stale_after=1.0, on_sample=lambda s, t: seen.append(s)) as ft:
         wait_for(lambda: len(seen) >= 5)
         for k in range(3):
-            peer.inject_corrupt(seq=1000 + k)
-            peer.inject_garbage()
+            peer.inject_damaged_frame(seq_wrench(1000 + k))
+            peer.inject(GARBAGE)
             wait_for_more(seen, 2)
-            peer.inject_partial(n=5 + 3 * k, seq=2000 + k)
+            peer.inject_partial_frame(seq_wrench(2000 + k), 5 + 3 * k)
             wait_for_more(seen, 2)
         wait_for(lambda: peer.injected_bytes == 3 * (16 + 5) + 5 + 8 + 11)
-        n_sent = len(peer.sent)
+        n_sent = len(sent_seqs(peer))
         wait_for(lambda: len(seen) >= n_sent)
         stats = ft.stats()
     assert stats["crc_errors"] == 6
     # The Modbus response to the start request and every injected byte, nothing else.
-    assert stats["skipped_bytes"] == peer.response_bytes + peer.injected_bytes
+    assert stats["skipped_bytes"] == peer.reply_bytes + peer.injected_bytes
     got = [round(s[5] * 1000) for s in seen]
-    assert got == [seq for seq, _ in peer.sent][: len(got)]  # every good frame, in order
+    assert got == sent_seqs(peer)[: len(got)]  # every good frame, in order
     for s in seen:
         np.testing.assert_allclose(s[:5], BASE[:5], atol=1e-9)
 
 
-def test_bias_averages_recent_samples(peer: FT300Peer) -> None:
+def test_bias_averages_recent_samples(peer: FT300Emulator) -> None:
     with FT300(peer.port, stale_after=1.0, bias_samples=10) as ft:
         wait_for(lambda: ft.stats()["frames"] >= 12)
         ft.bias()
@@ -90,7 +99,7 @@ def test_bias_averages_recent_samples(peer: FT300Peer) -> None:
         assert 0.0 < w[5] < 0.05
 
 
-def test_stale_stream_is_an_error_and_recovers(peer: FT300Peer) -> None:
+def test_stale_stream_is_an_error_and_recovers(peer: FT300Emulator) -> None:
     with FT300(peer.port, stale_after=0.05) as ft:
         peer.go_silent()
         time.sleep(0.3)
@@ -105,7 +114,7 @@ def test_stale_stream_is_an_error_and_recovers(peer: FT300Peer) -> None:
 
 
 def test_a_reader_thread_that_does_not_run_does_not_make_the_stream_stale(
-        peer: FT300Peer) -> None:
+        peer: FT300Emulator) -> None:
     # On a loaded machine the reader thread may not get the interpreter for 50 ms while frames
     # wait in the line (seen against `cell emulate`: the guard stopped the cell on a stale
     # sample with frames readable). wrench() must then take what has arrived itself.
@@ -138,15 +147,15 @@ def test_wrong_port_names_the_port() -> None:
     assert err.value.address == port and port in str(err.value)
 
 
-def test_wrong_unit_id_gets_no_stream(peer: FT300Peer) -> None:
+def test_wrong_unit_id_gets_no_stream(peer: FT300Emulator) -> None:
     ft = FT300(peer.port, unit_id=5, timeout=0.3)
     with pytest.raises(DeviceError, match="no valid stream frame.*unit 5"):
         ft.start()
     assert not ft.running
-    assert peer.requests == [] and len(peer.ignored_requests) == 1
+    assert peer.received == [] and len(peer.ignored) == 1
 
 
-def test_lost_line_is_an_error(peer: FT300Peer) -> None:
+def test_lost_line_is_an_error(peer: FT300Emulator) -> None:
     ft = FT300(peer.port, stale_after=1.0)
     ft.start()
     try:
@@ -158,7 +167,7 @@ def test_lost_line_is_an_error(peer: FT300Peer) -> None:
         ft.stop()
 
 
-def test_check_reports_rate_and_offset(peer: FT300Peer) -> None:
+def test_check_reports_rate_and_offset(peer: FT300Emulator) -> None:
     ft = FT300(peer.port, stale_after=1.0)
     try:
         result = ft.check(window_s=0.5, min_rate_hz=50.0)
@@ -169,7 +178,7 @@ def test_check_reports_rate_and_offset(peer: FT300Peer) -> None:
     assert result.details["raw_force_n"] == "+1.00 -2.00 +3.50"
 
 
-def test_check_fails_cleanly_without_a_sensor(peer: FT300Peer) -> None:
+def test_check_fails_cleanly_without_a_sensor(peer: FT300Emulator) -> None:
     peer.go_silent()
     ft = FT300(peer.port, timeout=0.2)
     result = ft.check(window_s=0.1)
@@ -177,14 +186,15 @@ def test_check_fails_cleanly_without_a_sensor(peer: FT300Peer) -> None:
     assert not ft.running
 
 
-def test_rate_and_latency_against_the_peer(peer: FT300Peer) -> None:
+def test_rate_and_latency_against_the_peer(peer: FT300Emulator) -> None:
     """Measure what the driver sees: rate over ~1 s and write-to-available latency per frame."""
     arrivals: dict[int, float] = {}
     with FT300(peer.port, stale_after=1.0,
                on_sample=lambda s, t: arrivals.__setitem__(round(s[5] * 1000), t)) as ft:
         time.sleep(1.0)
         stats = ft.stats()
-    written = dict(peer.sent)
+    assert peer.sent is not None
+    written = {values[5]: t for values, t in peer.sent}
     lat = np.array([arrivals[s] - written[s] for s in arrivals if s in written])
     assert len(lat) >= 50
     print(f"\nFT300 peer: rate {stats['rate_hz']:.1f} Hz, latency median "

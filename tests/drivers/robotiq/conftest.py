@@ -1,5 +1,7 @@
-"""Fixtures: a 2F-85 peer on a pty null modem (Modbus RTU) or on a localhost socket (URCap), and
-the driver connected to it. Every fixture stops its servers and joins its threads on teardown."""
+"""Fixtures: the emulated 2F-85 (sim/emulate/gripper_server.py, its fingers without physics and
+5x faster than real: tests/drivers/peers.py) as a Modbus RTU slave on a pseudo-terminal or
+behind the URCap's localhost socket, and the driver connected to it. Every fixture stops its
+servers and joins their threads on teardown."""
 
 from __future__ import annotations
 
@@ -10,8 +12,8 @@ from dataclasses import dataclass
 import pytest
 
 from drivers.robotiq_gripper import ModbusRtuTransport, Robotiq2F85, UrcapSocketTransport
-from tests.drivers.peers.gripper_modbus_peer import GripperModbusPeer, GripperModel, PtyNullModem
-from tests.drivers.peers.urcap_peer import UrcapPeer
+from sim.emulate.gripper_server import Gripper2F85, LinearFingers, ModbusRtuServer, UrcapServer
+from tests.drivers.peers import gripper as peer_gripper
 
 TIMEOUT = 0.05  # s per answer: the peers answer in ~2 ms, so failure tests stay short
 STALE = 0.2  # s
@@ -35,53 +37,48 @@ def settle(gripper: Robotiq2F85, timeout: float = 3.0) -> None:
 
 @dataclass
 class Rig:
-    model: GripperModel
+    device: Gripper2F85
     gripper: Robotiq2F85
-    cable: PtyNullModem | None = None
-    modbus: GripperModbusPeer | None = None
-    urcap: UrcapPeer | None = None
+    modbus: ModbusRtuServer | None = None
+    urcap: UrcapServer | None = None
+
+    @property
+    def fingers(self) -> LinearFingers:
+        fingers = self.device.fingers
+        assert isinstance(fingers, LinearFingers)
+        return fingers
 
 
 @pytest.fixture
-def model() -> GripperModel:
-    return GripperModel(min_count=4, max_count=227, activation_time=1.0, time_scale=10.0)
+def device() -> Gripper2F85:
+    return peer_gripper()
 
 
 @pytest.fixture
-def cable() -> Iterator[PtyNullModem]:
-    c = PtyNullModem()
-    yield c
-    c.close()
+def rtu_server(device: Gripper2F85) -> Iterator[ModbusRtuServer]:
+    with ModbusRtuServer(device, unit_id=9) as server:
+        yield server
 
 
 @pytest.fixture
-def modbus_peer(cable: PtyNullModem, model: GripperModel) -> Iterator[GripperModbusPeer]:
-    peer = GripperModbusPeer(cable.peer_path, model, unit_id=9)
-    yield peer
-    peer.stop()
-
-
-@pytest.fixture
-def rtu(cable: PtyNullModem, modbus_peer: GripperModbusPeer, model: GripperModel
-        ) -> Iterator[Rig]:
-    transport = ModbusRtuTransport(cable.driver_path, unit_id=9, timeout=TIMEOUT, retries=2,
+def rtu(rtu_server: ModbusRtuServer, device: Gripper2F85) -> Iterator[Rig]:
+    transport = ModbusRtuTransport(rtu_server.port, unit_id=9, timeout=TIMEOUT, retries=2,
                                    backoff_first=0.02)
     gripper = Robotiq2F85(transport, poll_hz=100.0, stale_after=STALE)
-    yield Rig(model, gripper, cable=cable, modbus=modbus_peer)
+    yield Rig(device, gripper, modbus=rtu_server)
     gripper.disconnect()
 
 
 @pytest.fixture
-def urcap_peer(model: GripperModel) -> Iterator[UrcapPeer]:
-    peer = UrcapPeer(model)
-    yield peer
-    peer.stop()
+def urcap_server(device: Gripper2F85) -> Iterator[UrcapServer]:
+    with UrcapServer(device, port=0) as server:
+        yield server
 
 
 @pytest.fixture
-def urcap(urcap_peer: UrcapPeer, model: GripperModel) -> Iterator[Rig]:
-    transport = UrcapSocketTransport(urcap_peer.host, urcap_peer.port, timeout=TIMEOUT,
+def urcap(urcap_server: UrcapServer, device: Gripper2F85) -> Iterator[Rig]:
+    transport = UrcapSocketTransport(urcap_server.host, urcap_server.port, timeout=TIMEOUT,
                                      retries=2, backoff_first=0.02)
     gripper = Robotiq2F85(transport, poll_hz=50.0, stale_after=STALE)
-    yield Rig(model, gripper, urcap=urcap_peer)
+    yield Rig(device, gripper, urcap=urcap_server)
     gripper.disconnect()

@@ -17,8 +17,8 @@ import pytest
 
 from drivers.health import DeviceError
 from drivers.robotiq_gripper import ModbusRtuTransport, Robotiq2F85, UrcapSocketTransport
-from sim.emulate.gripper_server import Gripper2F85, ModbusRtuServer, UrcapServer
-from tests.sim.emulate.conftest import LinearFingers, wait_for
+from sim.emulate.gripper_server import Gripper2F85, LinearFingers, ModbusRtuServer, UrcapServer
+from tests.drivers.robotiq.conftest import wait_for
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -113,7 +113,7 @@ _SCRIPT = textwrap.dedent("""
     from drivers.health import DeviceError
     from drivers.robotiq_gripper import ModbusRtuTransport, Robotiq2F85
     from sim.emulate.gripper_server import Gripper2F85, ModbusRtuServer
-    from tests.sim.emulate.conftest import LinearFingers
+    from sim.emulate.gripper_server import LinearFingers
     with ModbusRtuServer(Gripper2F85(LinearFingers())) as rtu:
         try:
             transport = ModbusRtuTransport(rtu.port, timeout=0.05)

@@ -1,4 +1,4 @@
-"""The driver against a pymodbus RTU server on a real pseudo-terminal pair (the 2F-85 peer)."""
+"""The driver against the emulated 2F-85's Modbus RTU slave on a real pseudo-terminal."""
 
 from __future__ import annotations
 
@@ -10,9 +10,10 @@ from drivers.gripper import Gripper
 from drivers.health import DeviceError
 from drivers.robotiq_gripper import ModbusRtuTransport, Robotiq2F85
 from drivers.robotiq_gripper.registers import force_count, speed_count
+from sim.emulate.gripper_server import ModbusRtuServer
 from skills.motion import Guard, gripper_motion
 from skills.status import Status
-from tests.drivers.peers.gripper_modbus_peer import GripperModel, PtyNullModem
+from tests.drivers.peers import gripper as peer_gripper
 from tests.drivers.robotiq.conftest import STALE, TIMEOUT, Rig, settle, wait_for
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT
 
@@ -28,7 +29,7 @@ def test_activation_resets_then_activates_and_check_reports_it(rtu: Rig) -> None
     g = rtu.gripper
     g.activate(timeout=2.0)
     assert g.activated()
-    first_two = rtu.model.requests[:2]
+    first_two = rtu.device.requests[:2]
     assert [(r.act, r.gto) for r in first_two] == [(False, False), (True, False)]
     result = g.check()
     assert result.ok, result
@@ -38,7 +39,7 @@ def test_activation_resets_then_activates_and_check_reports_it(rtu: Rig) -> None
     assert result.details["position"].startswith("4/255")
     assert result.details["transport"] == "modbus-rtu"
     # The real gripper's functions: 16 to write the request, 4 to read the status.
-    assert set(rtu.modbus.function_codes) == {4, 16}
+    assert set(rtu.modbus.functions) == {4, 16}
 
 
 def test_non_blocking_activation_is_polled_over_ticks(rtu: Rig) -> None:
@@ -74,7 +75,7 @@ def test_calibrate_then_open_and_close_to_a_width(rtu: Rig) -> None:
     g.open()
     settle(g)
     assert g.width() == pytest.approx(0.085, abs=0.0004)
-    assert rtu.model.requests[-1].position == 0
+    assert rtu.device.requests[-1].position == 0
 
 
 def test_closing_on_an_object_detects_it(rtu: Rig) -> None:
@@ -83,7 +84,7 @@ def test_closing_on_an_object_detects_it(rtu: Rig) -> None:
     g.calibrate(timeout=3.0)  # ends closed
     g.open()
     settle(g)
-    rtu.model.object_width = 0.040
+    rtu.fingers.object_width = 0.040
     g.close(force=80.0, speed=0.15)
     settle(g)
     assert g.object_detected()
@@ -107,11 +108,11 @@ def test_force_and_speed_reach_the_registers_and_speed_sets_the_pace(rtu: Rig) -
         g.close(force=force, speed=speed, width=0.055)
         settle(g)
         durations[speed] = time.monotonic() - t0
-        req = rtu.model.requests[-1]
+        req = rtu.device.requests[-1]
         assert (req.speed, req.force) == (speed_count(speed), force_count(force))
-    assert [(r.speed, r.force) for r in rtu.model.requests if r.gto][-3:] == [
+    assert [(r.speed, r.force) for r in rtu.device.requests if r.gto][-3:] == [
         (255, 255), (speed_count(0.1), force_count(100.0)), (0, 0)]
-    # 30 mm at 150 vs 20 mm/s (the peer runs 10x fast): ~0.02 s vs ~0.15 s
+    # 30 mm at 150 vs 20 mm/s a finger (the peer runs 5x fast): ~0.02 s vs ~0.15 s
     assert durations[0.02] > 0.1
     assert durations[0.02] > 2.5 * durations[0.15]
 
@@ -119,7 +120,7 @@ def test_force_and_speed_reach_the_registers_and_speed_sets_the_pace(rtu: Rig) -
 def test_fault_codes_surface_as_text_and_fail_the_guarded_motion(rtu: Rig) -> None:
     g = rtu.gripper
     g.activate(timeout=2.0)
-    rtu.model.injected_fault = 0x08
+    rtu.device.inject_fault(0x08)
     assert wait_for(lambda: g.fault() is not None)
     assert g.fault() == ("fault 0x08: maximum operating temperature exceeded (>= 85 C "
                          "internally); let it cool below 80 C")
@@ -141,8 +142,8 @@ def test_motion_before_activation_reports_fault_07(rtu: Rig) -> None:
 
 
 def test_wrong_unit_id_gets_no_answer_and_names_port_and_unit(
-        cable: PtyNullModem, modbus_peer) -> None:
-    transport = ModbusRtuTransport(cable.driver_path, unit_id=10, timeout=TIMEOUT, retries=2,
+        rtu_server: ModbusRtuServer) -> None:
+    transport = ModbusRtuTransport(rtu_server.port, unit_id=10, timeout=TIMEOUT, retries=2,
                                    backoff_first=0.02)
     transport.connect()
     try:
@@ -153,26 +154,27 @@ def test_wrong_unit_id_gets_no_answer_and_names_port_and_unit(
     finally:
         transport.close()
     assert err.value.device == "2F-85"
-    assert cable.driver_path in err.value.address and "unit 10" in err.value.address
+    assert rtu_server.port in err.value.address and "unit 10" in err.value.address
     assert "no answer" in err.value.cause and "3 tries" in err.value.cause
-    assert cable.bytes_to_peer == 3 * READ_FRAME  # exactly retries + 1 requests
-    assert modbus_peer.function_codes == []  # the unit-9 peer stayed silent
-    assert modbus_peer.dropped_replies == 3
+    assert rtu_server.received_bytes == 3 * READ_FRAME  # exactly retries + 1 requests
+    assert rtu_server.requests == 0 and not rtu_server.functions  # unit 9 stayed silent
+    assert rtu_server.other_units == 3
     assert elapsed < 3 * TIMEOUT + 0.02 + 0.04 + 0.1
 
 
 def test_a_peer_that_never_answers_costs_bounded_tries_with_back_off(
-        cable: PtyNullModem) -> None:
-    # Nothing listens on the far end of the cable: every request goes unanswered.
-    transport = ModbusRtuTransport(cable.driver_path, timeout=TIMEOUT, retries=2,
+        rtu_server: ModbusRtuServer) -> None:
+    # The gripper's cable is out: every request goes unanswered.
+    rtu_server.pull_cable()
+    transport = ModbusRtuTransport(rtu_server.port, timeout=TIMEOUT, retries=2,
                                    backoff_first=0.02)
     g = Robotiq2F85(transport, poll_hz=100.0, stale_after=STALE)
     result = g.check(timeout=0.5)
     assert not result.ok
     assert "no answer to the status request" in result.error
-    assert cable.driver_path in result.address
+    assert rtu_server.port in result.address
     time.sleep(1.0)
-    frames = cable.bytes_to_peer // READ_FRAME
+    frames = rtu_server.received_bytes // READ_FRAME
     g.disconnect()
     # At 100 Hz polling a retry storm would send ~100+ frames a second; the back-off (after
     # each failed 3-try cycle: 0.02, 0.04, 0.08, ... s) keeps it to a few cycles.
@@ -184,41 +186,41 @@ def test_a_pulled_cable_makes_the_status_stale_and_recovers(rtu: Rig) -> None:
     g = rtu.gripper
     g.activate(timeout=2.0)
     assert g.fault() is None
-    rtu.cable.cut = True
+    rtu.modbus.pull_cable()
     t_cut = time.monotonic()
     assert wait_for(lambda: g.fault() is not None, timeout=2.0)
     assert time.monotonic() - t_cut >= STALE - 0.01
     assert g.fault().startswith("status stale: newest is")
     # once the transport's bounded tries are spent, the cause rides along
     assert wait_for(lambda: "no answer to the status request" in (g.fault() or ""))
-    rtu.cable.cut = False
+    rtu.modbus.restore()
     assert wait_for(lambda: g.fault() is None, timeout=3.0)
 
 
 def test_an_undeliverable_command_is_dropped_and_reported(rtu: Rig) -> None:
     g = rtu.gripper
     g.activate(timeout=2.0)
-    rtu.cable.cut = True
+    rtu.modbus.pull_cable()
     g.close(force=50.0)
     assert wait_for(lambda: not g.moving(), timeout=2.0)  # given up: nothing to wait for
     assert g.fault() is not None  # stale, then the cause
-    rtu.cable.cut = False
+    rtu.modbus.restore()
     assert wait_for(lambda: g.status()[1] < 0.05)  # fresh status again
     assert g.fault().startswith("command not delivered: 2F-85 at")
     time.sleep(0.1)
-    assert all(not r.gto for r in rtu.model.requests)  # never replayed late
+    assert all(not r.gto for r in rtu.device.requests)  # never replayed late
     g.open()  # the next command clears it
     assert g.fault() is None
 
 
-def test_status_function_3_also_works(cable: PtyNullModem, modbus_peer) -> None:
-    transport = ModbusRtuTransport(cable.driver_path, timeout=TIMEOUT, status_function=3)
+def test_status_function_3_also_works(rtu_server: ModbusRtuServer) -> None:
+    transport = ModbusRtuTransport(rtu_server.port, timeout=TIMEOUT, status_function=3)
     transport.connect()
     try:
         assert transport.read_status().po == 4
     finally:
         transport.close()
-    assert modbus_peer.function_codes == [3]
+    assert rtu_server.functions == {3: 1}
 
 
 def test_wrong_port_names_it() -> None:
@@ -231,5 +233,5 @@ def test_wrong_port_names_it() -> None:
     assert not result.ok and "cannot open serial port" in result.error
 
 
-def test_model_stays_importable_without_hardware() -> None:
-    assert GripperModel().status().sta == 0
+def test_the_peer_gripper_works_without_hardware() -> None:
+    assert peer_gripper().get_var("STA") == 0

@@ -1,4 +1,5 @@
-"""The driver through the URCap socket transport against a localhost URCap peer."""
+"""The driver through the URCap socket transport against the emulated 2F-85's URCap socket on
+localhost."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import pytest
 
 from drivers.health import DeviceError
 from drivers.robotiq_gripper import Robotiq2F85, UrcapSocketTransport, make_gripper
-from tests.drivers.peers.urcap_peer import UrcapPeer, free_port
+from sim.emulate.gripper_server import UrcapServer
+from tests.addresses import free_port
 from tests.drivers.robotiq.conftest import STALE, TIMEOUT, Rig, settle, wait_for
 
 
@@ -32,7 +34,7 @@ def test_activation_open_close_and_object_over_the_socket(urcap: Rig) -> None:
     assert not g.object_detected()
     g.open()
     settle(g)
-    urcap.model.object_width = 0.050
+    urcap.fingers.object_width = 0.050
     g.close(force=235.0, speed=0.15)
     settle(g)
     assert g.object_detected()
@@ -45,13 +47,13 @@ def test_activation_open_close_and_object_over_the_socket(urcap: Rig) -> None:
 def test_fault_code_over_the_socket(urcap: Rig) -> None:
     g = urcap.gripper
     g.activate(timeout=2.0)
-    urcap.model.injected_fault = 0x0E
+    urcap.device.inject_fault(0x0E)
     assert wait_for(lambda: g.fault() == "fault 0x0E: overcurrent triggered")
 
 
-def test_a_silent_controller_costs_bounded_tries(urcap_peer: UrcapPeer) -> None:
-    urcap_peer.silent = True
-    transport = UrcapSocketTransport(urcap_peer.host, urcap_peer.port, timeout=TIMEOUT,
+def test_a_silent_controller_costs_bounded_tries(urcap_server: UrcapServer) -> None:
+    urcap_server.pull_cable()  # reads every command, answers none
+    transport = UrcapSocketTransport(urcap_server.host, urcap_server.port, timeout=TIMEOUT,
                                      retries=2, backoff_first=0.02)
     try:
         t0 = time.monotonic()
@@ -60,10 +62,10 @@ def test_a_silent_controller_costs_bounded_tries(urcap_peer: UrcapPeer) -> None:
         elapsed = time.monotonic() - t0
     finally:
         transport.close()
-    assert f"127.0.0.1:{urcap_peer.port}" in err.value.address
+    assert f"127.0.0.1:{urcap_server.port}" in err.value.address
     assert "no reply within" in err.value.cause and "3 tries" in err.value.cause
-    assert urcap_peer.lines == ["GET ACT"] * 3  # one try per reconnect, then give up
-    assert urcap_peer.connections == 3
+    assert urcap_server.lines == ["GET ACT"] * 3  # one try per reconnect, then give up
+    assert urcap_server.connections == 3
     assert elapsed < 3 * TIMEOUT + 0.02 + 0.04 + 0.1
 
 
@@ -80,10 +82,10 @@ def test_refused_connection_names_the_address() -> None:
 def test_a_hung_controller_makes_the_status_stale(urcap: Rig) -> None:
     g = urcap.gripper
     g.activate(timeout=2.0)
-    urcap.urcap.silent = True
+    urcap.urcap.pull_cable()
     assert wait_for(lambda: (g.fault() or "").startswith("status stale"), timeout=2.0)
     assert wait_for(lambda: "no reply within" in (g.fault() or ""), timeout=2.0)
-    urcap.urcap.silent = False
+    urcap.urcap.restore()
     assert wait_for(lambda: g.fault() is None, timeout=3.0)  # reconnects by itself
 
 

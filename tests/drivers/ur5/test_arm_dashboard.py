@@ -1,5 +1,5 @@
-"""UR5Arm's start-up check and protective-stop recovery: the dashboard side through the real TCP
-peer, the RTDE side through the recording double."""
+"""UR5Arm's start-up check and protective-stop recovery: the dashboard side over real TCP
+against the emulated controller's dashboard server, the RTDE side through the recording double."""
 
 from __future__ import annotations
 
@@ -9,24 +9,25 @@ from drivers.arm import MotionState
 from drivers.health import DeviceError
 from drivers.ur5.arm import UR5Arm
 from drivers.ur5.dashboard import DashboardClient
-from tests.drivers.peers.dashboard_peer import DashboardPeer
+from sim.emulate.ur_controller import DashboardServer
+from tests.drivers.peers import dashboard_peer, protective_stop
 from tests.drivers.ur5.recording_adapter import FakeClock, RecordingAdapter
 
 
 @pytest.fixture
 def peer():
-    with DashboardPeer() as p:
-        p.robot_mode = "RUNNING"
+    with dashboard_peer(robot_mode="RUNNING") as p:
         yield p
 
 
-def make(peer: DashboardPeer) -> tuple[UR5Arm, RecordingAdapter]:
+def make(peer: DashboardServer) -> tuple[UR5Arm, RecordingAdapter]:
     rtde = RecordingAdapter()
     dash = DashboardClient(peer.host, peer.port, timeout=0.5, connect_attempts=1)
     return UR5Arm(rtde, FakeClock(), dashboard=dash, spawn=lambda f: f()), rtde
 
 
-def test_check_reports_version_serial_and_both_views_of_the_state(peer: DashboardPeer) -> None:
+def test_check_reports_version_serial_and_both_views_of_the_state(peer: DashboardServer
+                                                                  ) -> None:
     arm, rtde = make(peer)
     res = arm.check()
     assert res.ok, res.error
@@ -40,7 +41,7 @@ def test_check_reports_version_serial_and_both_views_of_the_state(peer: Dashboar
     assert "power on" not in peer.received and "brake release" not in peer.received
 
 
-def test_check_fails_with_the_dashboard_reason(peer: DashboardPeer) -> None:
+def test_check_fails_with_the_dashboard_reason(peer: DashboardServer) -> None:
     arm, _ = make(peer)
     peer.replies["polyscopeversion"] = "could not understand: 'PolyscopeVersion'"
     res = arm.check()
@@ -49,23 +50,24 @@ def test_check_fails_with_the_dashboard_reason(peer: DashboardPeer) -> None:
     assert res.details["controller_version"] == "unavailable"
 
 
-def test_check_passes_without_serial_on_older_software(peer: DashboardPeer) -> None:
+def test_check_passes_without_serial_on_older_software(peer: DashboardServer) -> None:
     arm, _ = make(peer)
     peer.replies["get serial number"] = "could not understand: 'get serial number'"
     res = arm.check()
     assert res.ok and res.details["serial_number"] == "unavailable"
 
 
-def test_check_fails_when_the_dashboard_does_not_answer(peer: DashboardPeer) -> None:
+def test_check_fails_when_the_dashboard_does_not_answer(peer: DashboardServer) -> None:
     arm, _ = make(peer)
     peer.stop()
     res = arm.check()
     assert not res.ok and "cannot connect" in (res.error or "")
 
 
-def test_recover_unlocks_the_protective_stop_and_restarts_the_script(peer: DashboardPeer) -> None:
+def test_recover_unlocks_the_protective_stop_and_restarts_the_script(peer: DashboardServer
+                                                                    ) -> None:
     arm, rtde = make(peer)
-    peer.safety_status = "PROTECTIVE_STOP"
+    protective_stop(peer)
     rtde.safety_bits, rtde.program_running = 1 | 1 << 2, False
     assert arm.status().protective_stop
     rtde.safety_bits = 1  # what the controller does on the unlock
@@ -75,9 +77,10 @@ def test_recover_unlocks_the_protective_stop_and_restarts_the_script(peer: Dashb
     assert arm.status().state is MotionState.IDLE
 
 
-def test_recover_refused_within_five_seconds(peer: DashboardPeer) -> None:
-    arm, rtde = make(peer)
-    peer.unlock_refused = True
-    with pytest.raises(DeviceError, match="until 5s after occurrence"):
-        arm.recover()
+def test_recover_refused_within_five_seconds() -> None:
+    with dashboard_peer(robot_mode="RUNNING", unlock_delay=5.0) as peer:
+        arm, rtde = make(peer)
+        protective_stop(peer)
+        with pytest.raises(DeviceError, match="until 5s after occurrence"):
+            arm.recover()
     assert "reupload_script" not in rtde.names()

@@ -1,5 +1,6 @@
-"""Helpers for the emulator tests: a twin stepped in real time on its own thread, and plain
-kinematic fingers for the protocol tests that need no physics."""
+"""Helpers for the emulator tests: a twin stepped in real time on its own thread, and a
+reference CRC apart from the emulators' own. (The fingers without physics for the protocol tests
+are the emulator's own :class:`sim.emulate.gripper_server.LinearFingers`.)"""
 
 from __future__ import annotations
 
@@ -61,56 +62,6 @@ def wait_for(pred: Callable[[], bool], timeout: float = 3.0, tick: float = 0.005
             return True
         time.sleep(tick)
     return pred()
-
-
-class LinearFingers:
-    """Fingers that move at the commanded speed (opening changes at twice it) and stop on an
-    object of ``object_width`` m when closing past it: a FingerBackend for protocol tests."""
-
-    stroke = 0.085
-
-    def __init__(self, width: float = 0.085, clock: Callable[[], float] = time.monotonic) -> None:
-        self.clock = clock
-        self.object_width: float | None = None
-        self.commands: list[tuple[float, float, float]] = []
-        self._lock = threading.Lock()
-        self._w0, self._t0, self._target, self._rate = width, clock(), width, 0.0
-        self._stop_at = width
-
-    def command(self, width: float, speed: float, force: float) -> None:
-        with self._lock:
-            now = self.clock()
-            w = self._at(now)
-            self.commands.append((width, speed, force))
-            self._w0, self._t0, self._target = w, now, width
-            self._rate = 2 * speed
-            self._stop_at = width
-            ow = self.object_width
-            if ow is not None and width < w and width < ow <= w:
-                self._stop_at = ow
-
-    def _at(self, now: float) -> float:
-        span = self._stop_at - self._w0
-        moved = self._rate * (now - self._t0)
-        return self._stop_at if abs(span) <= moved else self._w0 + moved * (1 if span > 0 else -1)
-
-    def width(self) -> float:
-        with self._lock:
-            return self._at(self.clock())
-
-    def moving(self) -> bool:
-        with self._lock:
-            return self._at(self.clock()) != self._stop_at
-
-    def tip_advance(self, width: float) -> float:
-        return 0.0
-
-    def object_detected(self) -> bool:
-        with self._lock:
-            return self._stop_at != self._target and not self.moving_unlocked()
-
-    def moving_unlocked(self) -> bool:
-        return self._at(self.clock()) != self._stop_at
 
 
 def crc16(data: bytes) -> int:

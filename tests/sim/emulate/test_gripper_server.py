@@ -20,13 +20,14 @@ from drivers.ur5.kinematics import HOME_TCP
 from sim.emulate.gripper_server import (
     FingerBackend,
     Gripper2F85,
+    LinearFingers,
     ModbusRtuServer,
     TwinFingers,
     UrcapServer,
 )
 
 from ..conftest import add_box, add_floor, run_motion
-from .conftest import LinearFingers, RealTimeStepper, crc16, wait_for
+from .conftest import RealTimeStepper, crc16, wait_for
 
 serial = pytest.importorskip("serial")
 pytest.importorskip("pymodbus")  # the reference CRC

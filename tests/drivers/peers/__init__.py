@@ -1,1 +1,0 @@
-"""Protocol peers of the real devices, for the driver tests."""
