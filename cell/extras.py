@@ -1,8 +1,9 @@
 """The optional parts of the install, and the one message a command gives when one is missing.
 
-Why extras: the core (`cell sim`, `plan`, `pivot`, `tree`, `soak`, ...) needs neither torch
-(about 1 GB, for the learned perception option) nor Ray (for `cell sweep`); installing them for
-everyone made the install take minutes and gigabytes. The commands that need them ask here
+Why extras: the core (`cell sim`, `plan`, `pivot`, `tree`, `soak`, `perceive`, ...) needs
+neither torch (about 1 GB, for training the learned perception; its inference runs the ONNX
+export through OpenCV) nor Ray (for `cell sweep`); installing them for everyone made the install
+take minutes and gigabytes. The commands that need them ask here
 first, so a missing one is a line saying what to install (exit 2), not a traceback.
 """
 
@@ -14,7 +15,8 @@ from cell.errors import UserError
 
 #: module -> (the extra that installs it, what needs it)
 EXTRAS: dict[str, tuple[str, str]] = {
-    "torch": ("learned", "the learned perception (--pipeline learned, cell train-perception)"),
+    "torch": ("learned", "cell train-perception (training the learned perception)"),
+    "onnx": ("learned", "cell train-perception (the export of the learned perception to ONNX)"),
     "ray": ("sweep", "cell sweep (parallel trials on Ray)"),
 }
 

@@ -46,7 +46,7 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "cell check-hardware --config $(cell emulate --print-config)",
     ),
     "perceive": ("cell perceive --scenes 50 --seed 0 --json out/perceive.json",),
-    "train-perception": ("cell train-perception --scenes 300 --epochs 24 --out out/unet.pt",),
+    "train-perception": ("cell train-perception --scenes 300 --epochs 24 --out out/unet.onnx",),
 }
 
 #: Exit codes, for every command (each may add its own meaning of 1).

@@ -39,7 +39,12 @@ def add_parser(sub: Any) -> None:
         default="classical",
         help="segmentation: classical depth pipeline (default) or the learned network",
     )
-    p.add_argument("--weights", type=Path, default=None, help="learned: weights file")
+    p.add_argument(
+        "--weights",
+        type=Path,
+        default=None,
+        help="learned: the ONNX model (default: the shipped cell/data/perception_unet.onnx)",
+    )
     p.add_argument(
         "--layout",
         "--cell",
@@ -83,10 +88,10 @@ def add_parser(sub: Any) -> None:
 
 
 def default_weights() -> Path:
-    """The shipped weights, in the cell's data folder (``cell/data``)."""
+    """The shipped model (the network's ONNX export), in the cell's data folder (``cell/data``)."""
     import cell
 
-    return Path(cell.__file__).resolve().parent / "data" / "perception_unet.pt"
+    return Path(cell.__file__).resolve().parent / "data" / "perception_unet.onnx"
 
 
 def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
@@ -94,9 +99,7 @@ def make_segmenter(pipeline: str, weights: Path | None) -> object | None:
         if weights is not None:
             raise ValueError("--weights: only with --pipeline learned")
         return None
-    from cell.extras import require
-
-    require("torch", "--pipeline learned")
+    # No extra: the learned segmentation runs its ONNX export through OpenCV, without torch.
     from skills.perception.learned import LearnedSegmenter
 
     return LearnedSegmenter(weights if weights is not None else default_weights())

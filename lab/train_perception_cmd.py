@@ -2,7 +2,8 @@
 
 Contract::
 
-    cell train-perception [--scenes N] [--epochs E] [--seed S] [--out PATH] [--jobs J]
+    cell train-perception [--scenes N] [--epochs E] [--seed S] [--out PATH.onnx] [--jobs J]
+    cell train-perception --export STATE.pt --out PATH.onnx
 
 Scene ``i`` is rendered with seed ``S + i`` (parts from the catalogue lying in the bin of the
 twin, some touching, seen by the wrist camera from ~0.5 m, with the D435 noise model); the last
@@ -10,12 +11,17 @@ twin, some touching, seen by the wrist camera from ~0.5 m, with the D435 noise m
 augmented (camera jitter, more touching parts, see :func:`render_scene`); held-out ones are the
 nominal case, so the printed scores are those the cell can expect in the twin. Labels come from
 PyBullet's segmentation mask rendered with the camera's own view and projection, so they are
-pixel-aligned with the depth. The weights (a state dict of
-:class:`skills.perception.learned.SegNet`, ~0.3 MB) are written to ``PATH``; the defaults take
-~8 minutes on a 2-core CPU (~1 to render, ~17 s per epoch).
+pixel-aligned with the depth. The trained :class:`skills.perception.segnet.SegNet` is written
+twice, ~0.3 MB each: exported to ONNX at ``PATH.onnx`` (what ``--pipeline learned`` runs, through
+OpenCV, without torch) and as a torch state dict at ``PATH.pt`` beside it (to export again). The
+held-out scores are those of the ONNX export as OpenCV runs it. The defaults take ~8 minutes on a
+2-core CPU (~1 to render, ~17 s per epoch).
 
-Bad values (``--scenes`` < 2, ``--epochs`` < 1, an output that is a directory) end with one line
-and exit 2 before anything is rendered.
+``--export STATE.pt`` renders and trains nothing: it exports a state dict written earlier to
+``--out`` and prints how far OpenCV's logits are from torch's on a random input.
+
+Bad values (``--scenes`` < 2, ``--epochs`` < 1, an output that is a directory or not ``.onnx``)
+end with one line and exit 2 before anything is rendered.
 """
 
 from __future__ import annotations
@@ -35,12 +41,13 @@ import cell
 
 if TYPE_CHECKING:  # torch and the twin are imported only when training runs
     from skills.perception.heightmap import HeightMap
-    from skills.perception.learned import SegNet
+    from skills.perception.segnet import SegNet
 
-#: Where the shipped weights live (``LearnedSegmenter(DEFAULT_WEIGHTS)``): the cell's data folder,
-#: ``cell/data``, beside the package data it is installed with.
-#: the shipped weights, in the cell's data folder
-DEFAULT_WEIGHTS = Path(cell.__file__).resolve().parent / "data" / "perception_unet.pt"
+#: Where the shipped model lives (``LearnedSegmenter(DEFAULT_WEIGHTS)``, the ONNX export): the
+#: cell's data folder, ``cell/data``, beside the package data it is installed with.
+DEFAULT_WEIGHTS = Path(cell.__file__).resolve().parent / "data" / "perception_unet.onnx"
+#: The torch state dict it was exported from (training only).
+DEFAULT_STATE = DEFAULT_WEIGHTS.with_suffix(".pt")
 #: Camera height above the bin floor's centre (m) and the jitter of the training views around it.
 VIEW_HEIGHT = 0.5
 VIEW_JITTER_XY = 0.02
@@ -147,7 +154,8 @@ def add_parser(sub: Any) -> None:
         help="train the learned bin segmentation on rendered scenes",
         description="Render N random bin scenes in the twin, train the small U-Net of "
         "skills/perception/learned.py to split the parts in the bin into instances (touching "
-        "parts included), score it on held-out scenes and save its weights.",
+        "parts included), score it on held-out scenes and save it: exported to ONNX (what "
+        "--pipeline learned runs, without torch) and as a torch state dict beside it.",
     )
     p.add_argument("--scenes", type=int, default=300, help="scenes rendered; 1/10 held out (300)")
     p.add_argument("--epochs", type=int, default=24, help="passes over the training scenes (24)")
@@ -156,7 +164,15 @@ def add_parser(sub: Any) -> None:
         "--out",
         type=Path,
         default=DEFAULT_WEIGHTS,
-        help="where to write the weights (cell/data/perception_unet.pt)",
+        help="where to write the ONNX model (cell/data/perception_unet.onnx); the torch state "
+        "dict goes beside it, with the suffix .pt",
+    )
+    p.add_argument(
+        "--export",
+        type=Path,
+        default=None,
+        metavar="STATE.pt",
+        help="train nothing: export this state dict (written earlier) to ONNX at --out",
     )
     p.add_argument(
         "--workers",
@@ -181,6 +197,11 @@ def _check_args(args: argparse.Namespace) -> None:
         raise TrainPerceptionInputError(f"--workers (--jobs): must be >= 1, got {args.jobs}")
     if args.out.is_dir():
         raise TrainPerceptionInputError(f"--out: {args.out} is a directory, need a file path")
+    if args.out.suffix != ".onnx":
+        raise TrainPerceptionInputError(
+            f"--out: {args.out}: the model is written as ONNX, name it NAME.onnx (the torch "
+            "state dict goes beside it as NAME.pt)"
+        )
     try:
         args.out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -254,11 +275,12 @@ def match_ious(
     return out
 
 
-def score(net: SegNet, scenes: list[RenderedScene]) -> Scores:
-    """Run the full inference (network, instances at camera resolution) on ``scenes``."""
+def score(model: bytes, scenes: list[RenderedScene]) -> Scores:
+    """Run the full inference (the ONNX ``model`` through OpenCV, instances at camera
+    resolution) on ``scenes``."""
     from skills.perception.learned import BOUNDARY, DOWNSCALE, LearnedSegmenter, pixel_classes
 
-    seg = LearnedSegmenter.from_module(net)
+    seg = LearnedSegmenter.from_bytes(model, "the trained network")
     inter = union = b_inter = b_union = 0
     counts_ok = 0
     ious: list[float] = []
@@ -316,8 +338,9 @@ def train(
     import torch
     from torch.nn import functional as F
 
-    from skills.perception.learned import N_CLASSES, SegNet, input_crop, network_input
+    from skills.perception.learned import N_CLASSES, input_crop, network_input
     from skills.perception.learned import pixel_classes as classes_of
+    from skills.perception.segnet import SegNet
 
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -365,8 +388,13 @@ def cmd_train_perception(args: argparse.Namespace) -> int:
     from cell.extras import require
 
     require("torch", "cell train-perception")
+    require("onnx", "cell train-perception (its export to ONNX)")
     import torch
 
+    from skills.perception.segnet import onnx_bytes
+
+    if args.export is not None:
+        return _export(args)
     _check_args(args)
     n_held = max(1, args.scenes // 10)
     n_train = args.scenes - n_held
@@ -383,18 +411,52 @@ def cmd_train_perception(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     net, _ = train(train_set, args.epochs, args.seed, log=lambda s: print(s, flush=True))
     t_train = time.perf_counter() - t1
-    s = score(net, held)
+    model = onnx_bytes(net)
+    s = score(model, held)
     n_par = sum(p.numel() for p in net.parameters())
+    state = args.out.with_suffix(".pt")
     try:
-        torch.save(net.state_dict(), args.out)
+        args.out.write_bytes(model)
+        torch.save(net.state_dict(), state)
     except OSError as exc:
-        raise TrainPerceptionInputError(f"--out: cannot write {args.out}: {exc}") from None
+        raise TrainPerceptionInputError(
+            f"--out: cannot write {exc.filename or state}: {exc.strerror or exc}"
+        ) from None
     print(
         f"trained {n_par} parameters in {t_train:.0f} s ({args.epochs} epochs)\n"
         f"held out  part-pixel IoU {s.part_iou:.3f}  boundary IoU {s.boundary_iou:.3f}  "
         f"instance count right in {100 * s.count_accuracy:.0f} % of {len(held)} scenes  "
         f"parts found (IoU > {MATCH_IOU}) {100 * s.found:.0f} % of {s.parts}  "
         f"mean best IoU {s.mean_match_iou:.3f}  ({s.hidden} parts hidden in view, not scored)\n"
-        f"wrote {args.out} ({args.out.stat().st_size / 1024:.0f} kB)"
+        f"wrote {args.out} (ONNX, {args.out.stat().st_size / 1024:.0f} kB) and {state} "
+        f"(torch state dict, {state.stat().st_size / 1024:.0f} kB)"
+    )
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    """``--export STATE.pt``: the state dict to ONNX at ``--out``, and the largest difference of
+    OpenCV's logits from torch's on a random input."""
+    from skills.perception.heightmap import PerceptionInputError
+    from skills.perception.learned import IN_CHANNELS, LearnedSegmenter
+    from skills.perception.segnet import load_state, onnx_bytes, torch_logits
+
+    _check_args(args)
+    try:
+        net = load_state(args.export)
+    except PerceptionInputError as exc:
+        raise TrainPerceptionInputError(f"--export: {exc}") from None
+    model = onnx_bytes(net)
+    try:
+        args.out.write_bytes(model)
+    except OSError as exc:
+        raise TrainPerceptionInputError(f"--out: cannot write {args.out}: {exc}") from None
+    x = np.random.default_rng(0).uniform(0, 1, (1, IN_CHANNELS, 96, 128)).astype(np.float32)
+    seg = LearnedSegmenter(args.out)
+    seg.net.setInput(x)
+    diff = float(np.abs(seg.net.forward() - torch_logits(net, x)).max())
+    print(
+        f"exported {args.export} to {args.out} (ONNX, {len(model) / 1024:.0f} kB); on a random "
+        f"input OpenCV's logits differ from torch's by at most {diff:.1e}"
     )
     return 0

@@ -9,26 +9,26 @@ next to it) as a *boundary* class, so that instances are simply the connected co
 
 Contract with the classical pipeline (it fits each segment itself)::
 
-    LearnedSegmenter(weights).segment(hm, rgb) -> (H, W) int32, 0 background, 1..K one per part
+    LearnedSegmenter(model).segment(hm, rgb) -> (H, W) int32, 0 background, 1..K one per part
 
-The same :func:`network_input` and :func:`pixel_classes` serve training (``cell
-train-perception``, rendered scenes) and inference, so the two cannot drift apart. The weights
-carry the input format they were trained with (a ``format`` buffer); a file made for another
-format or another network is refused, never half-loaded.
+Inference needs no torch: the network (:class:`skills.perception.segnet.SegNet`, torch, used
+for training only) is exported to ONNX by ``cell train-perception`` and run here through
+OpenCV's DNN module. The same :func:`network_input` and :func:`pixel_classes` serve training
+(rendered scenes) and inference, so the two cannot drift apart. The model file carries the input
+format it was trained with (ONNX metadata, :data:`FORMAT_KEY`); a file made for another format
+or another network is refused, never half-loaded.
 """
 
 from __future__ import annotations
 
-import pickle
+import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
-import torch
 from numpy.typing import NDArray
 from scipy import ndimage
-from torch import nn
-from torch.nn import functional as F
 
 from skills.perception.heightmap import HeightMap, PerceptionInputError
 
@@ -56,52 +56,17 @@ WIDTHS = (12, 24, 48)
 MIN_INTERIOR_PX = 40
 #: Predicted part pixels farther than this (camera pixels) from every interior blob are dropped.
 MAX_GROW_PX = 12
-#: torch threads for one frame's inference (see LearnedSegmenter.logits).
+#: Threads of OpenCV's DNN module for one frame's inference (see LearnedSegmenter.logits).
 INFERENCE_THREADS = 1
+#: ONNX metadata key of the input format (:func:`format_values`, a JSON list) in a model file.
+FORMAT_KEY = "pivot_cell.segmentation_format"
 
 
-def _format_tensor() -> torch.Tensor:
-    return torch.tensor([FORMAT_VERSION, DOWNSCALE, HEIGHT_SCALE, BOUNDARY_PX, IN_CHANNELS])
-
-
-def _block(c_in: int, c_out: int) -> nn.Sequential:
-    return nn.Sequential(
-        nn.Conv2d(c_in, c_out, 3, padding=1, bias=False),
-        nn.BatchNorm2d(c_out),
-        nn.ReLU(inplace=True),
-        nn.Conv2d(c_out, c_out, 3, padding=1, bias=False),
-        nn.BatchNorm2d(c_out),
-        nn.ReLU(inplace=True),
-    )
-
-
-class SegNet(nn.Module):
-    """A three-level U-Net: (N, IN_CHANNELS, h, w) -> (N, 3, h, w) class logits.
-
-    ``h`` and ``w`` must be multiples of 4 (two poolings); :func:`network_input` pads to that.
-    Three levels give a receptive field of ~45 pixels (~4.5 cm in the bin): enough to see a
-    contact line together with the facets of both parts on either side of it, which is what
-    decides the boundary class; the interior class only needs the height under the pixel.
-    """
-
-    def __init__(self, widths: tuple[int, int, int] = WIDTHS) -> None:
-        super().__init__()
-        w0, w1, w2 = widths
-        self.enc0 = _block(IN_CHANNELS, w0)
-        self.enc1 = _block(w0, w1)
-        self.mid = _block(w1, w2)
-        self.dec1 = _block(w2 + w1, w1)
-        self.dec0 = _block(w1 + w0, w0)
-        self.head = nn.Conv2d(w0, N_CLASSES, 1)
-        self.register_buffer("format", _format_tensor())
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        a = self.enc0(x)
-        b = self.enc1(F.max_pool2d(a, 2))
-        c = self.mid(F.max_pool2d(b, 2))
-        d = self.dec1(torch.cat([F.interpolate(c, size=b.shape[-2:]), b], dim=1))
-        e = self.dec0(torch.cat([F.interpolate(d, size=a.shape[-2:]), a], dim=1))
-        return self.head(e)
+def format_values() -> tuple[float, ...]:
+    """The input format a model must have been trained with: version, downscale, height scale,
+    boundary px, input channels (the ``format`` buffer of the torch network, the
+    :data:`FORMAT_KEY` metadata of its ONNX export)."""
+    return (FORMAT_VERSION, DOWNSCALE, HEIGHT_SCALE, BOUNDARY_PX, IN_CHANNELS)
 
 
 def input_crop(height: NDArray[np.floating]) -> tuple[int, int, int, int]:
@@ -197,70 +162,60 @@ def instances_from_classes(classes: NDArray[np.integer], part_ok: NDArray[np.boo
 
 
 class LearnedSegmenter:
-    """Bin segmentation by the trained :class:`SegNet` (CPU, no gradients).
+    """Bin segmentation by the trained network's ONNX export, run by OpenCV's DNN module (CPU).
 
-    ``weights`` is a state dict saved by ``cell train-perception``. A missing file, a file torch
-    cannot read and a state dict of another network or input format each raise
+    ``model`` is an ``.onnx`` file written by ``cell train-perception``. A missing file, a file
+    that is not an ONNX model (a torch state dict included), a model without the input format in
+    its metadata, of another input format or of another network each raise
     :class:`PerceptionInputError` naming the file and the reason; nothing falls back silently to
-    random weights or to the classical segmentation.
+    the classical segmentation.
     """
 
-    def __init__(self, weights: str | Path) -> None:
-        path = Path(weights)
+    def __init__(self, model: str | Path) -> None:
+        path = Path(model)
         if not path.is_file():
-            what = "is a directory, not a weights file" if path.is_dir() else "no such file"
+            what = "is a directory, not a model file" if path.is_dir() else "no such file"
             raise PerceptionInputError(f"segmentation weights {path}: {what}")
         try:
-            state = torch.load(path, map_location="cpu", weights_only=True)
+            data = path.read_bytes()
         except OSError as exc:
             raise PerceptionInputError(
                 f"segmentation weights {path}: cannot be read: {exc.strerror or exc}"
             ) from None
-        except Exception as exc:  # torch raises many types for a file it cannot unpickle
-            # weights_only refuses anything but tensors and plain containers; its message is a
-            # page long, so only its gist is kept.
-            if isinstance(exc, pickle.UnpicklingError):
-                why = "not a file of tensors written by torch.save"
-            else:
-                why = (str(exc).splitlines() or [type(exc).__name__])[0][:160]
-            raise PerceptionInputError(
-                f"segmentation weights {path}: cannot be read as torch weights ({why})"
-            ) from None
-        net = SegNet()
-        check_state_dict(net, state, path)
-        net.load_state_dict(state)
-        self.net = net.eval()
+        self.net = _load_net(data, f"segmentation weights {path}", path)
         self.path: Path | None = path
 
     @classmethod
-    def from_module(cls, net: SegNet) -> LearnedSegmenter:
-        """A segmenter around a network in memory (scoring during training); ``net`` is put in
-        eval mode."""
+    def from_bytes(cls, data: bytes, name: str = "the network in memory") -> LearnedSegmenter:
+        """A segmenter around an ONNX model in memory (scoring during training); ``name`` stands
+        for the file in messages."""
         self = cls.__new__(cls)
-        self.net = net.eval()
+        self.net = _load_net(data, name, None)
         self.path = None
         return self
 
-    @torch.no_grad()
     def logits(self, hm: HeightMap, rgb: NDArray[np.uint8]) -> tuple[NDArray, tuple]:
         """Class logits (3, H', W') at camera resolution over the bin crop, and the crop.
 
-        Runs on one thread (``INFERENCE_THREADS``), the process's setting restored after: with
-        torch's default of one thread per core, on this 2-core machine a frame took 95 ms
-        alone but 570 ms while another job kept a core busy (the two threads wait on each
-        other at every layer); one thread takes 95 ms either way."""
+        Runs on one thread (``INFERENCE_THREADS``), the process's setting restored after: on this
+        2-core machine a frame takes about as long on one thread as on two while another job
+        keeps a core busy (the threads wait on each other at every layer), and the second core
+        stays free for the cell (docs/design.md, "Learned option")."""
         _check_inputs(hm, rgb)
         crop = input_crop(hm.height)
-        x = torch.from_numpy(network_input(hm.height, rgb, crop))[None]
-        before = torch.get_num_threads()
-        torch.set_num_threads(INFERENCE_THREADS)
+        x = network_input(hm.height, rgb, crop)[None]
+        before = cv2.getNumThreads()
+        cv2.setNumThreads(INFERENCE_THREADS)
         try:
-            y = self.net(x)
+            self.net.setInput(x)
+            y = np.asarray(self.net.forward(), dtype=np.float32)[0]
         finally:
-            torch.set_num_threads(before)
+            cv2.setNumThreads(before)
         r0, r1, c0, c1 = crop
-        y = F.interpolate(y, size=(r1 - r0, c1 - c0), mode="bilinear", align_corners=False)
-        return y[0].numpy(), crop
+        if y.shape[1:] != (r1 - r0, c1 - c0):  # DOWNSCALE > 1: bilinear, half-pixel centres
+            y = cv2.resize(y.transpose(1, 2, 0), (c1 - c0, r1 - r0), interpolation=cv2.INTER_LINEAR)
+            y = np.ascontiguousarray(y.reshape(r1 - r0, c1 - c0, -1).transpose(2, 0, 1))
+        return y, crop
 
     def segment(self, hm: HeightMap, rgb: NDArray[np.uint8]) -> NDArray[np.int32]:
         """(H, W) int32 instance labels: 0 background, 1..K one per part (largest first).
@@ -283,41 +238,197 @@ class LearnedSegmenter:
         return labels
 
 
-def check_state_dict(net: nn.Module, state: object, path: Path | str) -> None:
-    """Raise :class:`PerceptionInputError` unless ``state`` has exactly ``net``'s keys, shapes
-    and input format; the message names the first key that does not match."""
-    where = f"segmentation weights {path}"
-    if not isinstance(state, dict):
+#: The side (pixels) of the zero input a loaded model is tried on: a multiple of 4, as any input.
+_PROBE = 16
+
+
+def _load_net(data: bytes, where: str, path: Path | None) -> cv2.dnn.Net:
+    """The OpenCV network of the ONNX model ``data``, after checking that it is one, that its
+    input format is this code's and that it maps the input to N_CLASSES logits per pixel."""
+    if data[:4] == b"PK\x03\x04":  # torch.save's zip container
+        hint = f" {path}" if path is not None else " FILE.pt"
         raise PerceptionInputError(
-            f"{where}: does not match the network: holds a {type(state).__name__}, not a state dict"
+            f"{where}: a torch state dict, not an ONNX model; export it with "
+            f"cell train-perception --export{hint} --out MODEL.onnx"
         )
-    expected = net.state_dict()
-    for key, ref in expected.items():
-        if key not in state:
-            raise PerceptionInputError(f"{where}: does not match the network: no key {key!r}")
-        got = state[key]
-        if not isinstance(got, torch.Tensor) or got.shape != ref.shape:
-            shape = tuple(got.shape) if isinstance(got, torch.Tensor) else type(got).__name__
-            raise PerceptionInputError(
-                f"{where}: does not match the network: key {key!r} is {shape}, "
-                f"expected {tuple(ref.shape)}"
-            )
-    extra = [k for k in state if k not in expected]
-    if extra:
+    try:
+        meta, inputs = onnx_metadata(data), onnx_inputs(data)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise PerceptionInputError(f"{where}: cannot be read as an ONNX model ({exc})") from None
+    if FORMAT_KEY not in meta:
         raise PerceptionInputError(
-            f"{where}: does not match the network: unexpected key {extra[0]!r}"
+            f"{where}: an ONNX model without the segmentation's input format (metadata "
+            f"{FORMAT_KEY!r}): not written by cell train-perception"
         )
-    if not torch.allclose(state["format"].float(), expected["format"].float()):
+    expected = [float(v) for v in format_values()]
+    try:
+        got = [float(v) for v in json.loads(meta[FORMAT_KEY])]
+    except (ValueError, TypeError):
         raise PerceptionInputError(
-            f"{where}: does not match the network: key 'format' is "
-            f"{_fmt(state['format'])} (version, downscale, height scale, boundary px, "
-            f"channels), this code reads {_fmt(expected['format'])}; retrain with "
+            f"{where}: metadata {FORMAT_KEY!r} is {meta[FORMAT_KEY][:60]!r}, not a list of numbers"
+        ) from None
+    if len(got) != len(expected) or not np.allclose(got, expected):
+        raise PerceptionInputError(
+            f"{where}: does not match the network: its input format is "
+            f"{[round(v, 4) for v in got]} (version, downscale, height scale, boundary px, "
+            f"channels), this code reads {[round(v, 4) for v in expected]}; retrain with "
             "cell train-perception"
         )
+    dims = inputs[0][1] if len(inputs) == 1 else ()
+    if len(dims) != 4 or dims[1] != IN_CHANNELS or not all(isinstance(d, str) for d in dims[2:]):
+        # OpenCV would run a model made for other channels or another size on any input
+        # without a word.
+        shapes = ", ".join(f"{n} {list(d)}" for n, d in inputs) or "none"
+        raise PerceptionInputError(
+            f"{where}: does not match the network: its inputs are {shapes}, expected one of "
+            f"shape [N, {IN_CHANNELS}, H, W] for any H and W"
+        )
+    try:
+        net = cv2.dnn.readNetFromONNX(np.frombuffer(data, np.uint8))
+        net.setInput(np.zeros((1, IN_CHANNELS, _PROBE, _PROBE), np.float32))
+        shape = tuple(net.forward().shape)
+    except cv2.error as exc:
+        why = _cv_error(exc)
+        raise PerceptionInputError(
+            f"{where}: does not match the network: OpenCV cannot run it ({why})"
+        ) from None
+    if shape != (1, N_CLASSES, _PROBE, _PROBE):
+        raise PerceptionInputError(
+            f"{where}: does not match the network: it maps a (1, {IN_CHANNELS}, {_PROBE}, "
+            f"{_PROBE}) input to {shape}, expected (1, {N_CLASSES}, {_PROBE}, {_PROBE})"
+        )
+    return net
 
 
-def _fmt(t: torch.Tensor) -> list[float]:
-    return [round(float(v), 4) for v in t.flatten()]
+def _cv_error(exc: cv2.error) -> str:
+    """The gist of an OpenCV error: its ``error: (...) message`` line, without the source path."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    for ln in lines:
+        if "error: (" in ln:
+            return ln.split("error: ", 1)[1][:160]
+    return (lines or [type(exc).__name__])[0][:160]
+
+
+# ONNX files are protocol buffers (a ModelProto). Reading the metadata needs only the top level of
+# the message, so it is read here rather than with the onnx package, which inference does not need.
+_IR_VERSION, _GRAPH, _METADATA = 1, 7, 14  # ModelProto field numbers
+
+
+def _varint(data: bytes, i: int) -> tuple[int, int]:
+    out = shift = 0
+    while True:
+        if i >= len(data):
+            raise ValueError("truncated")
+        b = data[i]
+        i += 1
+        out |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return out, i
+        shift += 7
+        if shift > 63:
+            raise ValueError("a malformed number")
+
+
+def _fields(data: bytes) -> Iterator[tuple[int, int, int | bytes, int, int]]:
+    """``(field, wire type, value, start, end)`` for each field at the top level of the protocol
+    buffer ``data`` (``value``: an int for a varint, else the raw bytes); ValueError when
+    ``data`` is not one."""
+    i, n = 0, len(data)
+    while i < n:
+        start = i
+        key, i = _varint(data, i)
+        field, wire = key >> 3, key & 7
+        value: int | bytes
+        if field == 0:
+            raise ValueError("not a protocol buffer")
+        if wire == 0:
+            value, i = _varint(data, i)
+        elif wire == 2:
+            size, i = _varint(data, i)
+            value, i = data[i : i + size], i + size
+        elif wire in (1, 5):
+            size = 8 if wire == 1 else 4
+            value, i = data[i : i + size], i + size
+        else:
+            raise ValueError("not a protocol buffer")
+        if i > n:
+            raise ValueError("truncated")
+        yield field, wire, value, start, i
+
+
+def onnx_metadata(data: bytes) -> dict[str, str]:
+    """The ``metadata_props`` of the ONNX model ``data`` (the last value of a repeated key);
+    ValueError when ``data`` is not an ONNX model."""
+    meta: dict[str, str] = {}
+    seen = set()
+    for field, wire, value, _, _ in _fields(data):
+        seen.add((field, wire))
+        if field == _METADATA and wire == 2:
+            assert isinstance(value, bytes)
+            entry = {f: v for f, w, v, _, _ in _fields(value) if w == 2}
+            try:
+                key, val = (bytes(entry.get(f, b"")).decode() for f in (1, 2))
+            except UnicodeDecodeError:
+                raise ValueError("metadata that is not text") from None
+            meta[key] = val
+    if (_IR_VERSION, 0) not in seen or (_GRAPH, 2) not in seen:
+        raise ValueError("no model version or no graph")
+    return meta
+
+
+def _sub(msg: bytes, field: int) -> list[bytes]:
+    """The length-delimited fields number ``field`` at the top level of ``msg``."""
+    return [v for f, _, v, _, _ in _fields(msg) if f == field and isinstance(v, bytes)]
+
+
+def onnx_inputs(data: bytes) -> list[tuple[str, tuple[int | str, ...]]]:
+    """Name and shape (a dimension's size, or its name where it is free) of each input of the
+    ONNX model ``data``'s graph that is not an initializer; ValueError when ``data`` is not an
+    ONNX model."""
+    graphs = _sub(data, _GRAPH)
+    if not graphs:
+        raise ValueError("no graph")
+    graph = graphs[-1]
+    # GraphProto: initializer 5 (TensorProto, name 8), input 11 (ValueInfoProto: name 1, type 2);
+    # TypeProto: tensor_type 1 (shape 2); TensorShapeProto: dim 1 (dim_value 1, dim_param 2).
+    weights = {b"".join(_sub(t, 8)) for t in _sub(graph, 5)}
+    out = []
+    for value_info in _sub(graph, 11):
+        name = b"".join(_sub(value_info, 1))
+        if name in weights:
+            continue
+        dims: list[int | str] = []
+        for t in _sub(value_info, 2):
+            for tensor in _sub(t, 1):
+                for shape in _sub(tensor, 2):
+                    for dim in _sub(shape, 1):
+                        size = [v for f, w, v, _, _ in _fields(dim) if f == 1 and w == 0]
+                        dims.append(int(size[-1]) if size else b"".join(_sub(dim, 2)).decode())
+        out.append((name.decode(errors="replace"), tuple(dims)))
+    return out
+
+
+def with_metadata(data: bytes, meta: dict[str, str]) -> bytes:
+    """The ONNX model ``data`` with ``meta`` as its only ``metadata_props``."""
+
+    def length_delimited(field: int, payload: bytes) -> bytes:
+        out, key, size = bytearray(), field << 3 | 2, len(payload)
+        for v in (key, size):
+            while v > 0x7F:
+                out.append(v & 0x7F | 0x80)
+                v >>= 7
+            out.append(v)
+        return bytes(out) + payload
+
+    kept = b"".join(data[s:e] for f, _, _, s, e in _fields(data) if f != _METADATA)
+    added = b"".join(
+        length_delimited(
+            _METADATA,
+            length_delimited(1, k.encode()) + length_delimited(2, v.encode()),
+        )
+        for k, v in meta.items()
+    )
+    return kept + added
 
 
 def _check_inputs(hm: HeightMap, rgb: NDArray[np.uint8]) -> None:

@@ -47,11 +47,10 @@ def test_bad_input_exits_2(argv, words, tmp_path: Path, capsys) -> None:
 
 
 def test_learned_weights_that_do_not_exist_exit_2(tmp_path: Path, capsys) -> None:
-    pytest.importorskip("skills.perception.learned")
-    argv = ["--scenes", "1", "--seed", "1", "--pipeline", "learned", "--weights", "nope.pt"]
+    argv = ["--scenes", "1", "--seed", "1", "--pipeline", "learned", "--weights", "nope.onnx"]
     code = main(["perceive", *argv, "--json", str(tmp_path / "p.json")])
     err = capsys.readouterr().err
-    assert code == 2 and "nope.pt" in err, err
+    assert code == 2 and "nope.onnx" in err, err
 
 
 def test_random_fill_splits_by_part_and_situation(tmp_path: Path, capsys) -> None:

@@ -240,8 +240,6 @@ def test_a_malformed_input_is_refused_in_one_line_naming_the_file(
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    if kind == "binary" and command == "perceive":
-        pytest.importorskip("torch")
     monkeypatch.chdir(tmp_path)
     bad = tmp_path / f"bad_{kind}.input"
     bad.write_bytes(CONTENT[kind])
