@@ -1173,9 +1173,19 @@ class DashboardServer:
                     reply = self.controller.dashboard(command)
                 conn.sendall((reply + "\n").encode())
                 if command.lower() == "quit":
+                    # Closed as a controller closes it: our side first, then what the client
+                    # still sends is read, so it meets the end of the stream and not a reset
+                    # (a socket closed with unread bytes answers with RST).
+                    conn.shutdown(socket.SHUT_WR)
+                    conn.settimeout(QUIT_LINGER_S)
+                    _drain(conn)
                     return
         except OSError:  # the client or the cable went away
             return
+
+
+#: s a dashboard connection that was told ``quit`` waits for its client to close
+QUIT_LINGER_S = 2.0
 
 
 def _drain(conn: socket.socket) -> None:
