@@ -59,7 +59,8 @@ def _declared(node: ast.AST, lines: list[str]) -> bool:
         parent = child._parent  # type: ignore[attr-defined]
         if isinstance(parent, (ast.JoinedStr, ast.FormattedValue)):
             return True
-        if isinstance(parent, ast.BinOp) and isinstance(parent.op, ast.Pow) and parent.right is child:
+        is_pow = isinstance(parent, ast.BinOp) and isinstance(parent.op, ast.Pow)
+        if is_pow and parent.right is child:
             return True
         if isinstance(parent, ast.Call):
             name = _call_name(parent)
