@@ -13,9 +13,11 @@ X, Y, Z = 0, 1, 2
 XY = slice(X, Z)
 #: the number of Cartesian components: the length of a point, a force or a torque
 DIM = 3
-#: a wrench (Fx, Fy, Fz, Tx, Ty, Tz): its force and its torque, as slices, and its length
+#: the force of a wrench (Fx, Fy, Fz, Tx, Ty, Tz), as a slice
 FORCE = slice(0, DIM)
+#: the torque of a wrench, as a slice: a force and a torque of DIM components each
 TORQUE = slice(DIM, 2 * DIM)
+#: the length of a wrench: a force and a torque
 WRENCH_DIM = 2 * DIM
 #: force components of a wrench, by name
 FX, FY, FZ = X, Y, Z
