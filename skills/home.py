@@ -15,6 +15,7 @@ from drivers.pose import Pose
 from skills.motion import Guard, Sequence
 from skills.params import guard_field, si
 
+#: rad in one degree (exact: a half turn is 180 degrees), for the ranges written in degrees
 DEG = math.pi / 180.0
 
 

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY, Z
 from skills.force import ForcePush
 from skills.motion import Guard, GuardedMotion, Sequence, wait
 from skills.params import guard_field, si
@@ -93,6 +94,12 @@ class PackParams:
     #: back after the +x contact, so the +y push does not rub along the +x neighbour (two
     #: 12-sided parts sliding past each other catch corner on corner and stop the push short)
     back_off: float = si(0.001, "m", 0.0, 0.01, "back after the +x contact")
+    #: the last +x push closes ``back_off`` and may go this much further before it counts as
+    #: nothing felt: room for the part not sitting exactly ``back_off`` off its +x contact
+    #: after the +y push (it slid along the +y wall or the neighbour gave a little)
+    push_again_margin: float = si(
+        0.002, "m", 0.0, 0.01, "the last +x push may go beyond the back_off it closes"
+    )
     release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
     weight_check: float = si(
         0.5, "1", 0.0, 1.0, "fraction of the part's weight the wrench must lose; 0: no check"
@@ -129,7 +136,7 @@ class PackInBox(SequenceSkill):
         p = replace(params or PackParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
         target = np.asarray(place, float)
-        self.place_xy, self.floor_z = target[:2].copy(), float(target[2])
+        self.place_xy, self.floor_z = target[XY].copy(), float(target[Z])
         self._top = self.floor_z + part.length if top_z is None else float(top_z)
         self._offset = grasp_offset(part, dev.gripper.finger_width)
         self._x = horizontal((*p.trail_dir, 0.0))  #: tool x: the outer finger's side
@@ -178,7 +185,9 @@ class PackInBox(SequenceSkill):
         self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,))
         self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach, ())
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
-        self.push_x_again = push("push +x again", (1.0, 0.0, 0.0), p.back_off + 0.002, (1,))
+        self.push_x_again = push(
+            "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,)
+        )
 
     # --- the phases --------------------------------------------------------------------------
     def _over_place_steps(self) -> list[GuardedMotion]:
@@ -264,7 +273,7 @@ class PackInBox(SequenceSkill):
     def _clear_descent(self) -> str | None:
         if self.descend.contact:
             p, tool = self.params, self.dev.arm.tool_pose()
-            z = tool.position[2] - p.tip_offset + p.grip_depth - self.part.length
+            z = tool.position[Z] - p.tip_offset + p.grip_depth - self.part.length
             return (
                 f"the part hit something {1e3 * (z - self.floor_z):.0f} mm above the box "
                 f"floor ({self.descend.resisting:.1f} N) on the way down"
@@ -284,8 +293,8 @@ class PackInBox(SequenceSkill):
         return None
 
     def _placed(self) -> str | None:
-        tcp = self.dev.arm.tool_pose().position[:2]
-        self.placed_xy = tcp - self._offset * self._x[:2]
+        tcp = self.dev.arm.tool_pose().position[XY]
+        self.placed_xy = tcp - self._offset * self._x[XY]
         return None
 
     def _relax(self) -> None:

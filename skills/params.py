@@ -95,6 +95,13 @@ class ConfigKey:
 
 
 MOTION_TIMEOUT = "motion_timeout_s"
+#: s, the shortest timeout a motion may be configured with (``motion_timeout_s`` and each
+#: stricter guard's ``*_timeout_s``): a tenth of a second, below which a guarded motion would
+#: time out before the arm carried out even a short move
+MIN_MOTION_TIMEOUT = 0.1
+#: s, the longest: ten minutes, far beyond any one motion of the cell, so a configured timeout
+#: still ends a motion that never finishes (a lost reply, a stalled arm)
+MAX_MOTION_TIMEOUT = 600.0
 
 
 @functools.cache
@@ -107,7 +114,8 @@ def config_keys(cls: type) -> tuple[ConfigKey, ...]:
         if f.name == "guard":
             g = f.default_factory() if f.default_factory is not dataclasses.MISSING else Guard()
             keys.append(
-                ConfigKey(MOTION_TIMEOUT, "guard", "timeout", "s", 1.0, 0.1, 600.0, g.timeout,
+                ConfigKey(MOTION_TIMEOUT, "guard", "timeout", "s", 1.0, MIN_MOTION_TIMEOUT,
+                          MAX_MOTION_TIMEOUT, g.timeout,
                           "the longest one motion of the skill may take")
             )
         elif meta.get("guard"):
@@ -119,8 +127,9 @@ def config_keys(cls: type) -> tuple[ConfigKey, ...]:
                           f"{meta['doc']}: abort force, capped by the node's limit")
             )
             keys.append(
-                ConfigKey(f"{stem}_timeout_s", f.name, "timeout", "s", 1.0, 0.1, 600.0,
-                          g.timeout, f"{meta['doc']}: timeout of each such motion")
+                ConfigKey(f"{stem}_timeout_s", f.name, "timeout", "s", 1.0,
+                          MIN_MOTION_TIMEOUT, MAX_MOTION_TIMEOUT, g.timeout,
+                          f"{meta['doc']}: timeout of each such motion")
             )
         elif "unit" in meta:
             suffix, scale = UNITS[meta["unit"]]
@@ -171,6 +180,8 @@ def with_limits(params: P, max_force: float, max_torque: float) -> P:
 
 __all__ = [
     "ConfigKey",
+    "MAX_MOTION_TIMEOUT",
+    "MIN_MOTION_TIMEOUT",
     "MOTION_TIMEOUT",
     "UNITS",
     "apply_config",

@@ -4,8 +4,9 @@ takes the hole grasp on the standing part exactly as it does after the pivot's T
 
 Why a baseline: the paper's claim for the pivot is that it reaches the hole grasp with less
 motion than picking the part, turning it and regrasping it. The comparison is fair only if the
-baseline runs under the same limits -- the pivot's ``approach_speed`` (and twice it for moves
-through free space and for carrying, as the pivot's own free moves), ``acceleration``, guards
+baseline runs under the same limits -- the pivot's ``approach_speed`` (and twice it,
+``free_speed_factor``, for moves through free space and for carrying, as the pivot's own free
+moves), ``acceleration``, guards
 -- and ends in the same hole grasp taken by the same :class:`Align`.
 
 Geometry (the lying part's :class:`PivotFrame`: axis ``u`` towards the open end, ``normal =
@@ -22,7 +23,7 @@ up x u``):
    TCP -- the short way that brings ``u`` to ``up``, open end up -- and go down until the
    part's bottom is ``place_gap`` above the floor;
 3. zero the wrist sensor (the tool's own weight now pulls sideways in the tool frame) and go
-   down at half the approach speed (Align's descent speed) until the floor pushes back
+   down at half the approach speed (``set_down_speed_factor``) until the floor pushes back
    ``contact_force`` (a guarded contact move; arriving ``place_overshoot`` below the floor
    without feeling it fails);
 4. open by ``wall_gap`` a side, back the fingers off the part along the tool axis, rise and
@@ -54,12 +55,26 @@ from scipy.spatial.transform import Rotation
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY, Z
 from skills.motion import GuardedMotion, Sequence, wait
+from skills.params import si
 from skills.pivot.align import hole_grasp_rotation
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.slot import ContactMove, check
 from skills.status import Status, StepResult
+
+#: deg, the step of the search for the largest pinch tilt whose gripper body clears the lying
+#: part: coarse enough for a short search, fine enough that the lean found is within 5 deg of
+#: the largest (the planned leans, 55 and 20 deg, are multiples of it)
+TILT_STEP_DEG = 5.0
+#: points along the gripper body's lower edge tested against the lying part in that search:
+#: one every 5 % of the edge, both ends included
+EDGE_SAMPLES = 21
+#: the least horizontal share of the tool axis the back-off divides by: with the tool nearly
+#: vertical the back-off along the fingers stays within 1/0.3 (3.3 times) the clearance it
+#: needs across, instead of growing without bound
+MIN_BACK_OFF_REACH = 0.3
 
 
 @dataclass(frozen=True)
@@ -100,6 +115,26 @@ class RegraspOptions:
     contact_force: float = 3.0  #: N of floor reaction that ends the descent
     back_off: float = 0.015  #: m the fingertips clear the standing part's wall when backing off
     zero_wait: float = 0.1  #: s held still before the sensor is zeroed (it averages 64 ms)
+    #: The pads keep this far inside the part's ends, so neither pad hangs over an end and
+    #: pinches on the edge of the wall.
+    pad_end_margin: float = si(
+        0.002, "m", 0.0, 0.02, "the pads keep inside the part's ends along its axis"
+    )
+    #: Gripper closed on the part, the fingers stand still this long before the pinch is checked
+    #: (as long as the pivot's recovery waits on its pinch from above, ``pinch_settle``).
+    pinch_settle: float = si(
+        0.3, "s", 0.0, 2.0, "the pinch's fingers stand still this long before the check"
+    )
+    #: Moves through free space and carrying the pinched part run at this many times the
+    #: pivot's ``approach_speed``, as the pivot's own free moves do: the same limits for both.
+    free_speed_factor: float = si(
+        2.0, "1", 0.1, 10.0, "times approach_speed for free moves and for carrying the part"
+    )
+    #: The descent onto the floor runs at this fraction of ``approach_speed``, slow enough for
+    #: the contact move to stop on ``contact_force`` soon after the floor pushes back.
+    set_down_speed_factor: float = si(
+        0.5, "1", 0.01, 1.0, "times approach_speed for the descent onto the floor"
+    )
 
 
 def _rotation_about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
@@ -117,7 +152,7 @@ def pinch_rotation(frame: PivotFrame, tilt: float = 0.0, sign: int = -1) -> NDAr
 def upright_turn(frame: PivotFrame) -> NDArray[np.float64]:
     """The world rotation that takes the lying part's axis ``u`` to ``up`` (90 deg about
     ``-normal``): the open end up, the closed end of a cup or bottle down."""
-    return _rotation_about(-frame.normal, 0.5 * math.pi)
+    return _rotation_about(-frame.normal, 0.5 * math.pi)  # exact: a right angle
 
 
 @dataclass(frozen=True)
@@ -151,7 +186,8 @@ class Regrasp:
         axis, ``floor_z`` the floor). Raises ValueError when the part does not fit the jaws."""
         o = options or RegraspOptions()
         self.frame, self.part, self.params, self.options, self.dev = frame, part, params, o, dev
-        self._opening = part.outer + 2.0 * params.wall_gap  #: m, the jaws open across the part
+        #: m, the jaws open across the part
+        self._opening = part.outer + 2.0 * params.wall_gap  # exact: wall_gap a side
         if self._opening > dev.gripper.stroke:
             raise ValueError(
                 f"regrasp needs a jaw opening of {self._opening * 1e3:.1f} mm across the "
@@ -165,7 +201,7 @@ class Regrasp:
         tcp_h = self._pinch_height()
         rot = pinch_rotation(frame, tilt, o.closing_sign)
         self.grasp = Pose(frame.point(self.grip_offset, tcp_h), rot)  #: TCP pose of the pinch
-        self._pre = Pose(self.grasp.position - params.approach_distance * rot[:, 2], rot)
+        self._pre = Pose(self.grasp.position - params.approach_distance * rot[:, Z], rot)
         self._carry = self._plan_carry(tcp_h)
         self.placed: Pose | None = None  #: the TCP's pose when the floor was felt
         # The floor is felt by the rise against the motion (``contact_force`` above the start's
@@ -177,7 +213,7 @@ class Regrasp:
             dev,
             params.guard,
             lambda: self._carry.down,
-            0.5 * params.approach_speed,
+            o.set_down_speed_factor * params.approach_speed,
             params.acceleration,
             o.contact_force,
         )
@@ -189,8 +225,8 @@ class Regrasp:
     def _pinch_offset(self) -> float:
         """m from the part's centre towards the open end where the pads pinch."""
         o, part = self.options, self.part
-        a = 0.5 * part.length
-        room = a - 0.5 * self.dev.gripper.finger_width - 0.002
+        a = 0.5 * part.length  # exact: the half length
+        room = a - 0.5 * self.dev.gripper.finger_width - o.pad_end_margin  # exact: half a pad
         if o.grip_offset is None:
             offset = min(max(0.0, o.min_place_height - a), room)
         else:
@@ -204,23 +240,24 @@ class Regrasp:
         pad leans by ``tilt``) ``tip_floor_clearance`` off the floor."""
         p, o, tilt = self.params, self.options, self.tilt
         finger_width = self.dev.gripper.finger_width
-        tip_drop = p.tip_offset * math.cos(tilt) + 0.5 * finger_width * math.sin(tilt)
-        return max(0.5 * self.part.outer, o.tip_floor_clearance + tip_drop)
+        half_pad = 0.5 * finger_width  # exact: the pad's corner is half its width off its axis
+        tip_drop = p.tip_offset * math.cos(tilt) + half_pad * math.sin(tilt)
+        return max(0.5 * self.part.outer, o.tip_floor_clearance + tip_drop)  # exact: the radius
 
     def _plan_carry(self, tcp_h: float) -> _Carry:
         """The turn about the TCP and where it leaves the part; sets ``place_z`` and the
         predicted ``standing_axis``."""
         o, frame, rot = self.options, self.frame, self.grasp.rotation
-        a, b = 0.5 * self.part.length, 0.5 * self.part.outer
+        a, b = 0.5 * self.part.length, 0.5 * self.part.outer  # exact: half length, radius
         floor = frame.floor_z
         turn = upright_turn(frame)
         rel_centre = turn @ (frame.point(0.0, b) - self.grasp.position)
-        bottom_below = a - rel_centre[2]  # m from the TCP down to the part's bottom, standing
+        bottom_below = a - rel_centre[Z]  # m from the TCP down to the part's bottom, standing
         lift_z = self._lift_z(tcp_h)
-        lifted = Pose(np.array([*self.grasp.position[:2], lift_z]), rot)
+        lifted = Pose(np.array([*self.grasp.position[XY], lift_z]), rot)
         # The TCP's place: the standing axis lands on place_xy (the turn moves it off the TCP).
-        xy = self.grasp.position[:2] if o.place_xy is None else (
-            np.asarray(o.place_xy, float) - rel_centre[:2]
+        xy = self.grasp.position[XY] if o.place_xy is None else (
+            np.asarray(o.place_xy, float) - rel_centre[XY]
         )
         carried = Pose(np.array([*xy, lift_z]), rot)
         turned_rot = turn @ rot
@@ -231,17 +268,17 @@ class Regrasp:
         down = Pose(
             above_floor.position - (o.place_gap + o.place_overshoot) * frame.up, turned_rot
         )
-        self.standing_axis: NDArray[np.float64] = (xy + rel_centre[:2]).copy()
+        self.standing_axis: NDArray[np.float64] = (xy + rel_centre[XY]).copy()
         return _Carry(lifted, carried, turned, above_floor, down, rel_centre)
 
     def _lift_z(self, tcp_h: float) -> float:
         """m, the TCP's height for the turn: everything of the part lies within ``swing`` of
         the TCP, so it swings through the turn ``turn_clearance`` above the floor."""
         o = self.options
-        a, b = 0.5 * self.part.length, 0.5 * self.part.outer
+        a, b = 0.5 * self.part.length, 0.5 * self.part.outer  # exact: half length, radius
         swing = math.hypot(a + abs(self.grip_offset), b) + abs(tcp_h - b)
         lift_z = self.frame.floor_z + max(swing + o.turn_clearance, o.min_place_height)
-        return max(lift_z, self.grasp.position[2])
+        return max(lift_z, self.grasp.position[Z])
 
     # --- the phases --------------------------------------------------------------------------
     def _pinch_steps(self) -> list[GuardedMotion]:
@@ -249,12 +286,13 @@ class Regrasp:
         arm, gripper = dev.arm, dev.gripper
         o = self.options
         pinch_force = p.hold_force if o.pinch_force is None else o.pinch_force
+        free_speed = o.free_speed_factor * p.approach_speed
         return [
             dev.grip("open across the part", g, lambda: gripper.open(self._opening)),
             dev.move(
                 "above the part",
                 g,
-                lambda: arm.move_to(self._pre, 2 * p.approach_speed, p.acceleration),
+                lambda: arm.move_to(self._pre, free_speed, p.acceleration),
             ),
             dev.move(
                 "down beside the wall",
@@ -262,7 +300,8 @@ class Regrasp:
                 lambda: arm.move_to(self.grasp, p.approach_speed, p.acceleration),
             ),
             dev.grip(
-                "pinch across the diameter", g, lambda: gripper.close(pinch_force), settle=0.3
+                "pinch across the diameter", g, lambda: gripper.close(pinch_force),
+                settle=o.pinch_settle,
             ),
             check("part in the pinch", dev, g, self._pinched),
         ]
@@ -303,7 +342,8 @@ class Regrasp:
         waypoints = [c.lifted, c.turned, c.above_floor]
         if self.options.place_xy is not None:
             waypoints.insert(1, c.carried)
-        self.dev.arm.move_path(waypoints, 2 * p.approach_speed, p.acceleration)
+        speed = self.options.free_speed_factor * p.approach_speed
+        self.dev.arm.move_path(waypoints, speed, p.acceleration)
 
     def _floor_felt(self) -> str | None:
         if not self._contact.contact:
@@ -313,18 +353,19 @@ class Regrasp:
             )
         pose = self.dev.arm.tool_pose()
         self.placed = pose
-        self.standing_axis = (pose.position + self._carry.rel_centre)[:2].copy()
+        self.standing_axis = (pose.position + self._carry.rel_centre)[XY].copy()
         return None
 
     def _back_off(self) -> None:
         # Along the fingers until the fingertips are clear of the near side of the wall.
         arm, p, o = self.dev.arm, self.params, self.options
-        b = 0.5 * self.part.outer
+        b = 0.5 * self.part.outer  # exact: the radius
         tool = arm.tool_pose()
-        z = tool.rotation[:, 2]
-        reach = max(float(np.hypot(z[0], z[1])), 0.3)
+        z = tool.rotation[:, Z]
+        reach = max(float(np.hypot(*z[XY])), MIN_BACK_OFF_REACH)
         back = Pose(tool.position - (b + p.tip_offset + o.back_off) / reach * z, tool.rotation)
-        arm.move_path([back, self._hand_over()], 2 * p.approach_speed, p.acceleration)
+        arm.move_path([back, self._hand_over()], o.free_speed_factor * p.approach_speed,
+                      p.acceleration)
 
     def _hand_over(self) -> Pose:
         """Where the back-off ends: fingers down, turned as Align turns them, ``approach_distance``
@@ -346,13 +387,14 @@ class Regrasp:
         """The largest tilt (5 deg steps, at most ``max_tilt``) at which the gripper body's lower
         edge stays ``body_clearance`` above the lying part wherever it is over it."""
         o, part = self.options, self.part
-        a, b = 0.5 * part.length, 0.5 * part.outer
-        steps = int(math.floor(math.degrees(o.max_tilt) / 5.0))
+        a, b = 0.5 * part.length, 0.5 * part.outer  # exact: half length, radius
+        steps = int(math.floor(math.degrees(o.max_tilt) / TILT_STEP_DEG))
         for k in range(steps, -1, -1):
-            tilt = math.radians(5.0 * k)
+            tilt = math.radians(TILT_STEP_DEG * k)
             c, s = math.cos(tilt), math.sin(tilt)
             ok = True
-            for t in np.linspace(-1.0, 1.0, 21):  # along the face's lower edge (s, h from TCP)
+            # along the face's lower edge (s, h from TCP)
+            for t in np.linspace(-1.0, 1.0, EDGE_SAMPLES):
                 along = o.body_offset * s - t * o.body_half_depth * c
                 height = o.body_offset * c + t * o.body_half_depth * s
                 over_part = -a - o.body_clearance <= offset + along <= a + o.body_clearance
@@ -367,8 +409,8 @@ class Regrasp:
         """A frame whose Align prediction (``pivot - outer/2 u``) is the standing part's axis."""
         f = self.frame
         xy = self.standing_axis
-        centre = np.array([*xy, 0.0]) + (f.section.a + 0.5 * self.part.outer) * f.u
-        centre[2] = f.floor_z + 0.5 * self.part.outer
+        centre = np.array([*xy, 0.0]) + (f.section.a + 0.5 * self.part.outer) * f.u  # exact: r
+        centre[Z] = f.floor_z + 0.5 * self.part.outer  # exact: the radius
         return replace(f, center=centre)
 
     @property

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY, Z
 from skills.motion import Guard, Sequence, wait
 from skills.params import guard_field, si
 from skills.pivot.clearance import Obstacle, Reach, choose_end, tool_points
@@ -33,6 +34,10 @@ from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.slot import ContactMove, SequenceSkill, check
 from skills.status import Failure
+
+#: m added to ``max_shift`` as the end of the range of drags tried: floating-point room, far
+#: below a step, so a ``max_shift`` that is a whole number of steps is itself tried
+SHIFT_ROUNDING = 1e-9
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,9 @@ class RepositionParams:
     grip_force: float = si(
         20.0, "N", 0.1, 235.0, "per finger of the pinch", actuator="grip_force"
     )
+    close_speed: float = si(
+        0.05, "m/s", 0.001, 0.15, "of each finger closing on the part", actuator="finger_speed"
+    )
     speed: float = si(0.08, "m/s", 0.005, 0.5, "of the TCP over and down to the part")
     drag_speed: float = si(0.03, "m/s", 0.005, 0.2, "of the TCP carrying the part")
     acceleration: float = si(0.5, "m/s^2", 0.01, 3.0, "of the TCP")
@@ -63,6 +71,9 @@ class RepositionParams:
     plan_margin: float = si(
         0.012, "m", 0.0, 0.05, "the pivot's sweep keeps from walls, planned from the new place"
     )
+    #: the jaws open, held still this long before they rise, so the part let go comes to rest
+    #: before the fingers leave it
+    release_settle: float = si(0.1, "s", 0.0, 2.0, "held still after letting go, before rising")
     guard: Guard = field(default_factory=Guard)
     descent_guard: Guard = guard_field(25.0, 10.0, "the jaws down beside the part")
 
@@ -91,11 +102,12 @@ def pinch_pose(frame: PivotFrame, part: Part, params: RepositionParams) -> Pose:
 
 def _footprint_inside(frame: PivotFrame, part: Part, interior: Seq[float], margin: float) -> bool:
     x0, x1, y0, y1 = interior
-    u, n = frame.u[:2], frame.normal[:2]
-    c = np.asarray(frame.center[:2], float)
+    u, n = frame.u[XY], frame.normal[XY]
+    c = np.asarray(frame.center[XY], float)
+    half, radius = 0.5 * part.length, 0.5 * part.outer  # exact: the footprint's half sizes
     for su in (-1.0, 1.0):
         for sn in (-1.0, 1.0):
-            px, py = c + su * 0.5 * part.length * u + sn * 0.5 * part.outer * n
+            px, py = c + su * half * u + sn * radius * n
             if not (x0 + margin <= px <= x1 - margin and y0 + margin <= py <= y1 - margin):
                 return False
     return True
@@ -107,7 +119,7 @@ def _pinch_clear(
 ) -> bool:
     """The open jaws come down beside the part, here, without touching a wall or a neighbour."""
     pose = pinch_pose(frame, part, params)
-    width = part.outer + 2.0 * params.side_gap
+    width = part.outer + 2.0 * params.side_gap  # exact: a side gap each side of the part
     model = tool_points(width, params.tip_offset, params.finger_thickness, finger_width)
     for lift in (0.0, params.approach_height):
         p = Pose(pose.position + np.array([0.0, 0.0, lift + params.lift]), pose.rotation)
@@ -137,18 +149,18 @@ def plan_reposition(
     obstacles = [*walls, *neighbours]
     if not _pinch_clear(frame, part, params, obstacles, finger_width):
         return None
-    steps = np.arange(params.shift_step, params.max_shift + 1e-9, params.shift_step)
-    directions = [frame.u[:2], -frame.u[:2], frame.normal[:2], -frame.normal[:2]]
+    steps = np.arange(params.shift_step, params.max_shift + SHIFT_ROUNDING, params.shift_step)
+    directions = [frame.u[XY], -frame.u[XY], frame.normal[XY], -frame.normal[XY]]
     for s in steps:
         for d in directions:
             shift = float(s) * np.asarray(d, float)
             center = np.asarray(frame.center, float).copy()
-            center[:2] += shift
+            center[XY] += shift
             moved = replace(frame, center=center)
             if not _footprint_inside(moved, part, interior, params.wall_margin):
                 continue
-            body = Obstacle("the part", center, np.array([0.5 * part.length, 0.5 * part.outer,
-                                                          0.5 * part.outer]), moved.yaw)
+            half = 0.5 * np.array([part.length, part.outer, part.outer])  # exact: half sizes
+            body = Obstacle("the part", center, half, moved.yaw)
             corners = body.center + np.array(
                 [[a * body.half[0] * math.cos(moved.yaw) - b * body.half[1] * math.sin(moved.yaw),
                   a * body.half[0] * math.sin(moved.yaw) + b * body.half[1] * math.cos(moved.yaw),
@@ -191,20 +203,21 @@ class Reposition(SequenceSkill):
         g = p.guard
         gripper = dev.gripper
         shift = np.array([plan.shift[0], plan.shift[1], 0.0])
+        opening = part.outer + 2.0 * p.side_gap  # exact: a side gap each side of the part
         self.sequence = Sequence(
             "reposition",
             [
-                dev.grip("open", g, lambda: gripper.open(part.outer + 2.0 * p.side_gap)),
+                dev.grip("open", g, lambda: gripper.open(opening)),
                 dev.move("over the part", g, self._over),
                 self.descend.motion,
                 check("down to the floor", dev, g, self._down, Failure.BLOCKED),
-                dev.grip("pinch", g, lambda: gripper.close(p.grip_force, 0.05)),
+                dev.grip("pinch", g, lambda: gripper.close(p.grip_force, p.close_speed)),
                 check("holding it", dev, g, self._holding, Failure.MISSED),
                 dev.move("lift it", g, lambda: self._move_by(up * p.lift, p.speed)),
                 dev.move("carry it", g, lambda: self._move_by(shift, p.drag_speed)),
                 dev.move("set it down", g, lambda: self._move_by(-up * p.lift, p.speed)),
-                dev.grip("let go", g, lambda: gripper.open(part.outer + 2.0 * p.side_gap)),
-                wait("settle", dev, g, 0.1),
+                dev.grip("let go", g, lambda: gripper.open(opening)),
+                wait("settle", dev, g, p.release_settle),
                 dev.move("up", g, lambda: self._move_by(up * (part.outer + p.approach_height),
                                                         p.speed)),
             ],
@@ -214,7 +227,7 @@ class Reposition(SequenceSkill):
         arm, p = self.dev.arm, self.params
         tool = arm.tool_pose()
         high = self._above.position.copy()
-        high[2] = max(high[2], float(tool.position[2]))
+        high[Z] = max(high[Z], float(tool.position[Z]))
         arm.move_path([Pose(high, self._above.rotation), self._above], p.speed, p.acceleration)
 
     def _move_by(self, d: NDArray[np.float64], speed: float) -> None:

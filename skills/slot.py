@@ -44,6 +44,7 @@ from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import FZ, XY, Z
 from skills.force import world_force
 from skills.frames import frame_step
 from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure, wait
@@ -53,6 +54,19 @@ from skills.pivot.align import hole_grasp_rotation, pinched_span
 from skills.status import Failure, StepResult
 
 GRAVITY = 9.81  #: m/s^2
+#: the length below which a vector is taken to have no direction (a direction's horizontal
+#: part, a move's displacement in m): numerical, far below any distance the arm resolves
+NO_DIRECTION = 1e-9
+#: m^2, the least squared length of a travel path's horizontal leg the closest-point formula
+#: divides by: numerical, so a leg of zero length (start over the target) is no division by 0
+MIN_LEG_SQUARED = 1e-12
+#: rad, the largest turn about the base axis between two waypoints of a travel path's arc:
+#: the straight line between two of them dips at most 1 - cos(20 deg), 6 %, of the arc's
+#: radius inside it, so it stays well away from the base axis
+ARC_STEP = math.radians(40.0)
+#: m, the rise or descent to the travel height is left out when shorter than this: the start
+#: is already at that height, a tenth of a millimetre is no move to make
+SAME_HEIGHT = 1e-4
 
 
 @dataclass(frozen=True)
@@ -106,6 +120,11 @@ class SlotParams:
     pinch_settle: float = si(
         0.3, "s", 0.0, 2.0, "the pinch's fingers stand still this long before the check (pick)"
     )
+    #: The pads go down beside the wall at this fraction of ``approach_speed``: slower, so a pad
+    #: landing on the rim meets ``descent_guard`` before it presses hard.
+    beside_wall_speed_factor: float = si(
+        0.5, "1", 0.01, 1.0, "times approach_speed for the pads going down beside the wall (pick)"
+    )
     view_height: float = si(
         0.20, "m", 0.05, 1.0, "of the camera above the rim when looking (pick)"
     )
@@ -130,7 +149,7 @@ class SlotParams:
 def grasp_offset(part: Part, finger_width: float) -> float:
     """Distance (m) from the part's axis to the TCP in the hole grasp, along tool ``x``."""
     outer, inner = pinched_span(part, finger_width)
-    return 0.5 * (outer + inner)
+    return 0.5 * (outer + inner)  # exact: the axis is midway between the two pad contacts
 
 
 def horizontal(v: ArrayLike) -> NDArray[np.float64]:
@@ -138,7 +157,7 @@ def horizontal(v: ArrayLike) -> NDArray[np.float64]:
     a = np.asarray(v, float)
     h = np.array([a[0], a[1], 0.0])
     n = float(np.linalg.norm(h))
-    if n < 1e-9:
+    if n < NO_DIRECTION:
         raise ValueError(f"direction {a!r} has no horizontal part")
     return h / n
 
@@ -150,33 +169,33 @@ def hold_pose(
     """TCP pose that holds ``part`` in the hole grasp with its axis at ``axis_xy`` and its bottom
     at ``bottom_z`` (m), the outer finger towards ``x_dir``."""
     x = horizontal(x_dir)
-    xy = np.asarray(axis_xy, float)[:2]
+    xy = np.asarray(axis_xy, float)[XY]
     z = bottom_z + part.length - grip_depth + tip_offset
-    return Pose(np.array([*(xy + offset * x[:2]), z]), hole_grasp_rotation(x))
+    return Pose(np.array([*(xy + offset * x[XY]), z]), hole_grasp_rotation(x))
 
 
 def travel_path(start: Pose, target: Pose, min_radius: float) -> list[Pose]:
     """Waypoints from ``start`` to ``target``: up (or down) to the target's height first, then
     across; when the straight line across would pass within ``min_radius`` (m) of the base axis
     (where a UR5's wrist cannot follow a Cartesian line), through a point on an arc around it."""
-    up = Pose(np.array([*start.position[:2], target.position[2]]), start.rotation)
-    a, b = up.position[:2], target.position[:2]
+    up = Pose(np.array([*start.position[XY], target.position[Z]]), start.rotation)
+    a, b = up.position[XY], target.position[XY]
     d = b - a
-    s = float(np.clip(-(a @ d) / max(float(d @ d), 1e-12), 0.0, 1.0))
+    s = float(np.clip(-(a @ d) / max(float(d @ d), MIN_LEG_SQUARED), 0.0, 1.0))
     closest = float(np.linalg.norm(a + s * d))
     points = [up]
     if closest < min_radius:
         ang_a, ang_b = math.atan2(a[1], a[0]), math.atan2(b[1], b[0])
-        turn = (ang_b - ang_a + math.pi) % (2.0 * math.pi) - math.pi
+        turn = (ang_b - ang_a + math.pi) % math.tau - math.pi
         radius = max(min_radius, float(np.linalg.norm(a)), float(np.linalg.norm(b)))
-        steps = max(1, int(abs(turn) // math.radians(40.0)))
+        steps = max(1, int(abs(turn) // ARC_STEP))
         for k in range(1, steps + 1):
             frac = k / (steps + 1)
             ang = ang_a + turn * frac
-            pos = np.array([radius * math.cos(ang), radius * math.sin(ang), target.position[2]])
+            pos = np.array([radius * math.cos(ang), radius * math.sin(ang), target.position[Z]])
             points.append(Pose(pos, up.interpolate(target, frac).rotation))
     points.append(target)
-    if up.distance(start)[0] < 1e-4:
+    if up.distance(start)[0] < SAME_HEIGHT:
         points = points[1:]
     return points
 
@@ -198,12 +217,12 @@ class WrenchReference:
     def lost(self) -> float:
         """N of downward pull the tool lost since the reference (a part let go: its weight)."""
         assert self.force is not None
-        return float(world_force(self.dev)[2] - self.force[2])
+        return float(world_force(self.dev)[FZ] - self.force[FZ])
 
     def gained(self) -> float:
         """N of downward pull the tool gained since the reference (a part taken: its weight)."""
         assert self.force is not None
-        return float(self.force[2] - world_force(self.dev)[2])
+        return float(self.force[FZ] - world_force(self.dev)[FZ])
 
 
 class ContactMove:
@@ -239,7 +258,7 @@ class ContactMove:
         target = self._target()
         start = self.dev.arm.tool_pose().position
         d = target.position - start
-        self._dir = d / max(float(np.linalg.norm(d)), 1e-9)
+        self._dir = d / max(float(np.linalg.norm(d)), NO_DIRECTION)
         self._ref = world_force(self.dev)
         self.contact, self.contact_pose = False, None
         self.dev.arm.move_to(target, self._speed, self._acc)
@@ -301,7 +320,7 @@ class _SlotSkill(SequenceSkill):
         p = replace(params or SlotParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
         slot = np.asarray(slot_center, float)
-        self.slot_xy, self.slot_floor_z = slot[:2].copy(), float(slot[2])
+        self.slot_xy, self.slot_floor_z = slot[XY].copy(), float(slot[Z])
         self.machine_top_z = self.slot_floor_z + p.slot_depth
         self.reference = WrenchReference(dev)
 
@@ -429,7 +448,7 @@ class FeedSlot(_SlotSkill):
         """Where the insertion ended: on the slot floor, or let go within ``max_drop`` of it."""
         p = self.params
         bottom = (
-            self.dev.arm.tool_pose().position[2] - p.tip_offset + p.grip_depth - self.part.length
+            self.dev.arm.tool_pose().position[Z] - p.tip_offset + p.grip_depth - self.part.length
         )
         above_floor = bottom - self.slot_floor_z
         if self.insert.contact:
@@ -512,7 +531,7 @@ class PickFromSlot(_SlotSkill):
         super().__init__(slot_center, part, dev, params, overrides)
         p = self.params
         self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
-        self._offset = 0.5 * (self._outer + self._inner)
+        self._offset = grasp_offset(part, dev.gripper.finger_width)
         self._rim_z = self.slot_floor_z + part.length
         self.seen: UprightPart | None = None
         self._looking = p.use_camera and dev.camera is not None
@@ -570,7 +589,7 @@ class PickFromSlot(_SlotSkill):
 
     def _tcp(self, tips_z: float) -> Pose:
         position = np.array(
-            [*(self._axis_xy() + self._offset * self._x[:2]), tips_z + self.params.tip_offset]
+            [*(self._axis_xy() + self._offset * self._x[XY]), tips_z + self.params.tip_offset]
         )
         return Pose(position, self._rotation)
 
@@ -611,7 +630,8 @@ class PickFromSlot(_SlotSkill):
             )
 
     def _open_over_wall(self) -> None:
-        self.dev.gripper.open(self._outer - self._inner + 2.0 * self.params.wall_gap)
+        gaps = 2.0 * self.params.wall_gap  # exact: a wall gap on each side of the wall
+        self.dev.gripper.open(self._outer - self._inner + gaps)
 
     def _down_to_rim(self) -> None:
         p = self.params
@@ -621,8 +641,8 @@ class PickFromSlot(_SlotSkill):
     def _beside_wall(self) -> None:
         p = self.params
         depth = min(p.grip_depth, self._rim_z - self.machine_top_z - p.finger_clearance)
-        self.dev.arm.move_to(self._tcp(self._rim_z - depth), 0.5 * p.approach_speed,
-                             p.acceleration)
+        self.dev.arm.move_to(self._tcp(self._rim_z - depth),
+                             p.beside_wall_speed_factor * p.approach_speed, p.acceleration)
 
     def _pinched(self) -> str | None:
         if not self.dev.gripper.object_detected():
