@@ -24,9 +24,12 @@ from torch.nn import functional as F
 
 from skills.perception.heightmap import PerceptionInputError
 from skills.perception.learned import (
+    ERROR_GIST_CHARS,
     FORMAT_KEY,
+    H_AXIS,
     IN_CHANNELS,
     N_CLASSES,
+    W_AXIS,
     WIDTHS,
     format_values,
     with_metadata,
@@ -42,15 +45,11 @@ KERNEL = 3
 #: the pooling between levels (2 x 2 max) and the upsampling back (nearest, by 2.0): each level
 #: halves the resolution, which input_crop's multiple of 4 (two levels) relies on.
 POOL, UPSAMPLE = 2, 2.0
-#: the height and width axes of an (N, C, H, W) tensor: free in the export
-H_AXIS, W_AXIS = 2, 3
 #: decimals of the input format written into an export's metadata (the format's values are
 #: short decimals; this drops float32 round-off such as 0.07 -> 0.07000000029802322)
 FORMAT_DECIMALS = 6
 #: decimals of a format shown in a message
 SHOWN_DECIMALS = 4
-#: characters kept of the first line of a torch error: its gist, not a page
-ERROR_GIST_CHARS = 160
 
 
 def _format_tensor() -> torch.Tensor:
