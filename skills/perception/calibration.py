@@ -44,10 +44,82 @@ from drivers.camera import Camera, Intrinsics
 from drivers.clock import Clock
 from drivers.pose import Pose
 from drivers.tag_board import TagBoard, tag_dictionary
+from skills.axes import Z
+from skills.params import si
 from skills.status import Status, StepResult
 
 #: Fewest views :func:`calibrate_hand_eye` accepts (two relative motions).
 MIN_VIEWS = 3
+#: rad: a rotation between two views smaller than this gives no axis to the check that the
+#: views turn about two different ones (its axis is then mostly noise).
+MIN_TURN = math.radians(2.0)
+#: The second singular value of the unit rotation axes between the views must reach this: below
+#: it they all lie close to one axis (0: exactly one), and the mount's offset along it is
+#: poorly observed.
+MIN_AXES_SPREAD = 0.1
+#: The floor under the eigenvalues of M^T M in Park and Martin's inverse square root: no
+#: division by zero for a degenerate set of motions (calibrate_hand_eye refuses those first).
+EIGEN_FLOOR = 1e-300
+#: Views :func:`calibration_views` plans when not told how many: the rotations between 8 views
+#: turn about many axes, and a view or two lost (board not seen) leaves enough.
+VIEW_COUNT = 8
+#: Board markers a view must see to be used by :class:`HandEyeRoutine`: two markers' corners
+#: (eight points over the board) pin its pose down better than one marker's four.
+MIN_MARKERS = 2
+#: px: a view whose corners miss the fitted board pose by more than this (rms) holds a misread
+#: corner and is skipped; a good view is a few hundredths of a pixel off on the twin.
+MAX_RMS_PX = 2.0
+#: px: the synthetic image :func:`_corner_offset` measures the detector's convention on: its
+#: side, where the tag starts (rows and columns) and the tag's side, margins on every side so
+#: the tag is whole and its quiet zone white.
+PROBE_IMAGE, PROBE_AT, PROBE_TAG = 200, 60, 80
+#: Low-discrepancy sequences of the views' tilt, distance and turn: start and step of each
+#: (the golden ratio's, sqrt(2)'s and the plastic number's fractional steps, which spread any
+#: number of views evenly and differently from one another), and the azimuth's offset (rad)
+#: so the first view is not along the base's x axis.
+TILT_START, TILT_STEP = 0.5, 0.6180339887
+DIST_START, DIST_STEP = 0.25, 0.4142135624  #: sqrt(2) - 1
+YAW_START, YAW_STEP = 0.1, 0.7548776662  #: 1 / the plastic number
+AZIMUTH_OFFSET = 0.3  #: rad
+
+
+@dataclass(frozen=True)
+class HandEyeParams:
+    """The hand-eye routine's motions (SI): the views it plans and the moves between them."""
+
+    speed: float = si(
+        0.2, "m/s", 0.01, 1.0,
+        "of the TCP between the views: free-space moves above the board",
+    )
+    acceleration: float = si(0.5, "m/s^2", 0.05, 3.0, "of the TCP between the views")
+    settle: float = si(
+        0.3, "s", 0.0, 5.0, "wait once a move is done, before the capture: the arm at rest"
+    )
+    move_timeout: float = si(
+        20.0, "s", 1.0, 120.0,
+        "a move to a view not done after this stops the arm and fails the routine",
+    )
+    near: float = si(
+        0.28, "m", 0.1, 1.0,
+        "the nearest the camera looks at the board from: the whole board in view",
+    )
+    far: float = si(
+        0.40, "m", 0.1, 1.0,
+        "the farthest the camera looks at the board from: its markers still large enough",
+    )
+    min_tilt: float = si(
+        math.radians(10.0), "rad", 0.0, math.radians(45.0),
+        "the least tilt of the optical axis from the vertical: the rotations between the "
+        "views must turn about two different axes",
+    )
+    max_tilt: float = si(
+        math.radians(25.0), "rad", 0.0, math.radians(45.0),
+        "the most tilt of the optical axis from the vertical: the markers still read",
+    )
+    max_yaw: float = si(
+        math.radians(20.0), "rad", 0.0, math.radians(90.0),
+        "the most the camera is turned about its axis from image x along base x",
+    )
 
 
 # ----------------------------------------------------------------------------- one view
@@ -79,13 +151,18 @@ def _corner_offset() -> float:
     the convention needs no edit here.
     """
     dictionary = tag_dictionary()
-    image = np.full((200, 200), 255, np.uint8)
-    image[60:140, 60:140] = cv2.aruco.generateImageMarker(dictionary, 0, 80, borderBits=1)
+    image = np.full((PROBE_IMAGE, PROBE_IMAGE), 255, np.uint8)
+    end = PROBE_AT + PROBE_TAG
+    image[PROBE_AT:end, PROBE_AT:end] = cv2.aruco.generateImageMarker(
+        dictionary, 0, PROBE_TAG, borderBits=1
+    )
     corners, ids, _ = _detector().detectMarkers(image)
     if ids is None or len(ids) != 1:
         return 0.0
-    true = np.array([[59.5, 59.5], [139.5, 59.5], [139.5, 139.5], [59.5, 139.5]])
-    return round(2.0 * float(np.mean(corners[0].reshape(4, 2) - true))) / 2.0
+    lo, hi = PROBE_AT - 0.5, end - 0.5  # exact: a pixel's edge is half a pixel before its centre
+    true = np.array([[lo, lo], [hi, lo], [hi, hi], [lo, hi]])
+    offset = float(np.mean(corners[0].reshape(4, 2) - true))
+    return round(2.0 * offset) / 2.0  # exact: to the half pixel the conventions differ by
 
 
 def _pose(rvec: NDArray[np.float64], tvec: NDArray[np.float64]) -> Pose:
@@ -106,7 +183,8 @@ def detect_board(
     twin renders and the D435 colour stream is close to).
     """
     image = np.asarray(rgb)
-    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    colour = image.ndim == 3  # exact: (H, W, channels), not a grey (H, W)
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if colour else image
     corners, ids, _ = _detector().detectMarkers(np.ascontiguousarray(gray, np.uint8))
     if ids is None:
         return None
@@ -126,7 +204,7 @@ def detect_board(
     # Start from the marker seen largest: IPPE_SQUARE's two solutions, judged on every corner.
     areas = [cv2.contourArea(c.astype(np.float32)) for _, c in on_board]
     best_id, best_corners = on_board[int(np.argmax(areas))]
-    half = 0.5 * board.marker_size
+    half = 0.5 * board.marker_size  # exact: the centre to a side of a square
     square = np.array([[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]])
     board_T_marker = Pose(board.corners_of(best_id).mean(axis=0), np.eye(3))
     n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
@@ -141,9 +219,10 @@ def detect_board(
             best = (err, r0, guess.position.reshape(3, 1).copy())
     if best is None:
         return None
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, best[1], best[2])
+    _, rvec0, tvec0 = best
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, rvec0, tvec0)
     pose = _pose(rvec, tvec)
-    if pose.position[2] <= 0:
+    if pose.position[Z] <= 0:
         return None
     return BoardDetection(pose, tuple(i for i, _ in on_board), _rms(obj, img, rvec, tvec, k, dist))
 
@@ -206,9 +285,10 @@ def calibrate_hand_eye(
     for i, (a, _) in enumerate(pairs):
         for b, _ in pairs[i + 1 :]:
             rel = Rotation.from_matrix(a.rotation.T @ b.rotation).as_rotvec()
-            if np.linalg.norm(rel) > math.radians(2.0):
+            if np.linalg.norm(rel) > MIN_TURN:
                 axes.append(rel / np.linalg.norm(rel))
-    if len(axes) < 2 or np.linalg.svd(np.array(axes), compute_uv=False)[1] < 0.1:
+    two = len(axes) >= 2  # exact: two axes at least
+    if not two or np.linalg.svd(np.array(axes), compute_uv=False)[1] < MIN_AXES_SPREAD:
         raise ValueError(
             "hand-eye calibration: the tool must turn about at least two different axes "
             "between the views (tilt it about x and about y by 10 deg or more)"
@@ -246,7 +326,7 @@ def park_martin(base_T_tool: Sequence[Pose], camera_T_board: Sequence[Pose]) -> 
     for a, b in motions:
         m += np.outer(Rotation.from_matrix(b.rotation).as_rotvec(), a.rotvec)
     w, v = np.linalg.eigh(m.T @ m)
-    rot = v @ np.diag(1.0 / np.sqrt(np.maximum(w, 1e-300))) @ v.T @ m.T
+    rot = v @ np.diag(1.0 / np.sqrt(np.maximum(w, EIGEN_FLOOR))) @ v.T @ m.T
     u, _, vt = np.linalg.svd(rot)  # the nearest rotation (guards round-off)
     rot = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
     lhs = np.concatenate([a.rotation - np.eye(3) for a, _ in motions])
@@ -281,41 +361,42 @@ def hand_eye_residuals(
 def calibration_views(
     target: ArrayLike,
     tool_T_camera: Pose,
-    count: int = 8,
-    distance: tuple[float, float] = (0.28, 0.40),
-    tilt: tuple[float, float] = (math.radians(10.0), math.radians(25.0)),
-    max_yaw: float = math.radians(20.0),
+    count: int = VIEW_COUNT,
+    params: HandEyeParams | None = None,
 ) -> list[Pose]:
     """``count`` tool poses (base frame, m, rad) from which the camera looks at ``target``.
 
     ``target`` (3,): the board's centre in the base frame; ``tool_T_camera``: the mount as
     configured (it only aims the views: a few millimetres or degrees off still see the board).
-    The optical axis points at ``target`` from ``distance`` (m), tilted from the vertical by
-    ``tilt`` (rad) towards azimuths spread evenly around it, and the camera is turned about its
-    axis by up to ``max_yaw`` (rad) from "image x along base x" (the tool pointing down as at the
+    The optical axis points at ``target`` from between ``params.near`` and ``params.far`` (m),
+    tilted from the vertical by ``params.min_tilt`` to ``params.max_tilt`` (rad) towards azimuths
+    spread evenly around it, and the camera is turned about its axis by up to
+    ``params.max_yaw`` (rad) from "image x along base x" (the tool pointing down as at the
     robot's home). Tilt, distance and turn vary from view to view along low-discrepancy
     sequences, so the motions between views turn about many axes, as the calibration needs.
     """
+    p = params if params is not None else HandEyeParams()
+    distance, tilt, max_yaw = (p.near, p.far), (p.min_tilt, p.max_tilt), p.max_yaw
     if count < 1:
         raise ValueError(f"count: must be >= 1, got {count}")
     centre = np.asarray(target, float).reshape(3)
     down = np.diag([1.0, -1.0, -1.0])  # optical z along base -z, optical x along base x
     views = []
     for i in range(count):
-        azimuth = 2.0 * math.pi * i / count + 0.3
-        g_tilt = (0.5 + i * 0.6180339887) % 1.0
-        g_dist = (0.25 + i * 0.4142135624) % 1.0
-        g_yaw = (0.1 + i * 0.7548776662) % 1.0
+        azimuth = 2.0 * math.pi * i / count + AZIMUTH_OFFSET  # exact: a full turn, evenly
+        g_tilt = (TILT_START + i * TILT_STEP) % 1.0
+        g_dist = (DIST_START + i * DIST_STEP) % 1.0
+        g_yaw = (YAW_START + i * YAW_STEP) % 1.0
         t = tilt[0] + (tilt[1] - tilt[0]) * g_tilt
         d = distance[0] + (distance[1] - distance[0]) * g_dist
-        yaw = max_yaw * (2.0 * g_yaw - 1.0)
+        yaw = max_yaw * (2.0 * g_yaw - 1.0)  # exact: [0, 1) onto [-1, 1)
         axis = np.array([-math.sin(azimuth), math.cos(azimuth), 0.0])
         rot = (
             Rotation.from_rotvec(t * axis).as_matrix()
             @ down
             @ Rotation.from_euler("z", yaw).as_matrix()
         )
-        camera = Pose(centre - d * rot[:, 2], rot)
+        camera = Pose(centre - d * rot[:, Z], rot)
         views.append(camera @ tool_T_camera.inverse())
     return views
 
@@ -343,15 +424,15 @@ class HandEyeRoutine:
     """Move through ``views`` (tool poses, base frame), capture the board at each, calibrate.
 
     Non-blocking: each :meth:`tick` is one control step (start a move, poll it, wait
-    ``settle`` s once it is done, capture and detect). A view the arm cannot reach (its motion
-    faults or stops), where the camera times out, sees fewer than ``min_markers`` markers, or
-    where their corners miss the fitted pose by more than ``max_rms_px`` (a misread corner) is
-    recorded with a note and skipped; a move that takes longer than ``move_timeout`` s stops the
-    arm and fails the routine. At the end :func:`calibrate_hand_eye` runs on the views that saw
-    the board: SUCCESS leaves ``tool_T_camera`` and ``residuals`` (see
+    ``params.settle`` s once it is done, capture and detect). A view the arm cannot reach (its
+    motion faults or stops), where the camera times out, sees fewer than ``min_markers`` markers,
+    or where their corners miss the fitted pose by more than ``max_rms_px`` (a misread corner) is
+    recorded with a note and skipped; a move that takes longer than ``params.move_timeout`` s
+    stops the arm and fails the routine. At the end :func:`calibrate_hand_eye` runs on the views
+    that saw the board: SUCCESS leaves ``tool_T_camera`` and ``residuals`` (see
     :func:`hand_eye_residuals`); too few views or a degenerate set is a FAILURE saying so.
-    Free-space moves above the board, at ``speed`` m/s and ``acceleration`` m/s^2: clear the
-    space between the views first.
+    Free-space moves above the board, at ``params.speed`` and ``params.acceleration``
+    (:class:`HandEyeParams`): clear the space between the views first.
     """
 
     def __init__(
@@ -361,20 +442,18 @@ class HandEyeRoutine:
         clock: Clock,
         board: TagBoard,
         views: Sequence[Pose],
-        speed: float = 0.2,
-        acceleration: float = 0.5,
-        settle: float = 0.3,
-        move_timeout: float = 20.0,
-        min_markers: int = 2,
-        max_rms_px: float = 2.0,
+        params: HandEyeParams | None = None,
+        min_markers: int = MIN_MARKERS,
+        max_rms_px: float = MAX_RMS_PX,
         dist_coeffs: ArrayLike | None = None,
     ) -> None:
         if not views:
             raise ValueError("hand-eye routine: no views given")
         self.arm, self.camera, self.clock, self.board = arm, camera, clock, board
         self.views = list(views)
-        self.speed, self.acceleration, self.settle = speed, acceleration, settle
-        self.move_timeout, self.min_markers = move_timeout, min_markers
+        self.params = p = params if params is not None else HandEyeParams()
+        self.speed, self.acceleration, self.settle = p.speed, p.acceleration, p.settle
+        self.move_timeout, self.min_markers = p.move_timeout, min_markers
         self.max_rms_px = max_rms_px
         self.dist_coeffs = dist_coeffs
         self._state = _ViewState()

@@ -15,9 +15,36 @@ from numpy.typing import NDArray
 
 from drivers.camera import Frame, Intrinsics
 from drivers.pose import Pose
+from skills.axes import DIM
 from skills.status import SkillInputError
 
 _UP = np.array([0.0, 0.0, 1.0])
+#: Random three-point planes RANSAC tries. The floor is the largest plane in view, so a try
+#: whose three points all lie on it is common; the least-squares refit on the best one's inliers
+#: then makes the result insensitive to which of those tries won.
+FLOOR_ITERATIONS = 60
+#: m: a point this close to a candidate plane counts as its inlier: above the depth noise on the
+#: floor, well under the thinnest part lying on it (the 7.6 mm rail), whose top must not count.
+FLOOR_TOLERANCE = 0.003
+#: points drawn for counting the inliers: enough to rank the candidate planes, few enough that
+#: the tries stay a small part of a frame's time.
+FLOOR_SAMPLE = 20000
+#: m^2: three points whose two differences have a cross product shorter than this lie (nearly)
+#: on a line and define no plane.
+DEGENERATE_AREA = 1e-9
+#: deg: the floor's normal lies within this of the up hint; steeper planes are walls or faces of
+#: parts, and a camera or bin tilted by less still finds its floor.
+FLOOR_MAX_TILT_DEG = 25.0
+#: m: the bin's inside is shrunk by this before the floor fit, so that the walls drop out.
+ROI_MARGIN = 0.008
+#: valid depth pixels inside the bin below which no floor is looked for: a frame this empty is
+#: no view of the bin.
+MIN_FLOOR_PIXELS = 100
+#: points the floor fit is given at most (every k-th valid pixel): the bin is about half of a
+#: 640 x 480 frame, and the fit needs far fewer points than that.
+FLOOR_FIT_POINTS = 40000
+#: points that define a plane
+PLANE_POINTS = 3
 
 
 def dot_last(a: NDArray[np.floating], w: NDArray[np.floating] | tuple[float, ...]) -> NDArray:
@@ -60,7 +87,7 @@ def check_frame(frame: Frame, intr: Intrinsics | None) -> None:
     if intr is None:
         raise PerceptionInputError("missing camera intrinsics")
     depth = frame.depth
-    if not isinstance(depth, np.ndarray) or depth.ndim != 2:
+    if not isinstance(depth, np.ndarray) or depth.ndim != 2:  # exact: an image: rows, columns
         raise PerceptionInputError(
             f"depth must be an (H, W) array, got {getattr(depth, 'shape', type(depth).__name__)}"
         )
@@ -99,7 +126,7 @@ def back_project_image(
     cam = _rays(intr, depth.shape) * z[..., None]
     rot = world_T_camera.rotation
     pos = world_T_camera.position
-    pts = np.stack([dot_last(cam, rot[i]) + np.float32(pos[i]) for i in range(3)], axis=-1)
+    pts = np.stack([dot_last(cam, rot[i]) + np.float32(pos[i]) for i in range(DIM)], axis=-1)
     pts[z <= 0] = np.nan
     return pts
 
@@ -107,29 +134,29 @@ def back_project_image(
 def fit_floor(
     points: NDArray[np.floating],
     rng: np.random.Generator,
-    iterations: int = 60,
-    tolerance: float = 0.003,
+    iterations: int = FLOOR_ITERATIONS,
+    tolerance: float = FLOOR_TOLERANCE,
     up_hint: NDArray[np.float64] | None = None,
 ) -> Plane:
     """RANSAC plane with the most inliers among planes within 25 deg of ``up_hint``, refined by
     least squares on its inliers. ``points`` (N, 3) finite."""
     up_hint = _UP if up_hint is None else up_hint
     n = len(points)
-    if n < 3:
+    if n < PLANE_POINTS:
         raise PerceptionInputError("too few valid depth pixels to find the floor")
-    sample = points[rng.choice(n, size=min(n, 20000), replace=False)]
+    sample = points[rng.choice(n, size=min(n, FLOOR_SAMPLE), replace=False)]
     best, best_count = None, -1
-    idx = rng.integers(0, len(sample), size=(iterations, 3))
+    idx = rng.integers(0, len(sample), size=(iterations, PLANE_POINTS))
     for i, j, k in idx:
         a, b, c = sample[i], sample[j], sample[k]
         nrm = np.cross(b - a, c - a)
         norm = float(np.linalg.norm(nrm))
-        if norm < 1e-9:
+        if norm < DEGENERATE_AREA:
             continue
         nrm = nrm / norm
         if nrm @ up_hint < 0:
             nrm = -nrm
-        if nrm @ up_hint < np.cos(np.radians(25.0)):
+        if nrm @ up_hint < np.cos(np.radians(FLOOR_MAX_TILT_DEG)):
             continue
         count = int(np.count_nonzero(np.abs(dot_last(sample, nrm) - nrm @ a) < tolerance))
         if count > best_count:
@@ -140,7 +167,7 @@ def fit_floor(
     inl = sample[np.abs(dot_last(sample, nrm) - off) < tolerance]
     centroid = inl.mean(axis=0)
     d = inl - centroid
-    cov = np.array([[float(np.sum(d[:, i] * d[:, j])) for j in range(3)] for i in range(3)])
+    cov = np.array([[float(np.sum(d[:, i] * d[:, j])) for j in range(DIM)] for i in range(DIM)])
     nrm = np.linalg.eigh(cov)[1][:, 0]  # the least-spread direction (3 x 3: no BLAS threads)
     if nrm @ up_hint < 0:
         nrm = -nrm
@@ -152,7 +179,7 @@ def height_map(
     intr: Intrinsics,
     world_T_camera: Pose,
     roi: tuple[float, float, float, float] | None = None,
-    roi_margin: float = 0.008,
+    roi_margin: float = ROI_MARGIN,
     rng: np.random.Generator | None = None,
 ) -> HeightMap:
     """Heights above the floor for every pixel. ``roi`` = (xmin, xmax, ymin, ymax) in the base
@@ -172,9 +199,12 @@ def height_map(
                 & (pts[..., 1] < y1 - m)
             )
     flat = pts[valid]
-    if len(flat) < 100:
-        raise PerceptionInputError("fewer than 100 valid depth pixels inside the bin")
-    plane = fit_floor(flat.astype(np.float64, copy=False)[:: max(1, len(flat) // 40000)], rng)
+    if len(flat) < MIN_FLOOR_PIXELS:
+        raise PerceptionInputError(
+            f"fewer than {MIN_FLOOR_PIXELS} valid depth pixels inside the bin"
+        )
+    every = max(1, len(flat) // FLOOR_FIT_POINTS)
+    plane = fit_floor(flat.astype(np.float64, copy=False)[::every], rng)
     height = np.full(valid.shape, np.nan, np.float32)
     height[valid] = dot_last(flat, plane.normal) - np.float32(plane.offset)
     z_mid = float(np.median(frame.depth[frame.depth > 0]))

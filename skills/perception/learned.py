@@ -34,7 +34,7 @@ from skills.perception.heightmap import HeightMap, PerceptionInputError
 
 #: Classes per pixel.
 BACKGROUND, INTERIOR, BOUNDARY = 0, 1, 2
-N_CLASSES = 3
+N_CLASSES = 3  #: the three above
 #: The network sees the image at 1 / DOWNSCALE of the camera's resolution. 1, because at 0.5 m a
 #: camera pixel is ~1 mm and the thinnest part (the 7.6 mm rail) is only 7-9 pixels wide: at half
 #: resolution (tried first) it had ~2 interior pixels left and 46 % of the rails were lost in
@@ -60,6 +60,30 @@ MAX_GROW_PX = 12
 INFERENCE_THREADS = 1
 #: ONNX metadata key of the input format (:func:`format_values`, a JSON list) in a model file.
 FORMAT_KEY = "pivot_cell.segmentation_format"
+#: Pixels (at network resolution) an input's side is a multiple of: the network pools twice by
+#: 2 (:class:`skills.perception.segnet.SegNet`) and upsamples twice by 2 back to the same size.
+INPUT_MULTIPLE = 4
+#: The fraction of valid depth pixels in a network pixel below which its mean height is taken as
+#: 0 rather than divided out (no division by a vanishing fraction).
+MIN_VALID_FRACTION = 1e-3
+#: A uint8 grey level's full scale: the grey channel spans 0..1.
+GREY_FULL_SCALE = 255.0
+#: The height channel (in HEIGHT_SCALE) is clipped to this range: a pixel deeper than the floor
+#: by half a scale is noise, and anything taller than two scales (a wall's top) is no part.
+MIN_HEIGHT_IN, MAX_HEIGHT_IN = -0.5, 2.0
+#: Pixel connectivity of the interior blobs (4, not 8: see :func:`instances_from_classes`).
+CONNECTIVITY = 4
+#: Side (pixels) of the closing that fills small dropout holes in the bin's valid mask.
+CLOSE_PX = 5
+#: Characters kept of an error's gist in a message (the full text may be a page long).
+ERROR_GIST_CHARS = 160
+#: A network input's axes, (N, C, H, W): their number and where height and width are.
+INPUT_NDIM = 4
+H_AXIS, W_AXIS = 2, 3  #: free in an export: any height and width
+#: A colour frame's channels: red, green, blue.
+RGB_CHANNELS = 3
+#: The first bytes of a zip file, as torch.save writes its state dicts.
+ZIP_MAGIC = b"PK\x03\x04"
 
 
 def format_values() -> tuple[float, ...]:
@@ -78,12 +102,12 @@ def input_crop(height: NDArray[np.floating]) -> tuple[int, int, int, int]:
         raise PerceptionInputError("the height map holds no valid pixel")
     rows = np.flatnonzero(valid.any(axis=1))
     cols = np.flatnonzero(valid.any(axis=0))
-    step = 4 * DOWNSCALE
+    step = INPUT_MULTIPLE * DOWNSCALE
     h, w = height.shape
 
     def span(lo: int, hi: int, size: int) -> tuple[int, int]:
         n = -(-(hi - lo) // step) * step
-        lo = max(0, min(lo - (n - (hi - lo)) // 2, size - n))
+        lo = max(0, min(lo - (n - (hi - lo)) // 2, size - n))  # exact: grown evenly both sides
         return lo, min(size, lo + n)
 
     r0, r1 = span(int(rows[0]), int(rows[-1]) + 1, h)
@@ -111,10 +135,12 @@ def network_input(
     small = ((r1 - r0) // DOWNSCALE, (c1 - c0) // DOWNSCALE)
     frac = _shrink(valid, small)
     hsum = _shrink(np.where(valid > 0, hc, 0.0).astype(np.float32), small)
-    hmean = np.where(frac > 1e-3, hsum / np.maximum(frac, 1e-3), 0.0) / HEIGHT_SCALE
+    mean = hsum / np.maximum(frac, MIN_VALID_FRACTION)
+    hmean = np.where(frac > MIN_VALID_FRACTION, mean, 0.0) / HEIGHT_SCALE
     grey = cv2.cvtColor(np.ascontiguousarray(rgb[r0:r1, c0:c1]), cv2.COLOR_RGB2GRAY)
-    grey_small = _shrink(grey.astype(np.float32) / 255.0, small)
-    return np.stack([np.clip(hmean, -0.5, 2.0), frac, grey_small]).astype(np.float32)
+    grey_small = _shrink(grey.astype(np.float32) / GREY_FULL_SCALE, small)
+    hin = np.clip(hmean, MIN_HEIGHT_IN, MAX_HEIGHT_IN)
+    return np.stack([hin, frac, grey_small]).astype(np.float32)
 
 
 def pixel_classes(instances: NDArray[np.integer], crop: tuple[int, int, int, int]) -> NDArray:
@@ -123,9 +149,10 @@ def pixel_classes(instances: NDArray[np.integer], crop: tuple[int, int, int, int
     rest of each part INTERIOR. Returns (h, w) int64."""
     r0, r1, c0, c1 = crop
     inst = np.ascontiguousarray(instances[r0:r1, c0:c1]).astype(np.int32)
-    small = inst[DOWNSCALE // 2 :: DOWNSCALE, DOWNSCALE // 2 :: DOWNSCALE]
+    mid = DOWNSCALE // 2  # exact: the middle pixel of each DOWNSCALE block
+    small = inst[mid::DOWNSCALE, mid::DOWNSCALE]
     small = small[: (r1 - r0) // DOWNSCALE, : (c1 - c0) // DOWNSCALE]
-    k = 2 * BOUNDARY_PX + 1
+    k = 2 * BOUNDARY_PX + 1  # exact: BOUNDARY_PX on each side of the pixel
     kernel = np.ones((k, k), np.uint8)
     # A pixel is a boundary when the max or min label in its window differs from its own.
     f = small.astype(np.float32)
@@ -146,7 +173,7 @@ def instances_from_classes(classes: NDArray[np.integer], part_ok: NDArray[np.boo
     first.
     """
     interior = (classes == INTERIOR).astype(np.uint8)
-    n, comp, stats, _ = cv2.connectedComponentsWithStats(interior, connectivity=4)
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(interior, connectivity=CONNECTIVITY)
     keep = np.zeros(n, np.int32)
     big = [i for i in range(1, n) if stats[i, cv2.CC_STAT_AREA] >= MIN_INTERIOR_PX]
     big.sort(key=lambda i: -stats[i, cv2.CC_STAT_AREA])
@@ -213,8 +240,10 @@ class LearnedSegmenter:
             cv2.setNumThreads(before)
         r0, r1, c0, c1 = crop
         if y.shape[1:] != (r1 - r0, c1 - c0):  # DOWNSCALE > 1: bilinear, half-pixel centres
-            y = cv2.resize(y.transpose(1, 2, 0), (c1 - c0, r1 - r0), interpolation=cv2.INTER_LINEAR)
-            y = np.ascontiguousarray(y.reshape(r1 - r0, c1 - c0, -1).transpose(2, 0, 1))
+            hwc = y.transpose(1, 2, 0)  # exact: (C, H, W) -> (H, W, C)
+            y = cv2.resize(hwc, (c1 - c0, r1 - r0), interpolation=cv2.INTER_LINEAR)
+            chw = y.reshape(r1 - r0, c1 - c0, -1).transpose(2, 0, 1)  # exact: and back
+            y = np.ascontiguousarray(chw)
         return y, crop
 
     def segment(self, hm: HeightMap, rgb: NDArray[np.uint8]) -> NDArray[np.int32]:
@@ -232,7 +261,8 @@ class LearnedSegmenter:
         r0, r1, c0, c1 = crop
         classes = logits.argmax(axis=0)
         valid = np.isfinite(hm.height[r0:r1, c0:c1]).astype(np.uint8)
-        inside = cv2.morphologyEx(valid, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8)) > 0
+        closing = np.ones((CLOSE_PX, CLOSE_PX), np.uint8)
+        inside = cv2.morphologyEx(valid, cv2.MORPH_CLOSE, closing) > 0
         labels = np.zeros(hm.height.shape, np.int32)
         labels[r0:r1, c0:c1] = instances_from_classes(classes, inside)
         return labels
@@ -245,7 +275,7 @@ _PROBE = 16
 def _load_net(data: bytes, where: str, path: Path | None) -> cv2.dnn.Net:
     """The OpenCV network of the ONNX model ``data``, after checking that it is one, that its
     input format is this code's and that it maps the input to N_CLASSES logits per pixel."""
-    if data[:4] == b"PK\x03\x04":  # torch.save's zip container
+    if data[: len(ZIP_MAGIC)] == ZIP_MAGIC:  # torch.save's zip container
         hint = f" {path}" if path is not None else " FILE.pt"
         raise PerceptionInputError(
             f"{where}: a torch state dict, not an ONNX model; export it with "
@@ -275,7 +305,8 @@ def _load_net(data: bytes, where: str, path: Path | None) -> cv2.dnn.Net:
             "cell train-perception"
         )
     dims = inputs[0][1] if len(inputs) == 1 else ()
-    if len(dims) != 4 or dims[1] != IN_CHANNELS or not all(isinstance(d, str) for d in dims[2:]):
+    free = all(isinstance(d, str) for d in dims[H_AXIS:])
+    if len(dims) != INPUT_NDIM or dims[1] != IN_CHANNELS or not free:
         # OpenCV would run a model made for other channels or another size on any input
         # without a word.
         shapes = ", ".join(f"{n} {list(d)}" for n, d in inputs) or "none"
@@ -305,13 +336,34 @@ def _cv_error(exc: cv2.error) -> str:
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     for ln in lines:
         if "error: (" in ln:
-            return ln.split("error: ", 1)[1][:160]
-    return (lines or [type(exc).__name__])[0][:160]
+            return ln.split("error: ", 1)[1][:ERROR_GIST_CHARS]
+    return (lines or [type(exc).__name__])[0][:ERROR_GIST_CHARS]
 
 
 # ONNX files are protocol buffers (a ModelProto). Reading the metadata needs only the top level of
 # the message, so it is read here rather than with the onnx package, which inference does not need.
 _IR_VERSION, _GRAPH, _METADATA = 1, 7, 14  # ModelProto field numbers
+#: The protocol buffer encoding (protobuf.dev/programming-guides/encoding): a key is the field
+#: number shifted left by 3 bits over the wire type; a varint carries 7 bits a byte, low first,
+#: the top bit set on every byte but the last, and is at most 64 bits (shifts up to 63).
+_WIRE_BITS, _WIRE_MASK = 3, 0x7
+_VARINT_BITS, _VARINT_MASK, _VARINT_MORE = 7, 0x7F, 0x80  #: payload bits, their mask, more flag
+_VARINT_MAX_SHIFT = 63  #: the last shift of a 64-bit varint
+#: wire types: varint, fixed 64-bit, length-delimited, fixed 32-bit
+_VARINT, _I64, _LEN, _I32 = 0, 1, 2, 5
+_I64_SIZE, _I32_SIZE = 8, 4  #: bytes of the fixed wire types
+#: field numbers of the messages inside a ModelProto read here (onnx/onnx.proto):
+#: StringStringEntryProto key, value; GraphProto initializer, input; TensorProto name;
+#: ValueInfoProto name, type; TypeProto tensor_type; TypeProto.Tensor shape;
+#: TensorShapeProto dim; its Dimension's dim_value, dim_param.
+_ENTRY_KEY, _ENTRY_VALUE = 1, 2
+_GRAPH_INITIALIZER, _GRAPH_INPUT = 5, 11  #: GraphProto
+_TENSOR_NAME = 8  #: TensorProto
+_VALUE_INFO_NAME, _VALUE_INFO_TYPE = 1, 2  #: ValueInfoProto
+_TYPE_TENSOR = 1  #: TypeProto
+_TENSOR_TYPE_SHAPE = 2  #: TypeProto.Tensor
+_SHAPE_DIM = 1  #: TensorShapeProto
+_DIM_VALUE, _DIM_PARAM = 1, 2  #: TensorShapeProto.Dimension
 
 
 def _varint(data: bytes, i: int) -> tuple[int, int]:
@@ -321,11 +373,11 @@ def _varint(data: bytes, i: int) -> tuple[int, int]:
             raise ValueError("truncated")
         b = data[i]
         i += 1
-        out |= (b & 0x7F) << shift
-        if not b & 0x80:
+        out |= (b & _VARINT_MASK) << shift
+        if not b & _VARINT_MORE:
             return out, i
-        shift += 7
-        if shift > 63:
+        shift += _VARINT_BITS
+        if shift > _VARINT_MAX_SHIFT:
             raise ValueError("a malformed number")
 
 
@@ -337,17 +389,17 @@ def _fields(data: bytes) -> Iterator[tuple[int, int, int | bytes, int, int]]:
     while i < n:
         start = i
         key, i = _varint(data, i)
-        field, wire = key >> 3, key & 7
+        field, wire = key >> _WIRE_BITS, key & _WIRE_MASK
         value: int | bytes
         if field == 0:
             raise ValueError("not a protocol buffer")
-        if wire == 0:
+        if wire == _VARINT:
             value, i = _varint(data, i)
-        elif wire == 2:
+        elif wire == _LEN:
             size, i = _varint(data, i)
             value, i = data[i : i + size], i + size
-        elif wire in (1, 5):
-            size = 8 if wire == 1 else 4
+        elif wire in (_I64, _I32):
+            size = _I64_SIZE if wire == _I64 else _I32_SIZE
             value, i = data[i : i + size], i + size
         else:
             raise ValueError("not a protocol buffer")
@@ -363,15 +415,17 @@ def onnx_metadata(data: bytes) -> dict[str, str]:
     seen = set()
     for field, wire, value, _, _ in _fields(data):
         seen.add((field, wire))
-        if field == _METADATA and wire == 2:
+        if field == _METADATA and wire == _LEN:
             assert isinstance(value, bytes)
-            entry = {f: v for f, w, v, _, _ in _fields(value) if w == 2}
+            entry = {f: v for f, w, v, _, _ in _fields(value) if w == _LEN}
             try:
-                key, val = (bytes(entry.get(f, b"")).decode() for f in (1, 2))
+                key, val = (
+                    bytes(entry.get(f, b"")).decode() for f in (_ENTRY_KEY, _ENTRY_VALUE)
+                )
             except UnicodeDecodeError:
                 raise ValueError("metadata that is not text") from None
             meta[key] = val
-    if (_IR_VERSION, 0) not in seen or (_GRAPH, 2) not in seen:
+    if (_IR_VERSION, _VARINT) not in seen or (_GRAPH, _LEN) not in seen:
         raise ValueError("no model version or no graph")
     return meta
 
@@ -391,19 +445,24 @@ def onnx_inputs(data: bytes) -> list[tuple[str, tuple[int | str, ...]]]:
     graph = graphs[-1]
     # GraphProto: initializer 5 (TensorProto, name 8), input 11 (ValueInfoProto: name 1, type 2);
     # TypeProto: tensor_type 1 (shape 2); TensorShapeProto: dim 1 (dim_value 1, dim_param 2).
-    weights = {b"".join(_sub(t, 8)) for t in _sub(graph, 5)}
+    weights = {b"".join(_sub(t, _TENSOR_NAME)) for t in _sub(graph, _GRAPH_INITIALIZER)}
     out = []
-    for value_info in _sub(graph, 11):
-        name = b"".join(_sub(value_info, 1))
+    for value_info in _sub(graph, _GRAPH_INPUT):
+        name = b"".join(_sub(value_info, _VALUE_INFO_NAME))
         if name in weights:
             continue
         dims: list[int | str] = []
-        for t in _sub(value_info, 2):
-            for tensor in _sub(t, 1):
-                for shape in _sub(tensor, 2):
-                    for dim in _sub(shape, 1):
-                        size = [v for f, w, v, _, _ in _fields(dim) if f == 1 and w == 0]
-                        dims.append(int(size[-1]) if size else b"".join(_sub(dim, 2)).decode())
+        for t in _sub(value_info, _VALUE_INFO_TYPE):
+            for tensor in _sub(t, _TYPE_TENSOR):
+                for shape in _sub(tensor, _TENSOR_TYPE_SHAPE):
+                    for dim in _sub(shape, _SHAPE_DIM):
+                        size = [
+                            v for f, w, v, _, _ in _fields(dim) if f == _DIM_VALUE and w == _VARINT
+                        ]
+                        if size:
+                            dims.append(int(size[-1]))
+                        else:
+                            dims.append(b"".join(_sub(dim, _DIM_PARAM)).decode())
         out.append((name.decode(errors="replace"), tuple(dims)))
     return out
 
@@ -412,11 +471,11 @@ def with_metadata(data: bytes, meta: dict[str, str]) -> bytes:
     """The ONNX model ``data`` with ``meta`` as its only ``metadata_props``."""
 
     def length_delimited(field: int, payload: bytes) -> bytes:
-        out, key, size = bytearray(), field << 3 | 2, len(payload)
+        out, key, size = bytearray(), field << _WIRE_BITS | _LEN, len(payload)
         for v in (key, size):
-            while v > 0x7F:
-                out.append(v & 0x7F | 0x80)
-                v >>= 7
+            while v > _VARINT_MASK:
+                out.append(v & _VARINT_MASK | _VARINT_MORE)
+                v >>= _VARINT_BITS
             out.append(v)
         return bytes(out) + payload
 
@@ -424,7 +483,7 @@ def with_metadata(data: bytes, meta: dict[str, str]) -> bytes:
     added = b"".join(
         length_delimited(
             _METADATA,
-            length_delimited(1, k.encode()) + length_delimited(2, v.encode()),
+            length_delimited(_ENTRY_KEY, k.encode()) + length_delimited(_ENTRY_VALUE, v.encode()),
         )
         for k, v in meta.items()
     )
@@ -433,11 +492,15 @@ def with_metadata(data: bytes, meta: dict[str, str]) -> bytes:
 
 def _check_inputs(hm: HeightMap, rgb: NDArray[np.uint8]) -> None:
     h = hm.height
-    if not isinstance(h, np.ndarray) or h.ndim != 2:
+    if not isinstance(h, np.ndarray) or h.ndim != 2:  # exact: an image: rows, columns
         raise PerceptionInputError(
             f"height must be an (H, W) array, got {getattr(h, 'shape', type(h).__name__)}"
         )
-    if not isinstance(rgb, np.ndarray) or rgb.shape != (*h.shape, 3) or rgb.dtype != np.uint8:
+    if (
+        not isinstance(rgb, np.ndarray)
+        or rgb.shape != (*h.shape, RGB_CHANNELS)
+        or rgb.dtype != np.uint8
+    ):
         raise PerceptionInputError(
             f"rgb must be a uint8 {h.shape[0]} x {h.shape[1]} x 3 array like the height map, got "
             f"{getattr(rgb, 'dtype', type(rgb).__name__)} {getattr(rgb, 'shape', '')}"

@@ -14,6 +14,7 @@ from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY, Z
 from skills.frames import frame_step
 from skills.motion import Guard, GuardedMotion, Sequence
 from skills.params import si
@@ -26,6 +27,11 @@ from skills.perception.bin_parts import (
 from skills.status import Failure, Status, StepResult
 
 DOWN = np.diag([1.0, -1.0, -1.0])
+#: m: a part an earlier view found within this of one a later view found is that same part (the
+#: later view refines it); farther away, a part the later, closer view did not see, kept. About
+#: five times the shift between the views that a 0.5 deg hand-eye error makes (4 mm from the
+#: wide view, see LookParams.close_height).
+SAME_PART_DISTANCE = 0.02
 
 
 def camera_over(xy: tuple[float, float], height: float, dev: Devices) -> Pose:
@@ -67,14 +73,19 @@ def end_views(
     outside the bin) or a neighbour stands in front of it: the place deeper inside the bin
     ``roi`` and farther from the other parts comes first."""
     u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-    places = [d.center[:2] + s * (0.5 * d.length + offset) * u for s in (1.0, -1.0)]
+    reach = 0.5 * d.length + offset  # exact: the end is half the length from the centre
+    places = [d.center[XY] + s * reach * u for s in (1.0, -1.0)]
 
     def room(xy: np.ndarray) -> float:
         inside = math.inf
         if roi is not None:
             x0, x1, y0, y1 = roi
             inside = min(xy[0] - x0, x1 - xy[0], xy[1] - y0, y1 - xy[1])
-        near = [math.dist(xy, o.center[:2]) - 0.5 * o.outer for o in others if o is not d]
+        near = [
+            math.dist(xy, o.center[XY]) - 0.5 * o.outer  # exact: the radius is half the size
+            for o in others
+            if o is not d
+        ]
         return min([inside, *near, 1.0])
 
     places.sort(key=room, reverse=True)
@@ -173,17 +184,18 @@ class Look:
         within half its outer size keeps the earlier pose."""
         r = self.result
         assert r is not None
-        near = [d for d in dets if math.dist(d.center[:2], r.center[:2]) < 0.5 * r.outer]
+        radius = 0.5 * r.outer  # exact: half the outer size; a centre inside the earlier part
+        near = [d for d in dets if math.dist(d.center[XY], r.center[XY]) < radius]
         if not near:
             return
-        d = min(near, key=lambda d: math.dist(d.center[:2], r.center[:2]))
+        d = min(near, key=lambda d: math.dist(d.center[XY], r.center[XY]))
         yaw = d.yaw if math.cos(d.yaw - r.yaw) >= 0.0 else d.yaw + math.pi
         yaw = math.atan2(math.sin(yaw), math.cos(yaw))
         u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        centre = np.array([d.center[0], d.center[1], r.center[2]])
-        end = centre + 0.5 * r.length * u
+        centre = np.array([d.center[0], d.center[1], r.center[Z]])
+        end = centre + 0.5 * r.length * u  # exact: the end is half the length from the centre
         self.result = dataclasses.replace(r, center=centre, yaw=yaw,
-                                          open_end=np.array([end[0], end[1], r.open_end[2]]))
+                                          open_end=np.array([end[0], end[1], r.open_end[Z]]))
 
     def _detect_work(self, frame: Frame, pose: Pose) -> list[Detection]:
         camera = self.dev.camera
@@ -225,7 +237,7 @@ class Look:
         """The part nearest ``near_xy``; a later view replaces the choice only when it decided
         the open end."""
         if dets:
-            best = min(dets, key=lambda d: math.dist(d.center[:2], self._near_xy))
+            best = min(dets, key=lambda d: math.dist(d.center[XY], self._near_xy))
             if self.result is None or best.open_end_seen:
                 self.result = best
 
@@ -234,7 +246,7 @@ class Look:
         and adds any new ones, but never forgets what the wide view found."""
         merged = list(dets)
         for old in self.detections:
-            if all(math.dist(old.center[:2], d.center[:2]) > 0.02 for d in dets):
+            if all(math.dist(old.center[XY], d.center[XY]) > SAME_PART_DISTANCE for d in dets):
                 merged.append(old)
         self.detections = merged
 

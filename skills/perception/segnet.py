@@ -24,9 +24,12 @@ from torch.nn import functional as F
 
 from skills.perception.heightmap import PerceptionInputError
 from skills.perception.learned import (
+    ERROR_GIST_CHARS,
     FORMAT_KEY,
+    H_AXIS,
     IN_CHANNELS,
     N_CLASSES,
+    W_AXIS,
     WIDTHS,
     format_values,
     with_metadata,
@@ -35,6 +38,18 @@ from skills.perception.learned import (
 #: The ONNX operator set of the export: its Conv, Relu, MaxPool, Resize (nearest, constant
 #: scales) and Concat are read by OpenCV's DNN module from 4.8 on.
 ONNX_OPSET = 17
+#: px: the side of every convolution of a block, with a padding of one pixel so the size
+#: stays; two 3 x 3 layers per block are the U-Net's own. The weights' shapes hold it: the
+#: shipped model (cell/data/perception_unet.onnx) was trained with it.
+KERNEL = 3
+#: the pooling between levels (2 x 2 max) and the upsampling back (nearest, by 2.0): each level
+#: halves the resolution, which input_crop's multiple of 4 (two levels) relies on.
+POOL, UPSAMPLE = 2, 2.0
+#: decimals of the input format written into an export's metadata (the format's values are
+#: short decimals; this drops float32 round-off such as 0.07 -> 0.07000000029802322)
+FORMAT_DECIMALS = 6
+#: decimals of a format shown in a message
+SHOWN_DECIMALS = 4
 
 
 def _format_tensor() -> torch.Tensor:
@@ -43,10 +58,10 @@ def _format_tensor() -> torch.Tensor:
 
 def _block(c_in: int, c_out: int) -> nn.Sequential:
     return nn.Sequential(
-        nn.Conv2d(c_in, c_out, 3, padding=1, bias=False),
+        nn.Conv2d(c_in, c_out, KERNEL, padding=1, bias=False),
         nn.BatchNorm2d(c_out),
         nn.ReLU(inplace=True),
-        nn.Conv2d(c_out, c_out, 3, padding=1, bias=False),
+        nn.Conv2d(c_out, c_out, KERNEL, padding=1, bias=False),
         nn.BatchNorm2d(c_out),
         nn.ReLU(inplace=True),
     )
@@ -79,10 +94,10 @@ class SegNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         a = self.enc0(x)
-        b = self.enc1(F.max_pool2d(a, 2))
-        c = self.mid(F.max_pool2d(b, 2))
-        d = self.dec1(torch.cat([F.interpolate(c, scale_factor=2.0), b], dim=1))
-        e = self.dec0(torch.cat([F.interpolate(d, scale_factor=2.0), a], dim=1))
+        b = self.enc1(F.max_pool2d(a, POOL))
+        c = self.mid(F.max_pool2d(b, POOL))
+        d = self.dec1(torch.cat([F.interpolate(c, scale_factor=UPSAMPLE), b], dim=1))
+        e = self.dec0(torch.cat([F.interpolate(d, scale_factor=UPSAMPLE), a], dim=1))
         return self.head(e)
 
 
@@ -104,9 +119,9 @@ def onnx_bytes(net: SegNet) -> bytes:
             opset_version=ONNX_OPSET,
             input_names=["x"],
             output_names=["logits"],
-            dynamic_axes={"x": {2: "h", 3: "w"}, "logits": {2: "h", 3: "w"}},
+            dynamic_axes={"x": {H_AXIS: "h", W_AXIS: "w"}, "logits": {H_AXIS: "h", W_AXIS: "w"}},
         )
-    fmt = [round(float(v), 6) for v in net.get_buffer("format")]
+    fmt = [round(float(v), FORMAT_DECIMALS) for v in net.get_buffer("format")]
     return with_metadata(buf.getvalue(), {FORMAT_KEY: json.dumps(fmt)})
 
 
@@ -141,7 +156,7 @@ def load_state(path: str | Path) -> SegNet:
         if isinstance(exc, pickle.UnpicklingError):
             why = "not a file of tensors written by torch.save"
         else:
-            why = (str(exc).splitlines() or [type(exc).__name__])[0][:160]
+            why = (str(exc).splitlines() or [type(exc).__name__])[0][:ERROR_GIST_CHARS]
         raise PerceptionInputError(f"{where}: cannot be read as torch weights ({why})") from None
     net = SegNet()
     check_state_dict(net, state, path)
@@ -183,4 +198,4 @@ def check_state_dict(net: nn.Module, state: object, path: Path | str) -> None:
 
 
 def _fmt(t: torch.Tensor) -> list[float]:
-    return [round(float(v), 4) for v in t.flatten()]
+    return [round(float(v), SHOWN_DECIMALS) for v in t.flatten()]
