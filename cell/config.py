@@ -107,7 +107,7 @@ class ArmDevice(_Section):
         description="arm ur_rtde's watchdog once the ticks start: the controller stops the "
         "control script (and the arm) when the cell has not polled it for 1/hz s -- a dead "
         "process, a lost link, a stalled loop. null turns it off. At 10 Hz the emulated "
-        "cell's longest tick in three cycles was 42 ms (docs/emulator.md)",
+        "cell's longest tick in three cycles was 36.2 ms (docs/emulator.md)",
     )
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],
