@@ -107,8 +107,8 @@ JOIN_WIDTH_GROWTH = 1.25
 JOIN_WIDTH_MARGIN = 0.0005
 #: a direction this close to the floor's normal (norm of their cross product) is parallel
 PARALLEL = 1e-6
-#: the points above this share of a segment's top are its upper half (a lying part's crest
-#: and the top of its flanks: the part of it the camera sees whole)
+#: the points above this share of a segment's top are its upper half, which its axis and extent
+#: are measured on (a lying part's top and upper flanks; seen obliquely, a lower flank is hidden)
 UPPER_SHARE = 0.5
 #: points, the fewest in a segment's upper half for a fit
 MIN_UPPER = 20
@@ -132,7 +132,8 @@ FREE_SIDE_PERCENTILES = (5, 95)
 #: m, the floor beside a long side is looked at from 1.5 mm out (past the part's edge blurred by
 #: the noise) ...
 FREE_SIDE_FROM = 0.0015
-#: ... to 6 mm out (within a neighbour's shadow, where one stands)
+#: ... to 6 mm out: a few pixels of floor, near enough that a neighbour touching or overhanging
+#: the side is met there
 FREE_SIDE_TO = 0.006
 #: points, the fewest seen beside a side for it to be judged free
 MIN_FREE_SIDE = 20
@@ -150,7 +151,7 @@ LEVEL_SLOPE = 0.07
 #: the crest is the upper points above this share of the top (3 % under it: seen obliquely, a
 #: cylinder's far flank is hidden, so a wider band would be lopsided towards the camera) ...
 CREST_SHARE = 0.97
-#: ... and under the top by at most this share of it or :data:`CREST_ABOVE`, whichever larger
+#: ... and over the top by at most this share of it or :data:`CREST_ABOVE`, whichever larger
 #: (a few pixels of a taller neighbour at the edge do not pull the centre towards it)
 CREST_ABOVE_SHARE = 0.1
 #: m, the least a crest point may lie over the top (about three sigma of the depth noise)
