@@ -35,7 +35,198 @@ from numpy.typing import NDArray
 from drivers.camera import Frame, Intrinsics
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY
 from skills.perception.heightmap import HeightMap, PerceptionInputError, dot_last, height_map
+
+# Algorithm constants. The figures they quote are from the twin's D435 at the 0.5 m look-down
+# pose: depth noise 1.25 mm (one sigma), a pixel about 1.1 mm on the floor; the catalogue's
+# thin part is the 7.6 mm mounting rail. The tunable thresholds are :class:`DetectorSettings`.
+
+#: pixels, the aperture of the median filters over the heights (5 x 5): wide enough to take out
+#: the depth noise's speckle, narrow enough that the rail's top (7 pixels) keeps its height
+MEDIAN_APERTURE = 5
+#: pixels, the Sobel aperture for the slope that cuts the seeds (3 x 3, the finest)
+SOBEL_APERTURE = 3
+#: a 3 x 3 Sobel's response to a slope of one (height unit per pixel): its weights 1, 2, 1
+#: over a two-pixel difference; dividing by it and the pixel size gives rise over run
+SOBEL_GAIN = 8.0
+#: the seeds' connectivity (4: pixels sharing a side): two seeds touching at a corner only
+#: (two parts' tops across a diagonal gap) stay two
+SEED_CONNECTIVITY = 4
+#: the watershed marker of the first seed: 0 is the unknown it floods, 1 the background
+FIRST_SEED = 2
+#: the 8-bit grey level of the floor in the image the watershed floods (the top is black)
+GREY_FULL_SCALE = 255.0  # exact: the full scale of an 8-bit image
+#: m, the smallest length or height divided by (a frame or segment of no height, a camera on
+#: the floor): a guard against dividing by zero, far below any real size
+MIN_LENGTH = 1e-6
+#: m, the same guard for the pixel size and the spread of points across a crest
+MIN_SPREAD = 1e-9
+#: the same guard for a squared spread (m^2) and a direction's norm
+MIN_SQUARED = 1e-12
+#: pixels^4, the seed's scatter determinant below which its pixels lie on a line (no plane)
+MIN_SCATTER_DET = 1e-9
+#: m, a thin catalogue part's size tolerance: heights within 2 mm of its size (the depth noise
+#: is 1.25 mm) or a quarter of it, whichever is larger, are its band, its match, its stub
+THIN_SIZE_TOL = 0.002
+#: the same tolerance as a share of the thin part's size
+THIN_SIZE_SHARE = 0.25
+#: m, what a segment may rise above its seed's top before it is a neighbour's flank (3 mm:
+#: over twice the depth noise)
+CLIMB_MARGIN = 0.003
+#: the same margin as a share of the seed's top (tall parts: 10 %)
+CLIMB_SHARE = 0.1
+#: pixels, the fewest in a seed whose plane is fitted (a leaning top); fewer: its median
+MIN_PLANE_SEED = 30
+#: percent, a seed's rise is measured from its 2nd to its 98th percentile (a stray pixel of a
+#: neighbour does not make a level top lean)
+RISE_PERCENTILES = (2, 98)
+#: m, the rise across a seed that makes its top a leaning one (10 mm: eight sigma of noise)
+LEAN_RISE = 0.010
+#: a seed is a plane only when its heights scatter about the fit by under this share of its rise
+PLANE_SCATTER = 0.25
+#: percent: a segment's top (or outer size) is this percentile of its heights; that of a lying
+#: cylinder's is within 2 % of its diameter, and it keeps the depth noise from inflating a rail
+TOP_PERCENTILE = 80
+#: percent: a segment's extent along or across its axis runs between these percentiles of its
+#: points, so that a few stray pixels do not stretch it
+EXTENT_LO, EXTENT_HI = 1, 99
+#: points, the fewest of a segment's whose moments count when pieces are joined
+MIN_PIECE = 10
+#: pixel offsets (rows, columns) at which two segments are neighbours: the watershed leaves a
+#: one-pixel line between the regions it grows, so up to two pixels apart, each direction once
+NEIGHBOUR_OFFSETS = ((0, 2), (2, 0), (2, 2), (2, -2), (1, 2), (2, 1), (2, -1), (1, -2))
+#: m, pieces of one part have the same height to within 2 mm...
+JOIN_HEIGHT_TOL = 0.002
+#: ... or 10 % of the taller one's, whichever is larger
+JOIN_HEIGHT_SHARE = 0.1
+#: pieces end to end keep the width of the wider: a union whose spread across grows past this
+#: factor (plus :data:`JOIN_WIDTH_MARGIN`) holds two parts side by side
+JOIN_WIDTH_GROWTH = 1.25
+#: m, the spread across that a union of pieces may gain regardless (half a millimetre of noise)
+JOIN_WIDTH_MARGIN = 0.0005
+#: a direction this close to the floor's normal (norm of their cross product) is parallel
+PARALLEL = 1e-6
+#: the points above this share of a segment's top are its upper half, which its axis and extent
+#: are measured on (a lying part's top and upper flanks; seen obliquely, a lower flank is hidden)
+UPPER_SHARE = 0.5
+#: points, the fewest in a segment's upper half for a fit
+MIN_UPPER = 20
+#: a segment wider than this many times its height (a lying part is as wide as it is tall)
+#: holds several parts side by side
+SIDE_BY_SIDE_WIDTH = 1.6
+#: mm per m: the enclosing rectangle and the clusters are computed in millimetres, units of the
+#: order of a pixel (OpenCV's rectangle takes float32 points)
+MM_PER_M = 1e3  # exact: a metre is 1000 mm
+#: a thin segment narrower than its count of catalogue widths by this share of one is clipped:
+#: its last part partly under a taller neighbour
+STRIP_SHORTFALL = 0.25
+#: a strip of a split segment is fitted when it holds 1/this of ``min_pixels`` (a part beside
+#: others shows less of itself)
+STRIP_PIXEL_DIVISOR = 2
+#: m, the window around a segment searched for bare floor beside its long sides
+FREE_SIDE_WINDOW = 0.01
+#: percent, the stretch of a segment along its axis where the floor beside it is looked at
+#: (5th to 95th: its rounded ends left out)
+FREE_SIDE_PERCENTILES = (5, 95)
+#: m, the floor beside a long side is looked at from 1.5 mm out (past the part's edge blurred by
+#: the noise) ...
+FREE_SIDE_FROM = 0.0015
+#: ... to 6 mm out: a few pixels of floor, near enough that a neighbour touching or overhanging
+#: the side is met there
+FREE_SIDE_TO = 0.006
+#: points, the fewest seen beside a side for it to be judged free
+MIN_FREE_SIDE = 20
+#: m, heights above this are seen: invalid pixels read -1 (NaN replaced), any real height is
+#: far above this line
+SEEN_ABOVE = -0.5
+#: percent, the 2nd to 98th percentiles across a leaning part span its outer size
+LEAN_WIDTH_PERCENTILES = (2, 98)
+#: a leaning part's crest is the strip of this share of its width either side of its middle
+LEAN_CREST_BAND = 0.2
+#: points, the fewest on a leaning part's crest for its slope to be fitted
+MIN_LEAN_CREST = 30
+#: rise over run along the crest below which a part is level (0.07: 4 deg)
+LEVEL_SLOPE = 0.07
+#: the crest is the upper points above this share of the top (3 % under it: seen obliquely, a
+#: cylinder's far flank is hidden, so a wider band would be lopsided towards the camera) ...
+CREST_SHARE = 0.97
+#: ... and over the top by at most this share of it or :data:`CREST_ABOVE`, whichever larger
+#: (a few pixels of a taller neighbour at the edge do not pull the centre towards it)
+CREST_ABOVE_SHARE = 0.1
+#: m, the least a crest point may lie over the top (about three sigma of the depth noise)
+CREST_ABOVE = 0.004
+#: points, a narrower crest than this is widened to :data:`CREST_WIDE_SHARE` of the top
+MIN_CREST = 5
+#: the wider crest's share of the top
+CREST_WIDE_SHARE = 0.9
+#: points, the fewest on a crest whose own direction may be the axis
+MIN_CREST_AXIS = 30
+#: a crest this many times longer than wide is a strip along the axis (a cup's is 4-5 times)
+CREST_ASPECT = 2.5
+#: m, the window around a thin part's segment that is not a stub (its hidden rest is near)
+HIDDEN_WINDOW = 0.02
+#: percent, a stub's relief (see ``max_stub_relief``) is its 10th to 90th percentile spread
+RELIEF_PERCENTILES = (10, 90)
+#: relative size error at which a detection's confidence falls to 1/e (a tenth of its size)
+CONFIDENCE_SCALE = 0.1
+#: the confidence of a part whose place rests on the catalogue (its length or width), not on
+#: what was seen of it
+CATALOGUE_CONFIDENCE = 0.2
+#: the confidence is scaled by this while the open end is undecided
+UNDECIDED_END = 0.5
+#: share of a part's length the window around it grows by past its segment (its ends may lie
+#: beyond what was segmented), plus an outer size
+END_WINDOW_SHARE = 0.25
+#: m, the least depth of an end face below the camera (a guard: the camera is never that low)
+MIN_FACE_DEPTH = 1e-3
+#: the points within this share of the hole's width either side of the axis are looked at in
+#: and on an end (inside the hole's rim, with room for the axis' error)
+FACE_HALF_WIDTH = 0.4
+#: an end face's middle, where a closed face shows, spans these shares of the outer size in
+#: height (clear of the floor and of the crest)
+FACE_MIDDLE = (0.15, 0.85)
+#: m, the end face is the points this close to the end along the axis
+FACE_BAND = 0.004
+#: the band looked into behind an end reaches this share of the outer size inside it
+INSIDE_DEPTH = 0.6
+#: m, and stops this far inside the end (6 mm: the lower part of a closed end's own face,
+#: blurred by the depth noise and the centre's error, must not count as a view inside)
+INSIDE_INSET = 0.006
+#: m, heights from this (a little under the floor: noise) ...
+INSIDE_FLOOR = -0.002
+#: ... to this share of the outer size are low: the floor or the inner wall seen inside
+INSIDE_LOW = 0.3
+#: an end's crest: points within this share of the outer size of the axis, across ...
+END_CREST_HALF_WIDTH = 0.35
+#: ... as high as these shares of the outer size (the crest, not the floor or a neighbour) ...
+END_CREST_HEIGHT = (0.75, 1.2)
+#: m, ... and at most this far past the expected end along the axis
+END_CREST_BEYOND = 0.02
+#: points, the fewest on an end's crest for it to move the centre
+MIN_END_CREST = 10
+#: percent: the crest ends at this percentile of its points along the axis
+END_CREST_PERCENTILE = 98
+#: m, a crest ending farther than this from the expected end belongs to something else
+END_CREST_SHIFT = 0.015
+#: k-means rounds when a segment is split into clusters (they settle within a few)
+CLUSTER_ITERATIONS = 10
+#: the image window around a segment grows by this many times the margin over a pixel's floor
+#: width: room for the taller rows (fy over fx 1.34 in the twin) and for raised points
+WINDOW_GROWTH = 1.6
+#: a thin part seen over this share of its length or more is seen whole, not partly hidden
+MAX_HIDDEN_SHARE = 0.9
+#: a stub is at least this share of the part's width wide (its whole width shows)
+STUB_WIDTH = 0.85
+#: m, the heights just beyond an end are looked at from 2 mm past it (its rim blurred) ...
+BEYOND_FROM = 0.002
+#: ... to 10 mm past it
+BEYOND_TO = 0.010
+#: points, the fewest seen beyond an end to judge it free or covered
+MIN_BEYOND = 10
+#: a stub's hidden rest counts as covered where the surface over it is above this share of
+#: the part's size (a neighbour over it, not the part itself seen)
+COVER_HEIGHT = 0.8
 
 
 @dataclass(frozen=True)
@@ -103,9 +294,10 @@ def segment(
     # Seeds: the gently sloped top of each part. Where parts touch, or a low part lies against
     # a tall one, the surfaces between them are steep (a cylinder's flank, a box's wall), so
     # cutting the foreground at steep slopes leaves one seed per part.
-    hs = cv2.medianBlur(h, 5)  # edge-preserving: a thin part beside a tall one keeps its top
-    gx = cv2.Sobel(hs, cv2.CV_32F, 1, 0, ksize=3) / (8.0 * hm.pixel_size)
-    gy = cv2.Sobel(hs, cv2.CV_32F, 0, 1, ksize=3) / (8.0 * hm.pixel_size)
+    # Median: edge-preserving, so a thin part beside a tall one keeps its top.
+    hs = cv2.medianBlur(h, MEDIAN_APERTURE)
+    gx = cv2.Sobel(hs, cv2.CV_32F, 1, 0, ksize=SOBEL_APERTURE) / (SOBEL_GAIN * hm.pixel_size)
+    gy = cv2.Sobel(hs, cv2.CV_32F, 0, 1, ksize=SOBEL_APERTURE) / (SOBEL_GAIN * hm.pixel_size)
     gentle = np.hypot(gx, gy) < settings.max_seed_slope
     crest = fg & gentle & (h > settings.min_crest)
     # A thin part (the 7.6 mm rail, 7 pixels wide) against a tall one: the filtered slope is
@@ -113,25 +305,25 @@ def segment(
     # takes it. Its top is a band of its own height, as wide as the part; a tall part's flank
     # crosses that band in a line one or two pixels wide, which the opening removes.
     for size in thin:
-        band = (np.abs(hs - size) < max(0.002, 0.25 * size)) & fg
+        band = (np.abs(hs - size) < max(THIN_SIZE_TOL, THIN_SIZE_SHARE * size)) & fg
         band = cv2.morphologyEx(band.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
         crest |= band > 0
     crest = cv2.morphologyEx(crest.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    n, comp, stats, _ = cv2.connectedComponentsWithStats(crest, connectivity=4)
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(crest, connectivity=SEED_CONNECTIVITY)
     keep = stats[:, cv2.CC_STAT_AREA] >= settings.min_seed
     keep[0] = False
     lut = np.zeros(n, np.int32)
-    lut[keep] = np.arange(2, 2 + int(np.count_nonzero(keep)), dtype=np.int32)
+    lut[keep] = np.arange(FIRST_SEED, FIRST_SEED + int(np.count_nonzero(keep)), dtype=np.int32)
     markers = lut[comp]
     markers[~fg] = 1
     if not keep.any():
         return np.zeros(h.shape, np.int32)
     top = float(h.max())
-    grey = (255.0 * np.clip(1.0 - h / max(top, 1e-6), 0.0, 1.0)).astype(np.uint8)
+    grey = (GREY_FULL_SCALE * np.clip(1.0 - h / max(top, MIN_LENGTH), 0.0, 1.0)).astype(np.uint8)
     labels = cv2.watershed(cv2.merge([grey, grey, grey]), markers.copy())
-    out = np.where(fg & (labels >= 2), labels - 1, 0).astype(np.int32)
+    out = np.where(fg & (labels >= FIRST_SEED), labels - 1, 0).astype(np.int32)
     _drop_climbed(out, markers - 1, hs)
-    return _merge_pieces(out, hs, hm.points[..., :2], settings.thin_part)
+    return _merge_pieces(out, hs, hm.points[..., XY], settings.thin_part)
 
 
 def _groups(labels: NDArray[np.int32]) -> dict[int, NDArray[np.int64]]:
@@ -164,7 +356,7 @@ def _drop_climbed(
         if seed is None or len(seed) == 0:
             continue
         top = float(np.median(hflat[seed]))
-        limit = top + max(0.003, 0.1 * top)
+        limit = top + max(CLIMB_MARGIN, CLIMB_SHARE * top)
         rise = _seed_slope(seed, hflat[seed], hs.shape[1])
         if rise is not None:
             # A part leaning on a neighbour or a wall: its top rises along it, and so does
@@ -174,7 +366,7 @@ def _drop_climbed(
             plane = a + b * u + c * v
             keep = np.zeros(len(idx), bool)
             keep[np.isin(idx, seed)] = True
-            high = idx[(hflat[idx] > plane + max(0.003, 0.1 * top)) & ~keep]
+            high = idx[(hflat[idx] > plane + max(CLIMB_MARGIN, CLIMB_SHARE * top)) & ~keep]
         else:
             high = idx[hflat[idx] > limit]
         flat[high] = 0
@@ -185,7 +377,7 @@ def _seed_slope(
 ) -> tuple[float, float, float] | None:
     """The plane ``h = a + b u + c v`` (pixels) through a seed's heights when they rise by
     more than 10 mm across it (a leaning part's top), else None (a level part: its median)."""
-    if len(seed) < 30:
+    if len(seed) < MIN_PLANE_SEED:
         return None
     v, u = np.divmod(seed, cols)
     u = u.astype(np.float64)
@@ -195,12 +387,13 @@ def _seed_slope(
     du, dv, dh = u - um, v - vm, hh - hm_
     m = np.array([[np.sum(du * du), np.sum(du * dv)], [np.sum(du * dv), np.sum(dv * dv)]])
     r = np.array([np.sum(du * dh), np.sum(dv * dh)])
-    if abs(float(np.linalg.det(m))) < 1e-9:
+    if abs(float(np.linalg.det(m))) < MIN_SCATTER_DET:
         return None
     b, c = np.linalg.solve(m, r)
     fit = dh - (b * du + c * dv)
-    span = float(np.percentile(b * du + c * dv, 98) - np.percentile(b * du + c * dv, 2))
-    if span < 0.010 or float(np.std(fit)) > 0.25 * span:
+    lo, hi = RISE_PERCENTILES
+    span = float(np.percentile(b * du + c * dv, hi) - np.percentile(b * du + c * dv, lo))
+    if span < LEAN_RISE or float(np.std(fit)) > PLANE_SCATTER * span:
         return None
     return float(hm_ - b * um - c * vm), float(b), float(c)
 
@@ -232,7 +425,7 @@ def _merge_pieces(
     pieces lower than ``max_height`` (a thin part) are joined: two tall parts end to end or in
     a T would pass the same tests."""
     k_max = int(labels.max(initial=0))
-    if k_max < 2:
+    if k_max < 2:  # exact: a join takes two segments
         return labels
     # Moments per segment (count, sums of x, y, xx, yy, xy): a union's spread is their sum.
     mom: dict[int, NDArray[np.float64]] = {}
@@ -243,16 +436,16 @@ def _merge_pieces(
         p = px[idx].astype(np.float64)
         ok = np.isfinite(p[:, 0])
         p = p[ok]
-        if len(p) < 10:
+        if len(p) < MIN_PIECE:
             continue
         x, y = p[:, 0], p[:, 1]
         mom[k] = np.array([len(p), x.sum(), y.sum(), (x * x).sum(), (y * y).sum(), (x * y).sum()])
-        top[k] = float(np.percentile(hh[idx[ok]], 80))
+        top[k] = float(np.percentile(hh[idx[ok]], TOP_PERCENTILE))
     # The watershed leaves a one-pixel line (-1) between the regions it grows, so neighbours
     # are looked for up to two pixels apart.
     pairs = set()
     rows, cols = labels.shape
-    for dv, du in ((0, 2), (2, 0), (2, 2), (2, -2), (1, 2), (2, 1), (2, -1), (1, -2)):
+    for dv, du in NEIGHBOUR_OFFSETS:
         a = labels[: rows - dv, max(0, -du) : cols - max(0, du)]
         b = labels[dv:, max(0, du) : cols - max(0, -du)]
         m = (a > 0) & (b > 0) & (a != b)
@@ -274,10 +467,13 @@ def _merge_pieces(
         if ra == rb:
             continue
         ha, hb = top[ra], top[rb]
-        if max(ha, hb) > max_height or abs(ha - hb) > max(0.002, 0.1 * max(ha, hb)):
+        if max(ha, hb) > max_height or abs(ha - hb) > max(
+            JOIN_HEIGHT_TOL, JOIN_HEIGHT_SHARE * max(ha, hb)
+        ):
             continue
         union = mom[ra] + mom[rb]
-        if _minor_std(union) > 1.25 * max(_minor_std(mom[ra]), _minor_std(mom[rb])) + 0.0005:
+        wider = max(_minor_std(mom[ra]), _minor_std(mom[rb]))
+        if _minor_std(union) > JOIN_WIDTH_GROWTH * wider + JOIN_WIDTH_MARGIN:
             continue  # side by side: two parts
         parent[ra] = rb
         mom[rb] = union
@@ -288,16 +484,18 @@ def _merge_pieces(
 
 def _minor_std(m: NDArray[np.float64]) -> float:
     """Spread (m, one standard deviation) across the major axis, from the moments."""
-    n = m[0]
-    cx, cy = m[1] / n, m[2] / n
-    sxx, syy, sxy = m[3] / n - cx * cx, m[4] / n - cy * cy, m[5] / n - cx * cy
+    n, mx, my, mxx, myy, mxy = m
+    cx, cy = mx / n, my / n
+    sxx, syy, sxy = mxx / n - cx * cx, myy / n - cy * cy, mxy / n - cx * cy
     tr, det = sxx + syy, sxx * syy - sxy * sxy
-    return float(math.sqrt(max(0.5 * tr - math.sqrt(max(0.25 * tr * tr - det, 0.0)), 0.0)))
+    # The smaller eigenvalue of the 2 x 2 scatter: tr/2 - sqrt(tr^2/4 - det).
+    minor = 0.5 * tr - math.sqrt(max(0.25 * tr * tr - det, 0.0))  # exact: that eigenvalue
+    return float(math.sqrt(max(minor, 0.0)))
 
 
 def _plane_basis(normal: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     e1 = np.cross(normal, [0.0, 1.0, 0.0])
-    if np.linalg.norm(e1) < 1e-6:
+    if np.linalg.norm(e1) < PARALLEL:
         e1 = np.cross(normal, [1.0, 0.0, 0.0])
     e1 /= np.linalg.norm(e1)
     return e1, np.cross(normal, e1)
@@ -354,14 +552,15 @@ def fit_segments(
     hgt = np.nan_to_num(hm.height.reshape(-1), nan=-1.0)
     # Heights median-filtered (5 x 5) for the outer size: on a flat top the depth noise
     # (1.25 mm at 0.5 m) would otherwise push the 80th percentile 1 mm up, 13 % of a rail.
-    smooth = cv2.medianBlur(np.nan_to_num(hm.height, nan=0.0).astype(np.float32), 5).reshape(-1)
+    h0 = np.nan_to_num(hm.height, nan=0.0).astype(np.float32)
+    smooth = cv2.medianBlur(h0, MEDIAN_APERTURE).reshape(-1)
     uv_all = np.column_stack([dot_last(pts, e1), dot_last(pts, e2)])
     inputs = _FitInputs(uv_all, hgt, smooth, hm, e1, e2, catalogue, robot_xy, settings, cam)
     out: list[Detection] = []
     for _, idx in sorted(_groups(labels).items()):
         if len(idx) < settings.min_pixels and (
             len(idx) < settings.min_stub
-            or float(np.percentile(smooth[idx], 80)) >= settings.thin_part
+            or float(np.percentile(smooth[idx], TOP_PERCENTILE)) >= settings.thin_part
         ):
             continue  # too small for a part, and not the end of a thin one (_hidden_thin_part)
         out.extend(_fit_one(idx, inputs))
@@ -445,19 +644,19 @@ def _measure(idx: NDArray[np.int64], inputs: _FitInputs) -> _Segment | None:
     h = inputs.hgt[idx]
     # The 80th percentile of a lying cylinder's heights is within 2 % of its diameter, and it
     # keeps the depth noise (1.25 mm at 0.5 m) from inflating thin parts like the rail.
-    top = float(np.percentile(h, 80))
-    outer = float(np.percentile(inputs.smooth[idx], 80))
-    upper = idx[h > 0.5 * top]
-    if len(upper) < 20:
+    top = float(np.percentile(h, TOP_PERCENTILE))
+    outer = float(np.percentile(inputs.smooth[idx], TOP_PERCENTILE))
+    upper = idx[h > UPPER_SHARE * top]
+    if len(upper) < MIN_UPPER:
         return None
     uv = inputs.uv[upper].astype(np.float64)
     mean, axis = _principal(uv)
     across = np.array([-axis[1], axis[0]])
     s = dot_last(uv - mean, axis)
     c = dot_last(uv - mean, across)
-    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    width = float(np.percentile(c, EXTENT_HI) - np.percentile(c, EXTENT_LO))
     thin = _thin_match(outer, inputs.catalogue, inputs.settings)
-    length = float(np.percentile(s, 99) - np.percentile(s, 1))
+    length = float(np.percentile(s, EXTENT_HI) - np.percentile(s, EXTENT_LO))
     return _Segment(idx, upper, uv, top, outer, mean, axis, across, s, c, width, length, thin)
 
 
@@ -473,7 +672,7 @@ def _side_by_side(seg: _Segment, settings: DetectorSettings) -> bool:
         and seg.width > settings.thin_pair * thin.outer
         and abs(seg.length - thin.length) < settings.match_tolerance * thin.length
     )
-    return seg.width > 1.6 * seg.outer or pair
+    return seg.width > SIDE_BY_SIDE_WIDTH * seg.outer or pair
 
 
 # ----------------------------------------------------------- a segment of several parts
@@ -481,7 +680,7 @@ def _fit_side_by_side(seg: _Segment, inputs: _FitInputs) -> list[Detection]:
     """Each strip across the segment fitted on its own (its own axis and length); compact
     clusters instead when they explain more of it."""
     axis, across, c, width = _rect_aligned(seg)
-    strips = max(2, int(round(width / max(seg.outer, 1e-6))))
+    strips = max(2, int(round(width / max(seg.outer, MIN_LENGTH))))  # exact: at least a pair
     out = _fit_strips(seg, inputs, axis, across, c, width, strips)
     if len(out) < strips:
         # Parts touching end to side (a Z of two ducts) are not strips: split the segment
@@ -498,7 +697,7 @@ def _rect_aligned(
     """Side by side and offset along their axes, two parts make a blob whose principal axis
     is diagonal; the smallest enclosing rectangle stays aligned with them. Its axis (turned
     like the principal one), the direction across, the points across it and the width."""
-    (_, _), (rw, rh), ang = cv2.minAreaRect((seg.uv * 1e3).astype(np.float32))
+    (_, _), (rw, rh), ang = cv2.minAreaRect((seg.uv * MM_PER_M).astype(np.float32))
     a = math.radians(ang)
     cand = np.array([math.cos(a), math.sin(a)])
     if rh > rw:
@@ -506,7 +705,7 @@ def _rect_aligned(
     axis = cand if float(cand @ seg.axis) >= 0 else -cand
     across = np.array([-axis[1], axis[0]])
     c = dot_last(seg.uv - seg.mean, across)
-    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    width = float(np.percentile(c, EXTENT_HI) - np.percentile(c, EXTENT_LO))
     return axis, across, c, width
 
 
@@ -522,11 +721,11 @@ def _fit_strips(
     """The segment cut into ``strips`` equal strips across ``axis`` (or, for thin parts, strips
     of the catalogue width from the free side), each fitted on its own."""
     c_all = dot_last(inputs.uv[seg.idx] - seg.mean, across)
-    c_lo, c_hi = float(np.percentile(c, 1)), float(np.percentile(c, 99))
+    c_lo, c_hi = float(np.percentile(c, EXTENT_LO)), float(np.percentile(c, EXTENT_HI))
     edges = np.linspace(c_lo, c_hi, strips + 1)
     clipped, c_true = -1, 0.0
     thin = seg.thin
-    if thin is not None and width < (strips - 0.25) * thin.outer:
+    if thin is not None and width < (strips - STRIP_SHORTFALL) * thin.outer:
         from_free = _strips_from_free_side(seg, inputs, axis, across, (c_lo, c_hi), strips, thin)
         if from_free is not None:
             edges, clipped, c_true = from_free
@@ -534,7 +733,7 @@ def _fit_strips(
     out: list[Detection] = []
     for j in range(strips):
         sub = seg.idx[(c_all >= edges[j]) & (c_all < edges[j + 1])]
-        if len(sub) >= inputs.settings.min_pixels // 2:
+        if len(sub) >= inputs.settings.min_pixels // STRIP_PIXEL_DIVISOR:
             found = _fit_one(sub, inputs, False)
             if j == clipped:
                 e1, e2 = inputs.e1, inputs.e2
@@ -558,8 +757,9 @@ def _strips_from_free_side(
     edges across, the clipped strip and its centre across; None when no side is the free one.
     """
     c_lo, c_hi = c_range
-    win = _window(seg.idx, inputs.hm, 0.01)
-    s_in = (float(np.percentile(seg.s, 5)), float(np.percentile(seg.s, 95)))
+    win = _window(seg.idx, inputs.hm, FREE_SIDE_WINDOW)
+    lo, hi = FREE_SIDE_PERCENTILES
+    s_in = (float(np.percentile(seg.s, lo)), float(np.percentile(seg.s, hi)))
     uv, hgt = inputs.uv[win], inputs.hgt[win]
     free = [
         _side_free(uv, hgt, seg.mean, axis, across, s_in, edge, sign, inputs.settings)
@@ -567,16 +767,18 @@ def _strips_from_free_side(
     ]
     steps = thin.outer * np.arange(strips + 1)
     if free == [True, False]:
-        return c_lo + steps, strips - 1, c_lo + (strips - 0.5) * thin.outer
+        last = c_lo + (strips - 0.5) * thin.outer  # exact: the last strip's middle
+        return c_lo + steps, strips - 1, last
     if free == [False, True]:
-        return (c_hi - steps)[::-1].copy(), 0, c_hi - (strips - 0.5) * thin.outer
+        last = c_hi - (strips - 0.5) * thin.outer  # exact: the last strip's middle
+        return (c_hi - steps)[::-1].copy(), 0, last
     return None
 
 
 def _fit_clusters(seg: _Segment, inputs: _FitInputs, n: int) -> list[Detection]:
     """The segment split into ``n`` compact clusters, each fitted on its own."""
-    centres = _clusters(seg.uv * 1e3, n)
-    pts_all = inputs.uv[seg.idx] * 1e3
+    centres = _clusters(seg.uv * MM_PER_M, n)
+    pts_all = inputs.uv[seg.idx] * MM_PER_M
     dist = np.stack([np.hypot(*(pts_all - c).T) for c in centres])
     nearest = np.argmin(dist, axis=0)
     alt: list[Detection] = []
@@ -595,8 +797,8 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     crest = _crest(seg, inputs.hgt[seg.upper])
     axis, across, s, c = _crest_axis(seg, crest, settings)
     c_mid = float(np.median(c[crest]))
-    s_lo, s_hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
-    s_mid = 0.5 * (s_lo + s_hi)
+    s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+    s_mid = 0.5 * (s_lo + s_hi)  # exact: the middle
     center_uv = seg.mean + s_mid * axis + c_mid * across
     length = s_hi - s_lo
     part, err = _match(length, seg.outer, inputs.catalogue, settings.match_tolerance)
@@ -624,25 +826,26 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     across = np.array([-axis[1], axis[0]])
     s = dot_last(uv - mean, axis)
     c = dot_last(uv - mean, across)
-    c_lo, c_hi = float(np.percentile(c, 2)), float(np.percentile(c, 98))
+    lo, hi = LEAN_WIDTH_PERCENTILES
+    c_lo, c_hi = float(np.percentile(c, lo)), float(np.percentile(c, hi))
     outer = c_hi - c_lo
-    c_mid = 0.5 * (c_lo + c_hi)
-    band = np.abs(c - c_mid) < 0.2 * outer  # the crest's strip along the axis
-    if np.count_nonzero(band) < 30:
+    c_mid = 0.5 * (c_lo + c_hi)  # exact: the middle
+    band = np.abs(c - c_mid) < LEAN_CREST_BAND * outer  # the crest's strip along the axis
+    if np.count_nonzero(band) < MIN_LEAN_CREST:
         return None
     sb, hb = s[band], h[band]
     ds = sb - sb.mean()
-    slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), 1e-12))
-    if abs(slope) < 0.07:
+    slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), MIN_SQUARED))
+    if abs(slope) < LEVEL_SLOPE:
         # Level: on the floor the height fit said what it shows; level on other parts looks
         # like a strip cut off a taller part (a duct's half as a bushing), so it is not taken.
         return None
-    s_lo, s_hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
+    s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
     part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
     if part is None or part.outer < settings.thin_part:
         return None
-    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across
+    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across  # exact: the middle
     return _Placement(part, err, False, axis, across, center_uv, length, tilted=True)
 
 
@@ -653,9 +856,9 @@ def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
     pull the centre towards it. Narrow (3 % of the height): seen obliquely, a cylinder's far
     flank is hidden, so a wide band would be lopsided towards the camera."""
     top = seg.top
-    crest = (hs > 0.97 * top) & (hs < top + max(0.1 * top, 0.004))
-    if np.count_nonzero(crest) < 5:
-        crest = hs > 0.9 * top
+    crest = (hs > CREST_SHARE * top) & (hs < top + max(CREST_ABOVE_SHARE * top, CREST_ABOVE))
+    if np.count_nonzero(crest) < MIN_CREST:
+        crest = hs > CREST_WIDE_SHARE * top
     return crest
 
 
@@ -670,13 +873,14 @@ def _crest_axis(
     the whole top is the longer strip. Not for a thin part: its flat top is all crest."""
     axis, across, s, c = seg.axis, seg.across, seg.s, seg.c
     pts = seg.uv[crest]
-    if len(pts) >= 30 and seg.outer >= settings.thin_part:
+    if len(pts) >= MIN_CREST_AXIS and seg.outer >= settings.thin_part:
         _, crest_axis = _principal(pts)
         rel = pts - pts.mean(axis=0)
         along = dot_last(rel, crest_axis)
         side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
-        aspect = float(np.std(along)) / max(float(np.std(side)), 1e-9)
-        if aspect > 2.5 and aspect > float(np.std(s)) / max(float(np.std(c)), 1e-9):
+        aspect = float(np.std(along)) / max(float(np.std(side)), MIN_SPREAD)
+        whole = float(np.std(s)) / max(float(np.std(c)), MIN_SPREAD)
+        if aspect > CREST_ASPECT and aspect > whole:
             axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
             across = np.array([-axis[1], axis[0]])
             s = dot_last(seg.uv - seg.mean, axis)
@@ -700,12 +904,13 @@ def _hidden_under_neighbour(
     the enclosing rectangle's long side is tried after the principal axis."""
     settings = inputs.settings
     stub = s_hi - s_lo < settings.min_hidden * thin.length
-    win = _window(seg.idx, inputs.hm, thin.length if stub else 0.02)
+    win = _window(seg.idx, inputs.hm, thin.length if stub else HIDDEN_WINDOW)
     axes = [(axis, s_lo, s_hi, c_mid, seg.width)]
     if stub:
         axes.append(_rect_axis(seg.uv, seg.mean, axis))
     smooth = inputs.smooth[seg.idx]
-    relief = float(np.percentile(smooth, 90) - np.percentile(smooth, 10))
+    lo, hi = RELIEF_PERCENTILES
+    relief = float(np.percentile(smooth, hi) - np.percentile(smooth, lo))
     uv, hgt = inputs.uv[win], inputs.hgt[win]
     for ax, lo, hi, mid, wide in axes:
         ac = np.array([-ax[1], ax[0]])
@@ -748,10 +953,10 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
     center = (
         center_uv[0] * e1
         + center_uv[1] * e2
-        + (hm.plane.offset + 0.5 * seg.outer) * (hm.plane.normal)
+        + (hm.plane.offset + 0.5 * seg.outer) * (hm.plane.normal)  # exact: a lying part's axis
     )
     direction = axis[0] * e1 + axis[1] * e2
-    half = 0.5 * part.length
+    half = 0.5 * part.length  # exact: an end is half the length from the centre
     ends = [center + half * direction, center - half * direction]
     if part.open_ends == 1 and placed.tilted:
         choice, seen = 0, False  # the end tests assume a part level on the floor
@@ -763,9 +968,9 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
     end = ends[choice]
     toward = end - center
     yaw = math.atan2(toward[1], toward[0])
-    conf = float(math.exp(-((placed.err / 0.1) ** 2)))
+    conf = float(math.exp(-((placed.err / CONFIDENCE_SCALE) ** 2)))
     if placed.partial:  # the centre rests on the catalogue length, not on a seen extent
-        conf = 0.2
+        conf = CATALOGUE_CONFIDENCE
     return Detection(
         center=center,
         yaw=yaw,
@@ -774,7 +979,7 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
         part=part.name,
         open_end=end,
         open_end_seen=seen,
-        confidence=conf * (1.0 if seen else 0.5),
+        confidence=conf * (1.0 if seen else UNDECIDED_END),
         pixels=len(seg.idx),
         tilted=placed.tilted,
     )
@@ -792,8 +997,9 @@ def _open_end_in_view(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> 
     part, center_uv, axis, across = placed.part, placed.center_uv, placed.axis, placed.across
     cam_uv = np.array([cam @ e1, cam @ e2])
     # Only the pixels around this part matter: one pass picks them.
-    near = _window(seg.idx, hm, 0.25 * part.length + part.outer)
-    near = near[np.abs(inputs.uv[near] - center_uv).max(axis=1) < 0.5 * part.length + part.outer]
+    near = _window(seg.idx, hm, END_WINDOW_SHARE * part.length + part.outer)
+    reach = 0.5 * part.length + part.outer  # exact: an outer size past either end
+    near = near[np.abs(inputs.uv[near] - center_uv).max(axis=1) < reach]
     uv, hgt = inputs.uv[near], inputs.hgt[near]
     height = float(cam @ hm.plane.normal - hm.plane.offset)
     return _end_evidence(
@@ -826,8 +1032,8 @@ def _end_evidence(
     sign = 1.0 if facing == 0 else -1.0
     center_uv = _end_on_crest(uv, hgt, center_uv, sign * axis, across, part)
     inside, face = _end_view(uv, hgt, center_uv, sign * axis, across, part)
-    lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length
-    ratio = lateral / max(cam_height, 1e-6)
+    lateral = abs(float((cam_uv - center_uv) @ axis)) - 0.5 * part.length  # exact: from the end
+    ratio = lateral / max(cam_height, MIN_LENGTH)
     whole = _face_expected(part, ratio, cam_height, pixel_size)
     cavity = max(settings.max_face_per_inside * inside, settings.max_open_face_share * whole)
     is_open = inside >= settings.min_inside and face <= cavity
@@ -849,9 +1055,11 @@ def _face_expected(part: Part, ratio: float, cam_height: float, pixel_size: floa
     renders about 1.4 times this; the shares in :class:`DetectorSettings` are of this scale."""
     if ratio <= 0.0:
         return 0.0
-    area = (0.8 * part.hole) * (0.7 * part.outer)
-    depth = max(cam_height - 0.5 * part.outer, 1e-3)  # over the end's middle
-    focal = cam_height / max(pixel_size, 1e-9)  # pixels per metre at the floor, times depth
+    low, high = FACE_MIDDLE
+    area = (2 * FACE_HALF_WIDTH * part.hole) * ((high - low) * part.outer)  # exact: the strip
+    middle = 0.5 * part.outer  # exact: the end's middle, half the outer size up
+    depth = max(cam_height - middle, MIN_FACE_DEPTH)
+    focal = cam_height / max(pixel_size, MIN_SPREAD)  # pixels per metre at the floor, times depth
     slant = ratio / math.sqrt(1.0 + ratio * ratio)  # cosine of the face's normal to the ray
     return area * slant * focal * focal / (depth * depth * (1.0 + ratio * ratio))
 
@@ -873,18 +1081,19 @@ def _end_on_crest(
     end's place; it also gives the axis' place across. Unchanged when no crest is seen there
     (a leaning part, or the top hidden)."""
     s, c = _along_across(uv, center_uv, axis, across)
-    half = 0.5 * part.length
+    half = 0.5 * part.length  # exact: the end is half the length from the centre
+    low, high = END_CREST_HEIGHT
     crest = (
-        (np.abs(c) < 0.35 * part.outer)
-        & (hgt > 0.75 * part.outer)
-        & (hgt < 1.2 * part.outer)
+        (np.abs(c) < END_CREST_HALF_WIDTH * part.outer)
+        & (hgt > low * part.outer)
+        & (hgt < high * part.outer)
         & (s > 0.0)
-        & (s < half + 0.02)
+        & (s < half + END_CREST_BEYOND)
     )
-    if np.count_nonzero(crest) < 10:
+    if np.count_nonzero(crest) < MIN_END_CREST:
         return center_uv
-    s_end = float(np.percentile(s[crest], 98))
-    if abs(s_end - half) > 0.015:
+    s_end = float(np.percentile(s[crest], END_CREST_PERCENTILE))
+    if abs(s_end - half) > END_CREST_SHIFT:
         return center_uv  # not this part's end: something else on its line
     return center_uv + (s_end - half) * axis + float(np.median(c[crest])) * across
 
@@ -914,14 +1123,14 @@ def open_end_from_view(
     e1, e2 = _plane_basis(hm.plane.normal)
     direction = np.array([math.cos(det.yaw), math.sin(det.yaw), 0.0])
     axis = np.array([float(direction @ e1), float(direction @ e2)])
-    axis /= max(float(np.linalg.norm(axis)), 1e-12)
+    axis /= max(float(np.linalg.norm(axis)), MIN_SQUARED)
     across = np.array([-axis[1], axis[0]])
     center_uv = np.array([float(det.center @ e1), float(det.center @ e2)])
     pts = hm.points
     ok = np.isfinite(pts[..., 0])
     # Only the pixels around the part: a box in the base frame first (cheap), then the plane.
     c = det.center
-    reach = 0.5 * part.length + part.outer
+    reach = 0.5 * part.length + part.outer  # exact: an outer size past either end
     near = ok & (np.abs(np.nan_to_num(pts[..., 0]) - c[0]) < reach)
     near &= np.abs(np.nan_to_num(pts[..., 1]) - c[1]) < reach
     p = pts[near].astype(np.float64)
@@ -935,7 +1144,7 @@ def open_end_from_view(
     )
     if not seen:
         return det
-    half = 0.5 * part.length * direction
+    half = 0.5 * part.length * direction  # exact: an end is half the length from the centre
     end = det.center + (half if choice == 0 else -half)
     toward = end - det.center
     return replace(
@@ -943,7 +1152,7 @@ def open_end_from_view(
         yaw=math.atan2(toward[1], toward[0]),
         open_end=end,
         open_end_seen=True,
-        confidence=min(1.0, 2.0 * det.confidence),
+        confidence=min(1.0, det.confidence / UNDECIDED_END),  # the undecided halving undone
     )
 
 
@@ -956,20 +1165,20 @@ def combine_end_views(det: Detection, judged: list[Detection]) -> Detection:
     if not decided:
         return det
     first = decided[0]
-    if all(abs(_wrap(j.yaw - first.yaw)) < 0.5 * math.pi for j in decided):
+    if all(abs(_wrap(j.yaw - first.yaw)) < 0.5 * math.pi for j in decided):  # exact: right angle
         return first
     return det
 
 
 def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+    return (a + math.pi) % (2.0 * math.pi) - math.pi  # exact: a full turn
 
 
 def _thin_match(outer: float, catalogue: list[Part], settings: DetectorSettings) -> Part | None:
     """The thin catalogue part (under ``settings.thin_part``) whose size ``outer`` matches."""
     for part in catalogue:
         if part.outer < settings.thin_part and abs(outer - part.outer) <= max(
-            0.002, 0.25 * part.outer
+            THIN_SIZE_TOL, THIN_SIZE_SHARE * part.outer
         ):
             return part
     return None
@@ -991,10 +1200,10 @@ def _side_free(
     nothing is seen (hidden under a taller neighbour)."""
     s, c = _along_across(uv_all, mean, axis, across)
     c = (c - edge) * sign
-    beside = (s > s_in[0]) & (s < s_in[1]) & (c > 0.0015) & (c < 0.006)
+    beside = (s > s_in[0]) & (s < s_in[1]) & (c > FREE_SIDE_FROM) & (c < FREE_SIDE_TO)
     h = hgt[beside]
-    h = h[h > -0.5]  # invalid pixels read -1
-    return len(h) >= 20 and float(np.median(h)) < settings.min_height
+    h = h[h > SEEN_ABOVE]
+    return len(h) >= MIN_FREE_SIDE and float(np.median(h)) < settings.min_height
 
 
 def _moved_across(
@@ -1013,18 +1222,20 @@ def _moved_across(
         det,
         center=det.center + shift,
         open_end=det.open_end + shift,
-        confidence=min(det.confidence, 0.2),
+        confidence=min(det.confidence, CATALOGUE_CONFIDENCE),
     )
 
 
-def _clusters(xy: NDArray[np.float64], n: int, iterations: int = 10) -> NDArray[np.float64]:
+def _clusters(
+    xy: NDArray[np.float64], n: int, iterations: int = CLUSTER_ITERATIONS
+) -> NDArray[np.float64]:
     """``n`` k-means centres of 2D points, started at quantiles along the major axis
     (deterministic, unlike a random start)."""
     mean, major = _principal(xy)
     along = dot_last(xy - mean, major)
-    centres = np.array(
-        [mean + float(np.percentile(along, 100.0 * (j + 0.5) / n)) * major for j in range(n)]
-    )
+    # The middles of the n quantiles along the axis, in percent.
+    mids = [100.0 * (j + 0.5) / n for j in range(n)]  # exact: the quantiles' middles, in percent
+    centres = np.array([mean + float(np.percentile(along, q)) * major for q in mids])
     for _ in range(iterations):
         dist = np.stack([np.hypot(*(xy - c).T) for c in centres])
         nearest = np.argmin(dist, axis=0)
@@ -1040,7 +1251,7 @@ def _window(idx: NDArray[np.int64], hm: HeightMap, margin: float) -> NDArray[np.
     the neighbourhood tests then read a few thousand pixels instead of the whole frame."""
     rows, cols = hm.height.shape
     v, u = np.divmod(idx, cols)
-    grow = int(math.ceil(1.6 * margin / hm.pixel_size))
+    grow = int(math.ceil(WINDOW_GROWTH * margin / hm.pixel_size))
     r0, r1 = max(int(v.min()) - grow, 0), min(int(v.max()) + grow + 1, rows)
     c0, c1 = max(int(u.min()) - grow, 0), min(int(u.max()) + grow + 1, cols)
     return (np.arange(r0, r1)[:, None] * cols + np.arange(c0, c1)[None, :]).reshape(-1)
@@ -1051,7 +1262,7 @@ def _rect_axis(
 ) -> tuple[NDArray[np.float64], float, float, float, float]:
     """The long side of the smallest rectangle around ``uv`` as the axis, with the extent
     (s_lo, s_hi), the middle across and the width along it (as :func:`_fit_one` measures them)."""
-    (_, _), (rw, rh), ang = cv2.minAreaRect((uv * 1e3).astype(np.float32))
+    (_, _), (rw, rh), ang = cv2.minAreaRect((uv * MM_PER_M).astype(np.float32))
     a = math.radians(ang)
     ax = np.array([math.cos(a), math.sin(a)])
     if rh > rw:
@@ -1059,8 +1270,8 @@ def _rect_axis(
     ax = ax if float(ax @ axis) >= 0 else -ax
     s = dot_last(uv - mean, ax)
     c = dot_last(uv - mean, np.array([-ax[1], ax[0]]))
-    lo, hi = float(np.percentile(s, 1)), float(np.percentile(s, 99))
-    width = float(np.percentile(c, 99) - np.percentile(c, 1))
+    lo, hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+    width = float(np.percentile(c, EXTENT_HI) - np.percentile(c, EXTENT_LO))
     return ax, lo, hi, float(np.median(c)), width
 
 
@@ -1094,42 +1305,43 @@ def _hidden_thin_part(
     for part in catalogue:
         if part.outer >= settings.thin_part:
             continue
-        slack = max(0.002, 0.25 * part.outer)
-        if abs(outer - part.outer) > slack or width > part.outer + 2 * slack:
+        slack = max(THIN_SIZE_TOL, THIN_SIZE_SHARE * part.outer)
+        if abs(outer - part.outer) > slack or width > part.outer + 2 * slack:  # exact: both sides
             continue
-        if not settings.min_stub_length * part.length <= length < 0.9 * part.length:
+        if not settings.min_stub_length * part.length <= length < MAX_HIDDEN_SHARE * part.length:
             continue
         stub = length < settings.min_hidden * part.length
-        if stub and (relief > settings.max_stub_relief or width < 0.85 * part.outer):
+        if stub and (relief > settings.max_stub_relief or width < STUB_WIDTH * part.outer):
             continue
         ends, rest = [], []
         rel = uv_all - (mean + c_mid * across)
         c = dot_last(rel, across)
-        on_line = np.abs(c) < 0.5 * part.outer
+        on_line = np.abs(c) < 0.5 * part.outer  # exact: within its outline, half its size
         for sign, s_end in ((1.0, s_hi), (-1.0, s_lo)):
             # Heights just beyond this end, on the part's line.
             s = dot_last(rel, axis) * sign - sign * s_end
-            beyond = (s > 0.002) & (s < 0.010) & on_line
+            beyond = (s > BEYOND_FROM) & (s < BEYOND_TO) & on_line
             h = hgt[beyond]
-            seen = h > -0.5  # invalid pixels read -1
-            if stub and np.count_nonzero(seen) < 10:
+            seen = h > SEEN_ABOVE
+            if stub and np.count_nonzero(seen) < MIN_BEYOND:
                 # Hardly any floor seen just beyond a stub's end: hidden under a taller part
                 # (beside a taller part the floor is in its shadow for several millimetres).
                 ends.append("hidden")
-            elif np.count_nonzero(seen) < 10:
+            elif np.count_nonzero(seen) < MIN_BEYOND:
                 ends.append("unknown")
             elif float(np.median(h[seen])) < settings.min_height:
                 ends.append("free")
             else:  # a taller part over it, or a sliver of it seen past that part's flank
                 ends.append("hidden")
             # What is seen over the rest of the part's length, were this end the hidden one.
-            h = hgt[(s > 0.002) & (s < part.length - length) & on_line]
-            h = h[h > -0.5]
-            rest.append(float(np.mean(h > 0.8 * part.outer)) if len(h) else 1.0)
+            h = hgt[(s > BEYOND_FROM) & (s < part.length - length) & on_line]
+            h = h[h > SEEN_ABOVE]
+            rest.append(float(np.mean(h > COVER_HEIGHT * part.outer)) if len(h) else 1.0)
         if ends == ["free", "hidden"] and (not stub or rest[1] >= settings.min_cover):
-            return part, s_hi - 0.5 * part.length  # the +axis end (s_hi) is the free one
+            # The +axis end (s_hi) is the free one.
+            return part, s_hi - 0.5 * part.length  # exact: half the length from the free end
         if ends == ["hidden", "free"] and (not stub or rest[0] >= settings.min_cover):
-            return part, s_lo + 0.5 * part.length
+            return part, s_lo + 0.5 * part.length  # exact: half the length from the free end
     return None
 
 
@@ -1157,13 +1369,15 @@ def _end_view(
     those on the middle of the end face (a closed end shows a disc there, an open end only the
     hole's inside, which lies further in)."""
     s, c = _along_across(uv_all, center_uv, axis, across)
-    within = np.abs(c) < 0.4 * part.hole
+    within = np.abs(c) < FACE_HALF_WIDTH * part.hole
+    end = 0.5 * part.length  # exact: the end is half the length from the centre
     # Kept 6 mm inside the end: the lower part of a closed end's own face, blurred by the depth
     # noise and the centre's error, must not count as a view inside.
-    near_end = (s > 0.5 * part.length - 0.6 * part.outer) & (s < 0.5 * part.length - 0.006)
-    low = (hgt > -0.002) & (hgt < 0.3 * part.outer)
-    at_face = np.abs(s - 0.5 * part.length) < 0.004
-    middle = (hgt > 0.15 * part.outer) & (hgt < 0.85 * part.outer)
+    near_end = (s > end - INSIDE_DEPTH * part.outer) & (s < end - INSIDE_INSET)
+    low = (hgt > INSIDE_FLOOR) & (hgt < INSIDE_LOW * part.outer)
+    at_face = np.abs(s - end) < FACE_BAND
+    face_low, face_high = FACE_MIDDLE
+    middle = (hgt > face_low * part.outer) & (hgt < face_high * part.outer)
     return int(np.count_nonzero(near_end & within & low)), int(
         np.count_nonzero(at_face & within & middle)
     )

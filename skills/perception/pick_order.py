@@ -10,15 +10,23 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from skills.axes import XY
 from skills.perception.bin_parts import Detection
 
-_SAMPLES = 9  # points along each part's axis
+#: points sampled along each part's axis, end to end: the axis is a 9-point polyline, so a gap
+#: is measured to within an eighth of a part's length -- the spacing of the neighbours matters,
+#: not a millimetre of it
+_SAMPLES = 9
+#: decimals of a metre the clearance is rounded to before ordering (3: a millimetre), so parts
+#: whose clearances differ by less than the depth data resolves tie and the nearer goes first
+_CLEARANCE_DECIMALS = 3
 
 
 def _axis_points(d: Detection) -> NDArray[np.float64]:
     u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
-    s = np.linspace(-0.5, 0.5, _SAMPLES)[:, None] * d.length
-    return np.asarray(d.center[:2], float) + s * u
+    half = 0.5  # exact: the axis runs half the length either side of the centre
+    s = np.linspace(-half, half, _SAMPLES)[:, None] * d.length
+    return np.asarray(d.center[XY], float) + s * u
 
 
 def clearance(
@@ -29,13 +37,13 @@ def clearance(
     pts = _axis_points(d)
     x0, x1, y0, y1 = roi
     walls = np.minimum.reduce([pts[:, 0] - x0, x1 - pts[:, 0], pts[:, 1] - y0, y1 - pts[:, 1]])
-    gap = float(walls.min()) - 0.5 * d.outer
+    gap = float(walls.min()) - 0.5 * d.outer  # exact: the outline lies half the outer size out
     for o in others:
         if o is d:
             continue
         q = _axis_points(o)
-        dist = np.linalg.norm(pts[:, None, :] - q[None, :, :], axis=2).min()
-        gap = min(gap, float(dist) - 0.5 * (d.outer + o.outer))
+        dist = np.linalg.norm(pts[:, None, :] - q[None, :, :], axis=-1).min()
+        gap = min(gap, float(dist) - 0.5 * (d.outer + o.outer))  # exact: two half outer sizes
     return gap
 
 
@@ -45,7 +53,9 @@ def freest_first(
     """``usable`` ordered by clearance, the freest first (ties: nearer the robot first)."""
     return sorted(
         usable,
-        key=lambda d: (-round(clearance(d, all_seen, roi), 3), math.hypot(*d.center[:2])),
+        key=lambda d: (
+            -round(clearance(d, all_seen, roi), _CLEARANCE_DECIMALS), math.hypot(*d.center[XY])
+        ),
     )
 
 

@@ -8,7 +8,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from skills.axes import XY
 from skills.perception.bin_parts import Detection
+
+#: m, the farthest a detection's centre may lie from a part's true centre (in the floor plane)
+#: and still be scored as that part: a bench tolerance of about one outer size of the
+#: catalogue's smaller parts (30-35 mm), well past a good detection's error, short of a neighbour
+MATCH_GATE = 0.03
 
 
 @dataclass(frozen=True)
@@ -29,17 +35,17 @@ class Match:
 
 
 def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
+    return (a + math.pi) % (2 * math.pi) - math.pi  # exact: a full turn
 
 
 def score(
-    truths: list[Truth], detections: list[Detection], gate: float = 0.03
+    truths: list[Truth], detections: list[Detection], gate: float = MATCH_GATE
 ) -> tuple[list[Match], int, int]:
     """Greedy nearest matching within ``gate`` (m). Returns (matches, missed, false positives)."""
     pairs = []
     for i, t in enumerate(truths):
         for j, d in enumerate(detections):
-            dist = float(np.linalg.norm(t.center[:2] - d.center[:2]))
+            dist = float(np.linalg.norm(t.center[XY] - d.center[XY]))
             if dist < gate:
                 pairs.append((dist, i, j))
     pairs.sort()
@@ -51,10 +57,10 @@ def score(
         used_d.add(j)
         t, d = truths[i], detections[j]
         direct = abs(_wrap(d.yaw - t.yaw))
-        if t.open_ends == 2:
+        if t.open_ends == 2:  # exact: both ends open, a tube
             err, right = min(direct, math.pi - direct), None
         else:
             axis_err = min(direct, math.pi - direct)
-            err, right = axis_err, direct < 0.5 * math.pi
+            err, right = axis_err, direct < 0.5 * math.pi  # exact: a right angle
         matches.append(Match(t, d, dist, err, right))
     return matches, len(truths) - len(matches), len(detections) - len(matches)
