@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from skills.motion import Guard
 from skills.params import guard_field, si
 
+#: rad per degree, exact: the configuration's defaults below are written in degrees
 DEG = math.pi / 180.0
 
 
