@@ -49,7 +49,7 @@ class PivotParams:
         "the feel for S goes at most this many touch_standoff, plus height_tolerance, down",
     )
     #: 0.002 m/s and 0.7: the contact test of the packing pushes (skills.force), which the
-    #: feel for S was tuned with
+    #: feel for S has run with since it shares their force push
     touch_still_speed: float = si(
         0.002, "m/s", 0.0001, 0.05, "slower than this, the descent onto S is standing still"
     )
