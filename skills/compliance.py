@@ -22,7 +22,12 @@ import numpy as np
 from drivers.arm import MotionState
 from drivers.devices import Devices
 from drivers.pose import Pose
+from skills.axes import FORCE
 from skills.motion import Guard, GuardedMotion
+
+#: m (or rad), the shortest path length the progress divides by: a path of zero length (already
+#: at its end) then completes in one step instead of dividing by zero; far below any real motion
+MIN_LENGTH = 1e-9
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,7 @@ class CompliantPath:
 
     def _start(self) -> None:
         self._pose_at = self._path_factory()
-        self._total = max(1e-9, float(self._length(self._pose_at)))
+        self._total = max(MIN_LENGTH, float(self._length(self._pose_at)))
         self._t = self.dev.clock.now()
         self._v = 0.0
         self.progress = 0.0
@@ -99,10 +104,10 @@ class CompliantPath:
             return True
         # Trapezoid in path length: accelerate, cruise, decelerate to reach s = 1 at rest.
         remaining = (1.0 - self.progress) * self._total
-        v_brake = float(np.sqrt(2.0 * self._acc * remaining))
+        v_brake = float(np.sqrt(2.0 * self._acc * remaining))  # exact: v^2 = 2 a d at constant a
         self._v = min(self._speed, self._v + self._acc * dt, max(v_brake, self._acc * dt))
         self.progress = min(1.0, self.progress + self._v * dt / self._total)
-        force = np.asarray(self.dev.ft.wrench()[:3], float) * self._mask
+        force = np.asarray(self.dev.ft.wrench()[FORCE], float) * self._mask
         magnitude = float(np.linalg.norm(force))
         self.peak_force = max(self.peak_force, magnitude)
         if magnitude > c.deadband:

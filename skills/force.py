@@ -11,14 +11,27 @@ from numpy.typing import ArrayLike, NDArray
 
 from drivers.devices import Devices
 from drivers.pose import Pose
+from skills.axes import DIM, FORCE, WRENCH_DIM
 from skills.motion import Failed, Guard, GuardedMotion, arm_failure
 
-__all__ = ["ForcePush", "world_force"]
+__all__ = ["CONTACT_RATIO", "FORCE_SETTLE", "STILL_SPEED", "ForcePush", "world_force"]
+
+# The contact test of a push whose caller gives none of its own: the values the packing pushes
+# were measured with (their contact_settle_s and still_speed_m_s defaults).
+#: s the TCP must stand still, pressing, before the contact counts: many arm state samples, so
+#: one still sample between two steps of a stick-slip is not taken for a contact
+FORCE_SETTLE = 0.15
+#: m/s below which the TCP counts as standing still: a push still closing a gap moves at its
+#: commanded speed (about 0.01 m/s), one pressed against a neighbour only creeps
+STILL_SPEED = 0.002
+#: share of the commanded force that must press back before the contact counts: short of 1
+#: because the force mode settles a little under its target against a stiff neighbour
+CONTACT_RATIO = 0.7
 
 
 def world_force(dev: Devices) -> NDArray[np.float64]:
     """The force (N) the environment applies to the tool, in the base frame."""
-    return dev.arm.tool_pose().rotation @ np.asarray(dev.ft.wrench()[:3], float)
+    return dev.arm.tool_pose().rotation @ np.asarray(dev.ft.wrench()[FORCE], float)
 
 
 class ForcePush:
@@ -49,9 +62,9 @@ class ForcePush:
         force: float,
         speed: float,
         reach: Callable[[], float] | float,
-        settle: float = 0.15,
-        still_speed: float = 0.002,
-        contact_ratio: float = 0.7,
+        settle: float = FORCE_SETTLE,
+        still_speed: float = STILL_SPEED,
+        contact_ratio: float = CONTACT_RATIO,
         free: tuple[int, ...] = (),
     ) -> None:
         """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``."""
@@ -60,7 +73,7 @@ class ForcePush:
         if np.count_nonzero(d) != 1:
             raise ValueError(f"a force push runs along one base axis, got {direction}")
         self.dev, self.axis, self.sign = dev, axis, float(np.sign(d[axis]))
-        if axis in free or any(a not in (0, 1, 2) for a in free):
+        if axis in free or any(a not in range(DIM) for a in free):
             raise ValueError(f"free axes must be other base axes than the push's, got {free}")
         self.free = tuple(free)
         self.force, self.speed, self.settle = force, speed, settle
@@ -86,12 +99,12 @@ class ForcePush:
         self._limit = float(self._reach())
         self.contact, self.contact_pose, self.travelled = False, None, 0.0
         self._last, self._still_since = None, None
-        selection = [False] * 6
+        selection = [False] * WRENCH_DIM
         selection[self.axis] = True
-        wrench = [0.0] * 6
+        wrench = [0.0] * WRENCH_DIM
         # The wrench the tool applies is minus the force on it: reference plus the push.
         wrench[self.axis] = float(-self._ref[self.axis]) + self.sign * self.force
-        limits = [0.0] * 6
+        limits = [0.0] * WRENCH_DIM
         limits[self.axis] = self.speed
         for axis in self.free:
             # Nothing pressed beyond what was read at the start: only a contact moves it.

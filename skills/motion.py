@@ -26,12 +26,15 @@ from drivers.ft_sensor import ForceTorqueSensor
 from drivers.gripper import Gripper
 from drivers.health import DeviceError
 from drivers.limit_guard import LimitGuard
+from skills.axes import FORCE, TORQUE
 from skills.status import RUNNING, Failure, SkillInputError, Status, StepResult
 
 #: The cell's abort limits where a configuration gives none (its ``safety`` section defaults to
 #: these): |F| in N and |T| in N*m at the wrist, and the time one motion of a skill may take (s).
 DEFAULT_MAX_FORCE = 80.0
+#: N*m, the default torque limit at the wrist (see above)
 DEFAULT_MAX_TORQUE = 8.0
+#: s, the default time one motion of a skill may take (see above)
 DEFAULT_MOTION_TIMEOUT = 10.0
 #: N, the highest force limit a motion may be given: the FT300's measuring range (+-300 N; its
 #: counts saturate at 327.67 N), above which a limit could never be seen crossed
@@ -39,6 +42,10 @@ MAX_FORCE_LIMIT = 300.0
 #: N*m, the highest torque limit a motion may be given: the FT300's torque range (+-30 N*m; its
 #: counts saturate at 32.767 N*m), for the same reason
 MAX_TORQUE_LIMIT = 30.0
+#: s the fingers must be still before a gripper motion counts as finished, where its caller gives
+#: no settle of its own: the 2F-85 reports "not moving" as soon as its fingers stop, and 0.1 s
+#: (a few of its status polls) lets a grip that is still building its force finish doing so
+GRIPPER_SETTLE = 0.1
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,7 @@ class Guard:
         return arm_motion(name, dev.arm, dev.ft, dev.clock, self, command)
 
     def gripper_motion(
-        self, name: str, dev: Devices, command: Callable[[], None], settle: float = 0.1
+        self, name: str, dev: Devices, command: Callable[[], None], settle: float = GRIPPER_SETTLE
     ) -> GuardedMotion:
         """:func:`gripper_motion` on ``dev`` under this guard."""
         return gripper_motion(name, dev.gripper, dev.arm, dev.ft, dev.clock, self, command, settle)
@@ -134,7 +141,7 @@ class GuardedMotion:
             self.peak_force = max(self.peak_force, trip.force)
             return StepResult(Status.FAILURE, trip.describe(), Failure.FORCE_TORQUE)
         w = self.ft.wrench()
-        force, torque = float(np.linalg.norm(w[:3])), float(np.linalg.norm(w[3:]))
+        force, torque = float(np.linalg.norm(w[FORCE])), float(np.linalg.norm(w[TORQUE]))
         self.peak_force = max(self.peak_force, force)
         if force > self.guard.max_force or torque > self.guard.max_torque:
             self.arm.stop()
@@ -233,7 +240,7 @@ def gripper_motion(
     clock: Clock,
     guard: Guard,
     command: Callable[[], None],
-    settle: float = 0.1,
+    settle: float = GRIPPER_SETTLE,
 ) -> GuardedMotion:
     """A guarded gripper motion that finishes once the fingers stop moving (after ``settle`` s)."""
     settled = Settled(gripper, clock, settle)

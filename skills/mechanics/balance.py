@@ -21,6 +21,14 @@ from scipy.optimize import linprog
 from drivers.parts import Section
 from skills.mechanics.contact import WRENCH_NAMES, Frictions, contact_wrenches, gravity_wrench
 
+# The ``status`` codes of ``scipy.optimize.linprog`` (as its documentation lists them) read here:
+#: an optimum was found
+LP_OPTIMAL = 0
+#: the constraints cannot all hold: no force balance exists
+LP_INFEASIBLE = 2
+#: the objective has no lower bound
+LP_UNBOUNDED = 3
+
 
 @dataclass(frozen=True)
 class BalanceResult:
@@ -40,11 +48,11 @@ def _solve(wrenches: NDArray[np.float64], rhs: NDArray[np.float64], lower: float
         bounds=[(lower, None)] * n,
         method="highs",
     )
-    if res.status == 0:
+    if res.status == LP_OPTIMAL:
         return BalanceResult(True, dict(zip(WRENCH_NAMES, map(float, res.x), strict=True)), res.fun)
-    if res.status == 2:  # infeasible
+    if res.status == LP_INFEASIBLE:
         return BalanceResult(False, None, None)
-    if res.status == 3:  # unbounded cannot happen with a positive cost and k >= lower >= 0
+    if res.status == LP_UNBOUNDED:  # cannot happen with a positive cost and k >= lower >= 0
         raise RuntimeError(f"linprog reported an unbounded problem: {res.message}")
     raise RuntimeError(f"linprog failed: {res.message}")
 

@@ -27,7 +27,20 @@ from numpy.typing import NDArray
 #: Tolerance on dot products of unit vectors (dimensionless). A target within this of a
 #: facet counts as inside, like an LP solution that satisfies the constraints to tolerance.
 TOL = 1e-9
+#: Length below which a vector counts as zero (a generator or a target of no length, whose
+#: direction is undefined): far below any wrench of a real section, above rounding noise
 _EPS_CROSS = 1e-12
+#: Length below which the cross product of two unit generators counts as zero: the two are
+#: parallel and their normal is no ray of the dual cone
+_EPS_RAY = 1e-10
+#: The dimension of the space the cones live in: a planar wrench ``[m, F_x, F_y]``; a triple of
+#: generators is what can span it
+R3 = 3
+#: A generator matrix's trailing axes (components, generators) after the batch's
+MATRIX_AXES = 2
+#: With at least this many generators the probe triple spreads over the columns at thirds: with
+#: Table 2's six that is S1, H1, G1, one edge of each contact, the most independent triple
+PROBE_SPREAD_FROM = 6
 
 
 def _unit(v: NDArray[np.float64], axis: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -51,34 +64,34 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
     """Whether ``target`` (..., 3) lies in the cone of the columns of ``generators`` (..., 3, n)."""
     g_raw = np.asarray(generators, dtype=float)
     t_raw = np.asarray(target, dtype=float)
-    shape = np.broadcast_shapes(g_raw.shape[:-2], t_raw.shape[:-1])
+    shape = np.broadcast_shapes(g_raw.shape[:-MATRIX_AXES], t_raw.shape[:-1])
     n = g_raw.shape[-1]
     # Work on a flat batch (m, 3, n) so the degenerate branches can index points, and on
     # contiguous unit-length component arrays (scaling a generator does not change the cone).
-    g_flat = np.broadcast_to(g_raw, shape + (3, n)).reshape(-1, 3, n)
+    g_flat = np.broadcast_to(g_raw, shape + (R3, n)).reshape(-1, R3, n)
     m = g_flat.shape[0]
     comp = []
     for k in range(n):
-        c0, c1, c2 = (np.ascontiguousarray(g_flat[:, r, k]) for r in range(3))
+        c0, c1, c2 = (np.ascontiguousarray(g_flat[:, r, k]) for r in range(R3))
         norm = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
         scale = np.where(norm > _EPS_CROSS, 1.0 / np.where(norm > _EPS_CROSS, norm, 1.0), 0.0)
         comp.append((c0 * scale, c1 * scale, c2 * scale))
     if t_raw.ndim == 1:  # one target for every point: normalise it once
         t_unit, t_norm0 = _unit(t_raw, axis=-1)
-        t = np.broadcast_to(t_unit, (m, 3))
+        t = np.broadcast_to(t_unit, (m, R3))
         t_norm = np.full(m, float(t_norm0))
     else:
-        t, t_norm = _unit(np.broadcast_to(t_raw, shape + (3,)).reshape(-1, 3), axis=-1)
-    t0, t1, t2 = (np.ascontiguousarray(t[:, r]) for r in range(3))
+        t, t_norm = _unit(np.broadcast_to(t_raw, shape + (R3,)).reshape(-1, R3), axis=-1)
+    t0, t1, t2 = (np.ascontiguousarray(t[:, r]) for r in range(R3))
     separated = np.zeros(m, dtype=bool)
     any_valid = np.zeros(m, dtype=bool)
-    for i, j in combinations(range(n), 2):
+    for i, j in combinations(range(n), 2):  # exact: a dual ray is normal to a pair
         (a0, a1, a2), (b0, b1, b2) = comp[i], comp[j]
         y0 = a1 * b2 - a2 * b1
         y1 = a2 * b0 - a0 * b2
         y2 = a0 * b1 - a1 * b0
         norm = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-        valid = norm > 1e-10
+        valid = norm > _EPS_RAY
         tol = TOL * norm
         all_pos = valid.copy()
         all_neg = valid.copy()
@@ -96,8 +109,9 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
     # The pair normals are the whole answer when the generators span R^3. Find the points where
     # they span only a plane: one generic triple settles almost every point, all triples the rest.
     unsure = ~separated & any_valid
-    if n >= 3 and unsure.any():
-        probe = (0, n // 3, (2 * n) // 3) if n >= 6 else (0, 1, 2)
+    if n >= R3 and unsure.any():
+        spread = n >= PROBE_SPREAD_FROM
+        probe = tuple(k * n // R3 for k in range(R3)) if spread else tuple(range(R3))
         (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = (comp[k] for k in probe)
         det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
         unsure &= np.abs(det) <= TOL
@@ -105,26 +119,26 @@ def in_cone(generators: NDArray[np.float64], target: NDArray[np.float64]) -> NDA
         idx = np.nonzero(unsure)[0]
         g = np.stack([np.stack(c, axis=-1) for c in comp], axis=-1)  # (m, 3, n) unit columns
         gs = g[idx]
-        triples = list(combinations(range(n), 3))
+        triples = list(combinations(range(n), R3))
         dets = (
             np.stack([np.linalg.det(gs[:, :, list(c)]) for c in triples], axis=-1)
-            if n >= 3
+            if n >= R3
             else np.zeros((idx.size, 1))
         )
         rank2 = idx[(np.abs(dets) <= TOL).all(-1)]
         if rank2.size:
             g2 = g[rank2]
-            pairs = list(combinations(range(n), 2))
+            pairs = list(combinations(range(n), 2))  # exact: the normals of pairs, as above
             cross = np.cross(
-                g2[:, :, [i for i, _ in pairs]].transpose(0, 2, 1),
-                g2[:, :, [j for _, j in pairs]].transpose(0, 2, 1),
+                np.moveaxis(g2[:, :, [i for i, _ in pairs]], 1, -1),
+                np.moveaxis(g2[:, :, [j for _, j in pairs]], 1, -1),
             )
             norms = np.linalg.norm(cross, axis=-1)
             best = np.argmax(norms, axis=-1)
             p = cross[np.arange(rank2.size), best] / norms[np.arange(rank2.size), best, None]
-            inplane = np.cross(g2.transpose(0, 2, 1), p[:, None, :])  # (k, n, 3)
+            inplane = np.cross(np.moveaxis(g2, 1, -1), p[:, None, :])  # (k, n, 3)
             y2, y2_norm = _unit(inplane, axis=-1)
-            separated[rank2] |= _separated(y2, y2_norm > 1e-10, g2, t[rank2])
+            separated[rank2] |= _separated(y2, y2_norm > _EPS_RAY, g2, t[rank2])
     rank1 = ~any_valid
     if np.any(rank1):
         idx = np.nonzero(rank1)[0]

@@ -42,6 +42,19 @@ from drivers.parts import Frictions, Section
 
 #: Column order of the 3x6 wrench matrix, as in Table 2.
 WRENCH_NAMES: tuple[str, ...] = ("S1", "S2", "H1", "H2", "G1", "G2")
+#: Columns of the wrench matrix by name: the two friction-cone edges of S, of H and of G
+#: (Table 2, in :data:`WRENCH_NAMES` order)
+S1, S2, H1, H2, G1, G2 = 0, 1, 2, 3, 4, 5
+#: Rows of a planar wrench ``[m, F_x, F_y]`` (Eq. 6): the moment about the section centre, then
+#: the horizontal and the vertical force
+MOMENT, FORCE_X, FORCE_Y = 0, 1, 2
+#: the length of a planar wrench: one moment and two force components
+PLANAR_DIM = 3
+#: rad, a right angle: the open bound of alpha (Eq. 4) and the closed bound of beta (Eq. 5)
+HALF_PI = 0.5 * math.pi
+#: rad a beta may lie above pi/2 and still count as pi/2: a beta computed by adding angles can
+#: miss it by a few ulps
+BETA_ROUNDING = 1e-12
 
 
 def _check_finite(name: str, value: float) -> float:
@@ -61,7 +74,7 @@ def check_la(l_a: ArrayLike) -> NDArray[np.float64]:
 
 def check_alpha(alpha: ArrayLike) -> NDArray[np.float64]:
     arr = np.asarray(alpha, dtype=float)
-    bad = ~np.isfinite(arr) | (arr <= 0.0) | (arr >= 0.5 * math.pi)
+    bad = ~np.isfinite(arr) | (arr <= 0.0) | (arr >= HALF_PI)
     if np.any(bad):
         raise ValueError(f"alpha must lie in (0, pi/2) rad (Eq. 4), got {arr[bad].ravel()[0]:g}")
     return arr
@@ -69,7 +82,7 @@ def check_alpha(alpha: ArrayLike) -> NDArray[np.float64]:
 
 def check_beta(beta: ArrayLike) -> NDArray[np.float64]:
     arr = np.asarray(beta, dtype=float)
-    bad = ~np.isfinite(arr) | (arr < 0.0) | (arr > 0.5 * math.pi + 1e-12)
+    bad = ~np.isfinite(arr) | (arr < 0.0) | (arr > HALF_PI + BETA_ROUNDING)
     if np.any(bad):
         raise ValueError(f"beta must lie in [0, pi/2] rad (Eq. 5), got {arr[bad].ravel()[0]:g}")
     return arr
@@ -96,32 +109,32 @@ def contact_wrenches(
     la, al, be = np.broadcast_arrays(la, al, be)
     a, b, delta = section.a, section.b, section.delta
     g_s, g_h, g_g = frictions.gammas
-    l = 2.0 * a * la
+    l = 2.0 * a * la  # exact: l = 2 a l_a, the paper's definition of l_a (Eq. 1)
 
-    out = np.empty(la.shape + (3, 6))
+    out = np.empty(la.shape + (PLANAR_DIM, len(WRENCH_NAMES)))
     # S: finger tip on the top surface at (a - l, b).
-    out[..., 0, 0] = (l - a) * math.cos(g_s) - b * math.sin(g_s)
-    out[..., 1, 0] = np.sin(be + g_s)
-    out[..., 2, 0] = -np.cos(be + g_s)
-    out[..., 0, 1] = (l - a) * math.cos(g_s) + b * math.sin(g_s)
-    out[..., 1, 1] = np.sin(be - g_s)
-    out[..., 2, 1] = -np.cos(be - g_s)
+    out[..., MOMENT, S1] = (l - a) * math.cos(g_s) - b * math.sin(g_s)
+    out[..., FORCE_X, S1] = np.sin(be + g_s)
+    out[..., FORCE_Y, S1] = -np.cos(be + g_s)
+    out[..., MOMENT, S2] = (l - a) * math.cos(g_s) + b * math.sin(g_s)
+    out[..., FORCE_X, S2] = np.sin(be - g_s)
+    out[..., FORCE_Y, S2] = -np.cos(be - g_s)
     # H: the hole's upper lip at (a, b - delta) against the inner finger's face.
-    out[..., 0, 2] = a * np.sin(al - g_h) + (b - delta) * np.cos(al - g_h)
-    out[..., 1, 2] = -np.cos(al - be - g_h)
-    out[..., 2, 2] = np.sin(al - be - g_h)
-    out[..., 0, 3] = a * np.sin(al + g_h) + (b - delta) * np.cos(al + g_h)
-    out[..., 1, 3] = -np.cos(al - be + g_h)
-    out[..., 2, 3] = np.sin(al - be + g_h)
+    out[..., MOMENT, H1] = a * np.sin(al - g_h) + (b - delta) * np.cos(al - g_h)
+    out[..., FORCE_X, H1] = -np.cos(al - be - g_h)
+    out[..., FORCE_Y, H1] = np.sin(al - be - g_h)
+    out[..., MOMENT, H2] = a * np.sin(al + g_h) + (b - delta) * np.cos(al + g_h)
+    out[..., FORCE_X, H2] = -np.cos(al - be + g_h)
+    out[..., FORCE_Y, H2] = np.sin(al - be + g_h)
     # G: the far bottom corner (-a, -b) on the ground.
-    out[..., 0, 4] = -a * np.cos(g_g - be) - b * np.sin(g_g - be)
-    out[..., 1, 4] = -math.sin(g_g)
-    out[..., 2, 4] = math.cos(g_g)
-    out[..., 0, 5] = -a * np.cos(g_g + be) + b * np.sin(g_g + be)
-    out[..., 1, 5] = math.sin(g_g)
-    out[..., 2, 5] = math.cos(g_g)
+    out[..., MOMENT, G1] = -a * np.cos(g_g - be) - b * np.sin(g_g - be)
+    out[..., FORCE_X, G1] = -math.sin(g_g)
+    out[..., FORCE_Y, G1] = math.cos(g_g)
+    out[..., MOMENT, G2] = -a * np.cos(g_g + be) + b * np.sin(g_g + be)
+    out[..., FORCE_X, G2] = math.sin(g_g)
+    out[..., FORCE_Y, G2] = math.cos(g_g)
     if normalized:
-        out[..., 0, :] /= a
+        out[..., MOMENT, :] /= a
     return out
 
 

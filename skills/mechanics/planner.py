@@ -54,12 +54,29 @@ import numpy as np
 from drivers.parts import Gripper, Part, Section, hole_offset
 from skills.mechanics.contact import Frictions, check_la
 from skills.mechanics.region import (
+    ANGLE_TOL,
     HALF_PI,
     alpha_axis,
     bisect_edge,
     stable_beta_max,
     tilt_ok_mask,
 )
+
+#: rad, the largest ``alpha_margin`` accepted (about 29 deg): a margin that large would leave
+#: little of (0, pi/2) to plan in; a larger value is most likely degrees given as rad
+MAX_ALPHA_MARGIN = 0.5
+#: m, a length this short counts as none (an edge of no length has no normal), and a length
+#: within it of a bound counts as on the bound: float rounding of sums of millimetre lengths
+LENGTH_ROUNDING = 1e-12
+#: m an overlap may exceed ``contact_tolerance`` by rounding alone: far below a finger's accuracy
+OVERLAP_ROUNDING = 1e-9
+#: How close (in steps) a ratio of lengths or angles may fall short of a whole number of steps
+#: and still count as it: float division of 0.29 / 0.01 gives 28.999999999999996
+STEP_ROUNDING = 1e-9
+#: Decimals an ``l_a`` of the scan is rounded to: ``la_max - k * la_step`` by floats misses the
+#: intended value in the last digits (0.9 - 6 * 0.01 is 0.8400000000000001), and plans are
+#: compared and printed by that value
+LA_DECIMALS = 10
 
 
 @dataclass(frozen=True)
@@ -85,8 +102,10 @@ class PlannerOptions:
         check_la(self.la_min)
         if self.la_min > self.la_max:
             raise ValueError(f"la_min {self.la_min:g} exceeds la_max {self.la_max:g}")
-        if not math.isfinite(self.alpha_margin) or not 0 <= self.alpha_margin < 0.5:
-            raise ValueError(f"alpha_margin must lie in [0, 0.5) rad, got {self.alpha_margin:g}")
+        if not math.isfinite(self.alpha_margin) or not 0 <= self.alpha_margin < MAX_ALPHA_MARGIN:
+            raise ValueError(
+                f"alpha_margin must lie in [0, {MAX_ALPHA_MARGIN:g}) rad, got {self.alpha_margin:g}"
+            )
         if not math.isfinite(self.hook_depth) or self.hook_depth < 0:
             raise ValueError(f"hook_depth must be >= 0 m, got {self.hook_depth:g}")
         if not 0 < self.la_step <= 1:
@@ -114,7 +133,7 @@ class PivotPlan:
     @property
     def beta_ub(self) -> float | None:
         """Where balance is lost during the tilt (the paper's beta_ub), None if never."""
-        if self.beta_stable_max is None or self.beta_stable_max >= HALF_PI - 1e-9:
+        if self.beta_stable_max is None or self.beta_stable_max >= HALF_PI - ANGLE_TOL:
             return None
         return self.beta_stable_max
 
@@ -141,13 +160,13 @@ class PivotPlan:
 
 def reach_depth(section: Section, l_a: float, alpha: np.ndarray | float) -> np.ndarray | float:
     """``e_H``: how far the inner fingertip reaches past the rim contact H along the finger (m)."""
-    l = 2.0 * section.a * l_a
+    l = 2.0 * section.a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
     return l * np.sin(alpha) - section.delta * np.cos(alpha)
 
 
 def jaw_opening(section: Section, l_a: float, alpha: np.ndarray | float) -> np.ndarray | float:
     """Finger-face distance along the closing line at the grasp (m)."""
-    l = 2.0 * section.a * l_a
+    l = 2.0 * section.a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
     return l * np.cos(alpha) + section.delta * np.sin(alpha)
 
 
@@ -171,7 +190,7 @@ def _swept_overlap(
     axes = [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
     for edge in edges:
         norm = float(np.hypot(*edge))
-        if norm > 1e-12:
+        if norm > LENGTH_ROUNDING:
             axes.append(np.array([-edge[1], edge[0]]) / norm)
     depth = math.inf
     for axis in axes:
@@ -197,14 +216,14 @@ def approach_problem(
     closes onto H.
     """
     a, b, delta = section.a, section.b, section.delta
-    l = 2.0 * a * l_a
+    l = 2.0 * a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
     x = np.array([-math.cos(alpha), math.sin(alpha)])
     z = np.array([-math.sin(alpha), -math.cos(alpha)])
     length, thick = gripper.finger_length, gripper.finger_thickness
-    outer_tip = np.array([a - l, 2.0 * b])
+    outer_tip = np.array([a - l, 2.0 * b])  # exact: the top surface, the height D = 2b
     inner_tip = outer_tip - float(jaw_opening(section, l_a, alpha)) * x
     obstacles = {
-        "the rim and the wall above the hole": (-a, a, 2.0 * b - delta, 2.0 * b),
+        "the rim and the wall above the hole": (-a, a, 2.0 * b - delta, 2.0 * b),  # exact: D = 2b
         "the wall below the hole": (-a, a, 0.0, delta),
         "the floor": (-a - 1.0, a + 1.0, -1.0, 0.0),
     }
@@ -220,7 +239,7 @@ def approach_problem(
         outline = _finger(tip, z, back, length)
         for what, box in obstacles.items():
             depth = _swept_overlap(outline, travel, box)
-            if depth > tol + 1e-9:
+            if depth > tol + OVERLAP_ROUNDING:
                 return (
                     f"approach blocked: the {finger} finger cuts {depth * 1e3:.1f} mm into "
                     f"{what} {when} (l_a {l_a:.2f}, alpha {math.degrees(alpha):.1f} deg)"
@@ -241,7 +260,10 @@ def _run_starts(mask: np.ndarray, length: int) -> list[int]:
 
 def hook_alpha(part: Part, finger_width: float, hook_depth: float) -> float:
     """Smallest alpha (rad) at which the inner finger's tip gets ``hook_depth`` behind the rim."""
-    room = 2.0 * hole_offset(part.hole, finger_width) if part.hole_shape == "circle" else part.hole
+    if part.hole_shape == "circle":
+        room = 2.0 * hole_offset(part.hole, finger_width)  # exact: the chord is 2x (Eq. 2)
+    else:
+        room = part.hole
     return math.atan2(hook_depth, room)
 
 
@@ -273,20 +295,20 @@ def plan_pivot(
     alpha_hook = hook_alpha(part, gripper.finger_width, options.hook_depth)
     reach_max = gripper.finger_length - options.palm_margin
     alphas = alpha_axis(options.alpha_samples)
-    n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + 1e-9)) + 1
+    n_la = int(math.floor((options.la_max - options.la_min) / options.la_step + STEP_ROUNDING)) + 1
     stable_somewhere = False
     approach_blocked: str | None = None  #: the last plan passed over for its approach
-    margin_steps = int(math.ceil(options.alpha_margin / (alphas[1] - alphas[0]) - 1e-9))
+    margin_steps = int(math.ceil(options.alpha_margin / (alphas[1] - alphas[0]) - STEP_ROUNDING))
     for la in options.la_max - options.la_step * np.arange(n_la):
-        la = float(round(la, 10))
+        la = float(round(la, LA_DECIMALS))
 
         def feasible(al: np.ndarray, la: float = la) -> tuple[np.ndarray, np.ndarray]:
             """(stable and fits the stroke and hooks the hole, stable) for each alpha."""
             ok = tilt_ok_mask(
                 section, la, al, frictions, beta_req, options.equation, options.beta_samples
             )
-            fits = (jaw_opening(section, la, al) <= usable + 1e-12) & (al >= alpha_hook)
-            fits &= reach_depth(section, la, al) <= reach_max + 1e-12
+            fits = (jaw_opening(section, la, al) <= usable + LENGTH_ROUNDING) & (al >= alpha_hook)
+            fits &= reach_depth(section, la, al) <= reach_max + LENGTH_ROUNDING
             return ok & fits, ok
 
         both, ok = feasible(alphas)
@@ -310,7 +332,7 @@ def plan_pivot(
                 )
             alpha = alpha_min + options.alpha_margin
             end = stable_beta_max(section, la, alpha, frictions, options.equation)
-            if end is None or end < beta_req - 1e-9:  # a sliver the scan stepped over
+            if end is None or end < beta_req - ANGLE_TOL:  # a sliver the scan stepped over
                 continue
             blocked = approach_problem(section, la, alpha, gripper, options)
             if blocked is not None:

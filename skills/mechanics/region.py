@@ -12,7 +12,6 @@ why the defaults use 0.25 degree steps in beta.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -22,23 +21,38 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.parts import Section
 from skills.mechanics.balance import resolve_equation
 from skills.mechanics.cone import eq7_feasible, eq8_feasible
-from skills.mechanics.contact import Frictions, check_alpha, check_beta, check_la, contact_wrenches
+from skills.mechanics.contact import (
+    HALF_PI,
+    Frictions,
+    check_alpha,
+    check_beta,
+    check_la,
+    contact_wrenches,
+)
 
-HALF_PI = 0.5 * math.pi
 #: Default number of beta samples on [0, pi/2] for path questions (0.25 degree steps).
 BETA_SAMPLES = 361
+#: Default number of alpha samples inside (0, pi/2) for the smallest usable alpha (0.25 degree
+#: steps: 360 intervals, the two end points excluded)
+ALPHA_SAMPLES = 359
+#: Default number of halvings of a bisection: 30 halvings of a 0.25 deg step leave an error
+#: below 1e-11 rad, far below any angle the arm can set
+BISECTIONS = 30
+#: rad, angles this close count as equal: above the bisection's error, far below any angle the
+#: arm can set, so an edge found by bisection still counts as reaching its target
+ANGLE_TOL = 1e-9
 
 
 def alpha_axis(n: int) -> NDArray[np.float64]:
     """``n`` evenly spaced alphas strictly inside (0, pi/2) (the end points are excluded, Eq. 4)."""
     if n < 1:
         raise ValueError(f"grid must have at least 1 point, got {n}")
-    return np.linspace(0.0, HALF_PI, n + 2)[1:-1]
+    return np.linspace(0.0, HALF_PI, n + 2)[1:-1]  # exact: n inside, both ends dropped
 
 
 def beta_axis(n: int) -> NDArray[np.float64]:
     """``n`` evenly spaced betas from 0 to pi/2 inclusive (Eq. 5)."""
-    if n < 2:
+    if n < 2:  # exact: both end points
         raise ValueError(f"grid must have at least 2 points, got {n}")
     return np.linspace(0.0, HALF_PI, n)
 
@@ -75,7 +89,7 @@ def region_map(
 
 
 def bisect_edge(
-    holds: Callable[[float], bool], inside: float, outside: float, iterations: int = 30
+    holds: Callable[[float], bool], inside: float, outside: float, iterations: int = BISECTIONS
 ) -> float:
     """The point nearest ``outside`` where ``holds`` is still True, by bisection.
 
@@ -83,7 +97,7 @@ def bisect_edge(
     30 halvings of a 0.25 deg step leave an error below 1e-11 rad.
     """
     for _ in range(iterations):
-        mid = 0.5 * (inside + outside)
+        mid = 0.5 * (inside + outside)  # exact: the midpoint
         if holds(mid):
             inside = mid
         else:
@@ -106,9 +120,8 @@ class TiltCheck:
 
     @property
     def ok(self) -> bool:
-        return (
-            self.beta_stable_max is not None and self.beta_stable_max >= self.beta_required - 1e-9
-        )
+        end = self.beta_stable_max
+        return end is not None and end >= self.beta_required - ANGLE_TOL
 
 
 def stable_beta_max(
@@ -186,7 +199,7 @@ def min_alpha_for_tilt(
     frictions: Frictions,
     beta_required: float = HALF_PI,
     equation: str = "auto",
-    alpha_samples: int = 359,
+    alpha_samples: int = ALPHA_SAMPLES,
 ) -> float | None:
     """Smallest alpha (rad) whose Tilt stays stable from beta = 0 to ``beta_required``, or None.
 

@@ -37,20 +37,26 @@ from numpy.typing import NDArray
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import Z
 from skills.compliance import Compliance, CompliantPath
 from skills.motion import GuardedMotion, Sequence, Settled
 from skills.pivot.frame import PivotFrame, rotate_about_point
 from skills.pivot.params import PivotParams
 from skills.status import Failure, Status, StepResult
 
+#: m, the shortest slide into the hole: a tool already at its depth still gets a path with a
+#: direction (a micrometre, nothing the arm can show)
+MIN_SLIDE = 1e-6
+
 
 def pinched_span(part: Part, finger_width: float) -> tuple[float, float]:
     """``(outer, inner)`` distances (m) from the part's axis, along the grasp line, of the outer
     wall and of where a pad of width ``w`` inside the hole touches (the chord of Eq. 2)."""
-    outer = 0.5 * part.outer
+    outer = 0.5 * part.outer  # exact: a radius is half the diameter
     if part.hole_shape == "circle":
-        return outer, 0.5 * math.sqrt(max(0.0, part.hole**2 - finger_width**2))
-    return outer, 0.5 * part.hole
+        chord = math.sqrt(max(0.0, part.hole**2 - finger_width**2))
+        return outer, 0.5 * chord  # exact: the pad's contact, half the chord (Eq. 2) off the axis
+    return outer, 0.5 * part.hole  # exact: half the hole's width
 
 
 def hole_grasp_rotation(x_horizontal: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -66,8 +72,9 @@ def turn_centre(
 ) -> NDArray[np.float64]:
     """C (m, world): the rim contact H as the fingers carry it -- on the inner pad's face,
     ``hook_depth`` (e_H) back from the fingertip along the fingers, where the Grasp closed it."""
-    x, z = tool.rotation[:, 0], tool.rotation[:, 2]
-    return tool.position - 0.5 * jaw_width * x + (tip_offset - hook_depth) * z
+    x, z = tool.rotation[:, 0], tool.rotation[:, Z]
+    half = 0.5 * jaw_width  # exact: the inner pad lies half the opening from the TCP
+    return tool.position - half * x + (tip_offset - hook_depth) * z
 
 
 class HoleGraspSkill:
@@ -148,12 +155,13 @@ class Align(HoleGraspSkill):
         outer, inner = pinched_span(part, dev.gripper.finger_width)
         self._wall_width = outer - inner  #: m across the wall between the pads' faces
         self.turn = self._turn_about_rim()
+        gaps = 2.0 * params.wall_gap  # exact: a wall gap at each pad
         self.slide = CompliantPath(
             "slide into the hole", dev, params.descent_guard, self._slide_path,
             lambda path: float(np.linalg.norm(path(1.0).position - path(0.0).position)),
             params.slide_speed, params.acceleration,
             # as far as the jaws leave room: the two wall gaps
-            dataclasses.replace(along_closing(params), limit=2.0 * params.wall_gap),
+            dataclasses.replace(along_closing(params), limit=gaps),
         )
         g = params.guard
         self.sequence = Sequence(
@@ -198,7 +206,7 @@ class Align(HoleGraspSkill):
         reach = p.tip_offset + gripper.tip_advance(gripper.width())
         self.centre = turn_centre(tool, gripper.width(), hook, reach)
         axis = self._frame.normal
-        z = tool.rotation[:, 2]
+        z = tool.rotation[:, Z]
         down = np.array([0.0, 0.0, -1.0])
         self.turn_angle = math.atan2(float(np.dot(np.cross(z, down), axis)), float(z @ down))
         centre, angle = self.centre, self.turn_angle
@@ -208,7 +216,8 @@ class Align(HoleGraspSkill):
         tool = self.dev.arm.tool_pose()
         self._x = tool.rotation[:, 0].copy()
         self._rotation = tool.rotation.copy()
-        self._pad = tool.position - 0.5 * self.dev.gripper.width() * self._x
+        half = 0.5 * self.dev.gripper.width()  # exact: the inner pad, half the opening off
+        self._pad = tool.position - half * self._x
         self._still.reset()
 
     def _centre_step(self, name: str, command: Callable[[], None]) -> GuardedMotion:
@@ -247,12 +256,14 @@ class Align(HoleGraspSkill):
         the opening): the outer pad stands off the outer wall, the inner one keeps touching."""
         self._hold_pad_here()
         gripper = self.dev.gripper
-        gripper.open(gripper.width() + 2.0 * self.params.wall_gap, self.params.narrow_speed)
+        gap = 2.0 * self.params.wall_gap  # exact: a wall gap at each pad
+        gripper.open(gripper.width() + gap, self.params.narrow_speed)
 
     def _follow_pad(self) -> bool:
         """Keep the inner pad where it is while the jaws move (the TCP follows half the
         closing); done once the fingers have been still for ``close_settle``."""
-        position = self._pad + 0.5 * self.dev.gripper.width() * self._x
+        half = 0.5 * self.dev.gripper.width()  # exact: the TCP, half the opening off the pad
+        position = self._pad + half * self._x
         self.dev.arm.servo(Pose(position, self._rotation))
         return self._still()
 
@@ -265,10 +276,10 @@ class Align(HoleGraspSkill):
         tool = self.dev.arm.tool_pose()
         assert self._frame is not None
         reach = p.tip_offset + self.dev.gripper.tip_advance(self.dev.gripper.width())
-        tip_z = float(tool.position[2] + reach * tool.rotation[2, 2])
+        tip_z = float(tool.position[Z] + reach * tool.rotation[Z, Z])
         floor = self._frame.floor_z
         goal = max(floor + part.length - p.wall_depth, floor + p.floor_clearance)
-        depth = max(1e-6, tip_z - goal)
+        depth = max(MIN_SLIDE, tip_z - goal)
         down = np.array([0.0, 0.0, -depth])
         return lambda s: Pose(tool.position + s * down, tool.rotation)
 

@@ -25,6 +25,8 @@ from numpy.typing import NDArray
 
 from drivers.pose import Pose
 from drivers.tool import FINGER_LENGTH, FT_HEIGHT, FT_RADIUS, GRIPPER_BODY_SIZE, WRIST_SIZE
+from skills.axes import XY, Z
+from skills.mechanics.contact import HALF_PI
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -41,6 +43,33 @@ _BODY = GRIPPER_BODY_SIZE  #: the 2F-85's body, x along the closing axis
 _PUCK = (2.0 * FT_RADIUS, 2.0 * FT_RADIUS, FT_HEIGHT)  #: the FT300, its cylinder's bounding box
 _WRIST = WRIST_SIZE  #: the UR5's wrist 3 and the end of wrist 2 above the flange
 
+# How finely the tool model and its sweep are sampled: a point model tested at poses, so an
+# obstacle's edge can slip between two points by up to about one step; the clearance margin
+# (``clearance_margin``, 6 mm by default) is larger than the fingers' step.
+#: m between neighbouring surface points of a finger's box: the fingers come nearest the walls
+#: and the neighbours, so they are sampled finest
+FINGER_STEP = 0.005
+#: m between surface points of the gripper body's box: larger, and it meets only a wall's top
+BODY_STEP = 0.01
+#: m between surface points of the FT300's and the wrist's boxes: the largest, highest boxes
+WRIST_STEP = 0.012
+#: m, how near a grid point must lie to a face of its box to count as on it: rounding only
+FACE_TOL = 1e-12
+#: Poses of the straight move down from ``approach_height`` above the pre-approach pose to it,
+#: both ends included (2 cm apart with the default 0.10 m)
+DESCENT_POSES = 6
+#: Poses of the approach at alpha from the pre-approach pose to the grasp, the first (the
+#: pre-approach pose, already checked) dropped (1.5 cm apart with the default 0.06 m)
+APPROACH_POSES = 5
+#: Angles of the Tilt's arc, 0 to its end, the first (the grasp) dropped: 15 steps of at most 6
+#: deg, about 3 cm of travel at the fingertips for a 0.3 m radius
+ARC_POSES = 16
+#: The phase of the sweep's approach at alpha, whose last pose is the grasp
+AT_ALPHA = "on the approach at alpha"
+#: m, the thinnest a bin wall is modelled: one configured thinner (or 0) still has an inside
+#: that a point of the sweep can be found in
+MIN_WALL_THICKNESS = 0.002
+
 
 @dataclass(frozen=True)
 class Obstacle:
@@ -55,7 +84,7 @@ class Obstacle:
         """Signed distance (m) of each point to the box: negative inside."""
         c, s = math.cos(self.yaw), math.sin(self.yaw)
         d = points - self.center
-        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, Z]])
         q = np.abs(local) - self.half
         outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
         inside = np.minimum(np.max(q, axis=1), 0.0)
@@ -70,23 +99,16 @@ def bin_walls(
 ) -> list[Obstacle]:
     """The bin's four walls around its free inside ``(xmin, xmax, ymin, ymax)``."""
     x0, x1, y0, y1 = interior
-    t, h = max(wall_thickness, 0.002), wall_height
-    zc = floor_z + 0.5 * h
-    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    hx, hy = 0.5 * (x1 - x0) + t, 0.5 * (y1 - y0) + t
+    t, h = max(wall_thickness, MIN_WALL_THICKNESS), wall_height
+    ht, hh = 0.5 * t, 0.5 * h  # exact: a wall box's half sizes
+    zc = floor_z + hh
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)  # exact: the middle of the inside
+    hx, hy = 0.5 * (x1 - x0) + t, 0.5 * (y1 - y0) + t  # exact: half the inside and a wall
     return [
-        Obstacle(
-            "the bin's -x wall", np.array([x0 - 0.5 * t, cy, zc]), np.array([0.5 * t, hy, 0.5 * h])
-        ),
-        Obstacle(
-            "the bin's +x wall", np.array([x1 + 0.5 * t, cy, zc]), np.array([0.5 * t, hy, 0.5 * h])
-        ),
-        Obstacle(
-            "the bin's -y wall", np.array([cx, y0 - 0.5 * t, zc]), np.array([hx, 0.5 * t, 0.5 * h])
-        ),
-        Obstacle(
-            "the bin's +y wall", np.array([cx, y1 + 0.5 * t, zc]), np.array([hx, 0.5 * t, 0.5 * h])
-        ),
+        Obstacle("the bin's -x wall", np.array([x0 - ht, cy, zc]), np.array([ht, hy, hh])),
+        Obstacle("the bin's +x wall", np.array([x1 + ht, cy, zc]), np.array([ht, hy, hh])),
+        Obstacle("the bin's -y wall", np.array([cx, y0 - ht, zc]), np.array([hx, ht, hh])),
+        Obstacle("the bin's +y wall", np.array([cx, y1 + ht, zc]), np.array([hx, ht, hh])),
     ]
 
 
@@ -94,20 +116,23 @@ def lying_part(
     what: str, center_xy: Sequence[float], yaw: float, length: float, outer: float, floor_z: float
 ) -> Obstacle:
     """A neighbour lying on the floor, as the cell saw it: its footprint up to its diameter."""
+    radius, half_length = 0.5 * outer, 0.5 * length  # exact: halves of the diameter, length
     return Obstacle(
         what,
-        np.array([float(center_xy[0]), float(center_xy[1]), floor_z + 0.5 * outer]),
-        np.array([0.5 * length, 0.5 * outer, 0.5 * outer]),
+        np.array([float(center_xy[0]), float(center_xy[1]), floor_z + radius]),
+        np.array([half_length, radius, radius]),
         yaw,
     )
 
 
-def _box_points(center: Sequence[float], size: Sequence[float], step: float = 0.005) -> NDArray:
+def _box_points(center: Sequence[float], size: Sequence[float], step: float) -> NDArray:
     """Points on the surface of an axis-aligned box (tool frame), ``step`` apart at most."""
     c, s = np.asarray(center, float), np.asarray(size, float)
-    axes = [np.linspace(-0.5 * n, 0.5 * n, max(2, int(math.ceil(n / step)) + 1)) for n in s]
+    half = 0.5 * s  # exact: the faces lie half the size from the centre
+    counts = [max(2, int(math.ceil(n / step)) + 1) for n in s]  # exact: both faces at least
+    axes = [np.linspace(-h, h, k) for h, k in zip(half, counts, strict=True)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    on_face = np.any(np.isclose(np.abs(grid), 0.5 * s, atol=1e-12), axis=1)
+    on_face = np.any(np.isclose(np.abs(grid), half, atol=FACE_TOL), axis=1)
     return grid[on_face] + c
 
 
@@ -117,23 +142,24 @@ def tool_points(
     """The tool's model as point sets in the TCP frame, by name, at jaw opening ``width``."""
     tip = tip_offset
     top = tip + _FINGER_TOP
-    fz = 0.5 * (tip + top)
+    fz = 0.5 * (tip + top)  # exact: the fingers' middle
+    # A pad's face lies half the opening from the TCP, its box's centre half its thickness on.
+    x_outer = 0.5 * width + 0.5 * thickness  # exact: half the opening, half the pad
+    x_inner = -0.5 * width - 0.5 * thickness  # exact: the same, on the other side
+    finger = (thickness, finger_width, tip - top)
     fingers = {
-        "the outer finger": _box_points(
-            (0.5 * width + 0.5 * thickness, 0.0, fz), (thickness, finger_width, tip - top)
-        ),
-        "the inner finger": _box_points(
-            (-0.5 * width - 0.5 * thickness, 0.0, fz), (thickness, finger_width, tip - top)
-        ),
+        "the outer finger": _box_points((x_outer, 0.0, fz), finger, FINGER_STEP),
+        "the inner finger": _box_points((x_inner, 0.0, fz), finger, FINGER_STEP),
     }
-    body_z = top - 0.5 * _BODY[2]
-    puck_z = top - _BODY[2] - 0.5 * _PUCK[2]
-    wrist_z = top - _BODY[2] - _PUCK[2] - 0.5 * _WRIST[2]
-    fingers["the gripper body"] = _box_points((0.0, 0.0, body_z), _BODY, 0.01)
+    # Each box sits on the one below it: its centre half its height above their contact.
+    body_z = top - 0.5 * _BODY[Z]  # exact: a box's centre is half its height in
+    puck_z = top - _BODY[Z] - 0.5 * _PUCK[Z]  # exact: a box's centre is half its height in
+    wrist_z = top - _BODY[Z] - _PUCK[Z] - 0.5 * _WRIST[Z]  # exact: the same
+    fingers["the gripper body"] = _box_points((0.0, 0.0, body_z), _BODY, BODY_STEP)
     fingers["the wrist"] = np.vstack(
         [
-            _box_points((0.0, 0.0, puck_z), _PUCK, 0.012),
-            _box_points((0.0, 0.0, wrist_z), _WRIST, 0.012),
+            _box_points((0.0, 0.0, puck_z), _PUCK, WRIST_STEP),
+            _box_points((0.0, 0.0, wrist_z), _WRIST, WRIST_STEP),
         ]
     )
     return fingers
@@ -173,12 +199,12 @@ def pivot_sweep(
     assert p.l_a is not None and p.alpha is not None
     target = frame.grasp_pose(p.l_a, p.alpha, p.tip_offset)
     opening = frame.opening(p.l_a, p.alpha)
-    z = target.rotation[:, 2]
+    z = target.rotation[:, Z]
     pre = target.position - p.approach_distance * z
     above = pre + p.approach_height * frame.up
     poses: list[tuple[str, Pose, float]] = []
     wide = opening + p.approach_clearance
-    for k in np.linspace(0.0, 1.0, 6):
+    for k in np.linspace(0.0, 1.0, DESCENT_POSES):
         poses.append(
             (
                 "coming down over the open end",
@@ -186,10 +212,10 @@ def pivot_sweep(
                 wide,
             )
         )
-    for k in np.linspace(0.0, 1.0, 5)[1:]:
+    for k in np.linspace(0.0, 1.0, APPROACH_POSES)[1:]:
         poses.append(
             (
-                "on the approach at alpha",
+                AT_ALPHA,
                 Pose(pre + k * (target.position - pre), target.rotation),
                 wide,
             )
@@ -199,9 +225,9 @@ def pivot_sweep(
     end = (
         p.tilt_angle
         if p.tilt_angle is not None
-        else min(0.5 * math.pi, frame.section.tip_angle + p.tilt_past_tip)
+        else min(HALF_PI, frame.section.tip_angle + p.tilt_past_tip)
     )
-    for theta in np.linspace(0.0, end, 16)[1:]:
+    for theta in np.linspace(0.0, end, ARC_POSES)[1:]:
         poses.append(("on the Tilt's arc", frame.tilt_pose(target, float(theta)), opening))
     return poses
 
@@ -271,7 +297,8 @@ def reach_problem(
     """Where the sweep leaves the arm's ``reach`` (checked above the part, at the grasp and at
     the arc's end), or None when it stays inside."""
     sweep = pivot_sweep(frame, params, finger_width)
-    checked = (sweep[0], sweep[9], sweep[-1])  # above, at the grasp, arc's end
+    at_grasp = max(i for i, (phase, _, _) in enumerate(sweep) if phase == AT_ALPHA)
+    checked = (sweep[0], sweep[at_grasp], sweep[-1])  # above, at the grasp, arc's end
     out = reach([pose for _, pose, _ in checked])
     if out is None:
         return None
@@ -307,17 +334,17 @@ def choose_end(
     (``clearance.clear`` False: not pickable where it lies). An end whose sweep leaves the
     arm's ``reach`` does not clear."""
     frames = [frame]
-    if open_ends >= 2:
+    if open_ends >= 2:  # exact: a tube, open at both ends
         frames.append(replace(frame, yaw=frame.yaw + math.pi))
     tried = [
         reach_problem(f, params, finger_width, reach)
         or pivot_clearance(f, params, obstacles, finger_width, margin)
         for f in frames
     ]
-    radial = np.asarray(frame.center[:2], float) - np.asarray(base_xy, float)
+    radial = np.asarray(frame.center[XY], float) - np.asarray(base_xy, float)
 
     def rank(i: int) -> tuple[bool, bool, float]:
-        outward = float(frames[i].u[:2] @ radial) > 0.0
+        outward = float(frames[i].u[XY] @ radial) > 0.0
         return (tried[i].clear, outward, tried[i].distance)
 
     best = max(range(len(frames)), key=rank)

@@ -26,6 +26,14 @@ from scipy.spatial.transform import Rotation
 
 from drivers.parts import Section
 from drivers.pose import Pose
+from skills.axes import Z
+
+#: rad between two poses of a listed tilt path: a straight move over 2 deg of the arc strays
+#: about 15 um from it at a 0.1 m radius, far inside the fingers' give
+TILT_PATH_STEP = math.radians(2.0)
+#: The tool's z component below which the fingers count as horizontal: they then never reach
+#: the rim's height, and the grasp cannot say where H lies along the part
+HORIZONTAL_Z = 1e-6
 
 
 def _rotation_about(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
@@ -66,12 +74,12 @@ class PivotFrame:
 
     def opening(self, l_a: float, alpha: float) -> float:
         """Distance between the finger faces at the grasp (m)."""
-        l = 2.0 * self.section.a * l_a
+        l = 2.0 * self.section.a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
         return l * math.cos(alpha) + self.section.delta * math.sin(alpha)
 
     def hook_depth(self, l_a: float, alpha: float) -> float:
         """``e_H``: how far the H finger reaches past the rim contact along the finger (m)."""
-        l = 2.0 * self.section.a * l_a
+        l = 2.0 * self.section.a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
         return l * math.sin(alpha) - self.section.delta * math.cos(alpha)
 
     def grasp_rotation(self, alpha: float) -> NDArray[np.float64]:
@@ -82,10 +90,11 @@ class PivotFrame:
     def grasp_pose(self, l_a: float, alpha: float, tip_offset: float) -> Pose:
         """``P_i``: TCP pose at the grasp. ``tip_offset``: TCP to fingertip along z (m)."""
         a, b = self.section.a, self.section.b
-        l = 2.0 * a * l_a
+        l = 2.0 * a * l_a  # exact: l = 2 a l_a, the paper's definition of l_a
         rot = self.grasp_rotation(alpha)
-        s_point = self.point(a - l, 2.0 * b)
-        tcp = s_point - 0.5 * self.opening(l_a, alpha) * rot[:, 0] - tip_offset * rot[:, 2]
+        s_point = self.point(a - l, 2.0 * b)  # exact: S on the top surface, at D = 2b
+        half = 0.5 * self.opening(l_a, alpha)  # exact: the TCP lies midway between the pads
+        tcp = s_point - half * rot[:, 0] - tip_offset * rot[:, Z]
         return Pose(tcp, rot)
 
     def located(self, tool: Pose, jaw_width: float) -> PivotFrame:
@@ -97,12 +106,12 @@ class PivotFrame:
         S and the floor as theta grows (a 3 mm error gives about 1.3 mm of interference at S by
         60 deg), which rigid fingers cannot absorb.
         """
-        x, z = tool.rotation[:, 0], tool.rotation[:, 2]
-        if abs(z[2]) < 1e-6:
+        x, z = tool.rotation[:, 0], tool.rotation[:, Z]
+        if abs(z[Z]) < HORIZONTAL_Z:
             return self
-        face = tool.position - 0.5 * jaw_width * x
-        h_contact = self.floor_z + 2.0 * self.section.b - self.section.delta
-        face = face + ((h_contact - face[2]) / z[2]) * z
+        face = tool.position - 0.5 * jaw_width * x  # exact: the TCP lies midway between the pads
+        h_contact = self.floor_z + 2.0 * self.section.b - self.section.delta  # exact: D = 2b
+        face = face + ((h_contact - face[Z]) / z[Z]) * z
         shift = float(np.dot(face - self.point(0.0, 0.0), self.u)) - self.section.a
         return replace(self, center=np.asarray(self.center, float) + shift * self.u)
 
@@ -112,7 +121,7 @@ class PivotFrame:
         p = self.pivot + r @ (grasp.position - self.pivot)
         return Pose(p, r @ grasp.rotation)
 
-    def tilt_path(self, grasp: Pose, theta: float, step: float = math.radians(2.0)) -> list[Pose]:
+    def tilt_path(self, grasp: Pose, theta: float, step: float = TILT_PATH_STEP) -> list[Pose]:
         n = max(1, int(math.ceil(theta / step)))
         return [self.tilt_pose(grasp, theta * k / n) for k in range(1, n + 1)]
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from drivers.devices import Devices
 from drivers.pose import Pose
+from skills.axes import Z
 from skills.force import ForcePush, world_force
 from skills.motion import GuardedMotion, Sequence
 from skills.pivot.frame import PivotFrame
@@ -70,18 +71,20 @@ class Grasp:
         #: N, the press at S the pinch needs (module doc)
         self.press = max(p.touch_force, pinch_press(p.grip_force, p.alpha, p.pinch_friction))
         self.rotation = frame.grasp_rotation(p.alpha)
-        self._x, self._z = self.rotation[:, 0], self.rotation[:, 2]
+        self._x, self._z = self.rotation[:, 0], self.rotation[:, Z]
         # The outer pad's tip over S, ``touch_standoff`` up; only the inner finger has the
         # approach clearance, so the TCP sits half of it towards the inner finger.
         reach = p.tip_offset + gripper.tip_advance(self._start_width)
-        s_point = frame.point(frame.section.a - 2.0 * frame.section.a * p.l_a,
-                              2.0 * frame.section.b)
-        tcp = s_point - 0.5 * self._start_width * self._x - reach * self._z
+        a, b = frame.section.a, frame.section.b
+        l = 2.0 * a * p.l_a  # exact: l = 2 a l_a, the paper's definition of l_a
+        s_point = frame.point(a - l, 2.0 * b)  # exact: S on the top surface, at D = 2b
+        tcp = s_point - 0.5 * self._start_width * self._x - reach * self._z  # exact: pads' middle
         self.standoff = Pose(tcp + p.touch_standoff * UP, self.rotation)
         self._pre = Pose(self.standoff.position - p.approach_distance * self._z, self.rotation)
         self.touch = ForcePush(
             self.touch_step, dev, p.guard, (0.0, 0.0, -1.0), p.touch_force, p.touch_speed,
-            2.0 * p.touch_standoff + p.height_tolerance, settle=p.touch_settle,
+            p.touch_reach_factor * p.touch_standoff + p.height_tolerance, settle=p.touch_settle,
+            still_speed=p.touch_still_speed, contact_ratio=p.touch_contact_ratio,
         )
         self.s_height: float | None = None  #: m, where the outer tip found S
         self.shove = 0.0  #: m the TCP gave way along the closing line while closing (diagnostic)
@@ -116,8 +119,9 @@ class Grasp:
         pre = self._pre
         above = pre.position + p.approach_height * self.frame.up
         tool = arm.tool_pose()
-        above[2] = max(above[2], float(tool.position[2]))
-        arm.move_path([Pose(above, pre.rotation), pre], 2 * p.approach_speed, p.acceleration)
+        above[Z] = max(above[Z], float(tool.position[Z]))
+        speed = p.transfer_speed_factor * p.approach_speed
+        arm.move_path([Pose(above, pre.rotation), pre], speed, p.acceleration)
 
     # --- the close ---------------------------------------------------------------------------
     def _close(self) -> None:
@@ -126,10 +130,11 @@ class Grasp:
             return  # _close_failed says why
         self._touched = arm.tool_pose()
         reach = p.tip_offset + gripper.tip_advance(gripper.width())
-        tip = self._touched.position + 0.5 * gripper.width() * self._x + reach * self._z
-        self.s_height = float(tip[2])
+        half = 0.5 * gripper.width()  # exact: the outer pad lies half the opening from the TCP
+        tip = self._touched.position + half * self._x + reach * self._z
+        self.s_height = float(tip[Z])
         # The part's top is where the tip stopped: the floor of the pivot plane follows from it.
-        floor = self.s_height - 2.0 * self.frame.section.b
+        floor = self.s_height - 2.0 * self.frame.section.b  # exact: the top is D = 2b up
         self.frame = dataclasses.replace(self.frame, floor_z=floor)
         self._closed_from = gripper.width()
         self._advance_from = gripper.tip_advance(self._closed_from)
@@ -151,9 +156,10 @@ class Grasp:
         pressing = float(world_force(self.dev) @ UP)
         self._press_offset += p.press_gain * (self.press - pressing) * dt
         self._press_offset = min(max(self._press_offset, -p.touch_standoff), p.height_tolerance)
+        half = 0.5 * closing  # exact: symmetric jaws, each pad moves half the closing
         position = (
             self._touched.position
-            + (0.5 * closing + min(p.close_lead, 0.5 * closing)) * self._x
+            + (half + min(p.close_lead, half)) * self._x
             - advance * self._z
             - self._press_offset * UP
         )
@@ -178,13 +184,13 @@ class Grasp:
         result = self.sequence.tick()
         if result.status is Status.SUCCESS:
             self.dev.arm.stop()
-            gripper = self.dev.gripper
+            gripper, p = self.dev.gripper, self.params
             pressing = float(world_force(self.dev) @ UP)
             if not gripper.object_detected():
                 return StepResult(
                     Status.FAILURE, "grasp: missed, the fingers closed on nothing", Failure.MISSED
                 )
-            if pressing < 0.5 * self.press:
+            if pressing < p.press_confirm * self.press:
                 return StepResult(
                     Status.FAILURE,
                     f"grasp: S is not pressed ({pressing:.1f} N, want {self.press:.1f} N): the "

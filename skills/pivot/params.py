@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from skills.motion import Guard
 from skills.params import guard_field, si
 
+#: rad per degree, exact: the configuration's defaults below are written in degrees
 DEG = math.pi / 180.0
 
 
@@ -41,6 +42,21 @@ class PivotParams:
     touch_settle: float = si(
         0.05, "s", 0.0, 1.0, "the descent stands still pressing this long to count as contact"
     )
+    #: 2: the descent first covers the standoff to where S should be, then as much again and
+    #: ``height_tolerance`` on, before it gives up on finding S
+    touch_reach_factor: float = si(
+        2.0, "1", 1.0, 10.0,
+        "the feel for S goes at most this many touch_standoff, plus height_tolerance, down",
+    )
+    #: 0.002 m/s and 0.7: the contact test of the packing pushes (skills.force), which the
+    #: feel for S has run with since it shares their force push
+    touch_still_speed: float = si(
+        0.002, "m/s", 0.0001, 0.05, "slower than this, the descent onto S is standing still"
+    )
+    touch_contact_ratio: float = si(
+        0.7, "1", 0.1, 1.0,
+        "share of touch_force that must press back, the descent still, to count as contact",
+    )
     pinch_friction: float = si(
         0.6, "1", 0.1, 2.0,
         "the least pad-part friction the grasp counts on: S is pressed so the pinch cannot "
@@ -50,6 +66,11 @@ class PivotParams:
         0.0002, "m/(N*s)", 0.0, 0.01, "the TCP moves down per newton S is pressed too little"
     )
     close_settle: float = si(0.2, "s", 0.0, 2.0, "the fingers stand still this long: closed")
+    press_confirm: float = si(
+        0.5, "1", 0.0, 1.0,
+        "share of the press at S the closed grasp must still read, else the outer finger lost "
+        "the top surface",
+    )
     width_tolerance: float = si(
         0.006, "m", 0.0, 0.03,
         "the jaws may close this far past the planned rim contact before it counts as a miss",
@@ -76,6 +97,17 @@ class PivotParams:
     )
     tip_offset: float = 0.005  #: m from the TCP to the fingertips along the tool z axis (gripper)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP on approaches")
+    #: Moves with nothing near the fingers go faster than the approaches, moves that put a pad
+    #: beside a wall slower; both as factors of ``approach_speed``, so configuring it scales them.
+    transfer_speed_factor: float = si(
+        2.0, "1", 0.1, 10.0,
+        "times approach_speed of the moves over the part: down to the pre-approach pose (Grasp), "
+        "to the camera's view and over the wall (recovery)",
+    )
+    descent_speed_factor: float = si(
+        0.5, "1", 0.01, 1.0,
+        "times approach_speed of the recovery's descent into the hole beside the wall",
+    )
     #: 0.02: with the 2F-85's 20 N grasp the Tilt holds the part at twice the 0.01 m/s a 2 N
     #: grasp needed (tuning seeds 500-509: the same successes, the Tilt in half the time; at
     #: 0.03 the light wiring duct fell from 6 to 2 of 10)

@@ -25,6 +25,7 @@ from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
+from skills.axes import XY, Z
 from skills.frames import frame_step
 from skills.motion import GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
@@ -102,19 +103,21 @@ class PickFromAbove(HoleGraspSkill):
 
     def _wall_xy(self) -> NDArray[np.float64]:
         assert self.seen is not None
-        toward_robot = -self._frame_now().u[:2]
-        return self.seen.center + 0.5 * (self._outer + self._inner) * toward_robot
+        toward_robot = -self._frame_now().u[XY]
+        middle = 0.5 * (self._outer + self._inner)  # exact: the wall's middle, between its faces
+        return self.seen.center + middle * toward_robot
 
     # --- the steps' commands and checks ------------------------------------------------------
     def _release(self) -> None:
         frame, gripper = self._frame_now(), self.dev.gripper
-        self.predicted_axis = (frame.pivot - 0.5 * self.part.outer * frame.u)[:2].copy()
+        radius = 0.5 * self.part.outer  # exact: a radius is half the diameter
+        self.predicted_axis = (frame.pivot - radius * frame.u)[XY].copy()
         gripper.open(gripper.width() + self.params.release)
 
     def _withdraw(self) -> None:
         arm, p = self.dev.arm, self.params
         tool = arm.tool_pose()
-        back = tool.position - p.approach_distance * tool.rotation[:, 2]
+        back = tool.position - p.approach_distance * tool.rotation[:, Z]
         arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
 
     def _view(self) -> None:
@@ -126,7 +129,8 @@ class PickFromAbove(HoleGraspSkill):
         cam = camera.tool_T_camera().position
         # Optical centre straight above the predicted axis, view_height above the rim.
         target = np.array([*self.predicted_axis, self._rim_z() + p.view_height]) - rot @ cam
-        self.dev.arm.move_to(Pose(target, rot), 2 * p.approach_speed, p.acceleration)
+        speed = p.transfer_speed_factor * p.approach_speed
+        self.dev.arm.move_to(Pose(target, rot), speed, p.acceleration)
 
     def _locate(self, frame: Frame, world_T_camera: Pose) -> UprightPart | None:
         camera = self.dev.camera
@@ -154,16 +158,19 @@ class PickFromAbove(HoleGraspSkill):
     def _over_wall(self) -> None:
         p = self.params
         target = np.array([*self._wall_xy(), self._rim_z() + p.clear_height + p.tip_offset])
-        self.dev.arm.move_to(Pose(target, self._rotation()), 2 * p.approach_speed, p.acceleration)
+        speed = p.transfer_speed_factor * p.approach_speed
+        self.dev.arm.move_to(Pose(target, self._rotation()), speed, p.acceleration)
 
     def _narrow(self) -> None:
-        self.dev.gripper.open(self._outer - self._inner + 2.0 * self.params.wall_gap)
+        gaps = 2.0 * self.params.wall_gap  # exact: a wall gap at each pad
+        self.dev.gripper.open(self._outer - self._inner + gaps)
 
     def _into_hole(self) -> None:
         p = self.params
         depth = min(p.wall_depth, self.part.length - p.floor_clearance)
         target = np.array([*self._wall_xy(), self._rim_z() - depth + p.tip_offset])
-        self.dev.arm.move_to(Pose(target, self._rotation()), 0.5 * p.approach_speed, p.acceleration)
+        speed = p.descent_speed_factor * p.approach_speed
+        self.dev.arm.move_to(Pose(target, self._rotation()), speed, p.acceleration)
 
     def _lift(self) -> None:
         p, arm = self.params, self.dev.arm

@@ -18,18 +18,23 @@ inner finger over its rim -- never let go.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import numpy as np
 
 from drivers.devices import Devices
 from drivers.pose import Pose
+from skills.axes import Z
 from skills.compliance import Compliance, CompliantPath
+from skills.mechanics.contact import HALF_PI
 from skills.motion import Guard, Sequence, wait
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import StepResult
+
+#: Angles at which the fingertips' clearance of the floor is checked, from the tip-over angle to
+#: the arc's end (``tilt_past_tip``, 4 deg by default: 30 steps of 0.13 deg)
+FLOOR_CHECKS = 31
 
 
 class Tilt:
@@ -53,7 +58,7 @@ class Tilt:
         self.dev = dev
         p = params
         self.tip = self.frame.section.tip_angle  #: rad, beta where the weight passes over G
-        self.angle = p.tilt_angle if p.tilt_angle is not None else 0.5 * math.pi  #: theta (rad)
+        self.angle = p.tilt_angle if p.tilt_angle is not None else HALF_PI  #: theta (rad)
         self.start_width = 0.0  #: m, jaw opening when the arc started
         self.eased = False  #: the jaws have eased past the tip-over angle
         #: the node's force and torque limits over the arc's own time
@@ -101,17 +106,18 @@ class Tilt:
         and the part's weight stands it up the rest of the way."""
         p = self.params
         floor = self.frame.floor_z + p.tilt_floor_clearance
+        half = 0.5 * width  # exact: each pad's face lies half the opening from the TCP
         corners = [
-            (side * 0.5 * width + side * back, p.tip_offset + self.dev.gripper.tip_advance(width))
+            (side * half + side * back, p.tip_offset + self.dev.gripper.tip_advance(width))
             for side in (1.0, -1.0)
             for back in (0.0, p.finger_thickness)
         ]
         best = self.tip
-        end = min(0.5 * math.pi, self.tip + p.tilt_past_tip)
-        for theta in np.linspace(self.tip, end, 31):
+        end = min(HALF_PI, self.tip + p.tilt_past_tip)
+        for theta in np.linspace(self.tip, end, FLOOR_CHECKS):
             pose = self.frame.tilt_pose(tool, float(theta))
             lowest = min(
-                float((pose.position + x * pose.rotation[:, 0] + z * pose.rotation[:, 2])[2])
+                float((pose.position + x * pose.rotation[:, 0] + z * pose.rotation[:, Z])[Z])
                 for x, z in corners
             )
             if lowest < floor:
