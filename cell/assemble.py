@@ -138,6 +138,8 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     cat_path = config.cell.catalogue
     if cat_path is not None and not Path(cat_path).is_absolute():
         cat_path = str(Path(doc.source).resolve().parent / cat_path)
+    if cat_path is not None and not Path(cat_path).is_file():  # this file's key names it
+        raise doc.error(("cell", "catalogue"), f"{cat_path}: no such file")
     try:
         catalogue = load_catalogue(Path(cat_path) if cat_path else None)
     except CatalogueError as exc:  # the catalogue's own file and line, not this file's

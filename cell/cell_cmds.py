@@ -76,7 +76,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "bushing-machining example.",
     )
     p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
-    p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
+    p.add_argument("--cycles", type=int, default=None,
+                   help="cycles to run (default: the configuration's workflow.cycles; the "
+                   "shipped example's is 10)")
     p.add_argument("--seed", type=int, default=None, help="seed of the bin scene (sim.seed)")
     p.add_argument(
         "--fill",
@@ -94,7 +96,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--max-sim-time",
         type=float,
         default=None,
-        help="simulated seconds before the run is cut (default: 150 per cycle)",
+        help="simulated seconds before the run is cut (default: 150 per cycle, plus 60)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument(
@@ -119,7 +121,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "unless the configuration says `cell.backend: hw` and the device checks pass.",
     )
     p.add_argument("--config", type=Path, required=True, help="cell configuration YAML")
-    p.add_argument("--cycles", type=int, default=None, help="cycles to run (workflow.cycles)")
+    p.add_argument("--cycles", type=int, default=None,
+                   help="cycles to run (default: the configuration's workflow.cycles; the "
+                   "shipped example's is 10)")
     p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
     p.add_argument(
         "--resume",

@@ -357,6 +357,14 @@ def main(argv: list[str] | None = None) -> int:
         text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
         print(f"cell {args.command}: error: {text}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        if exc.filename is None:  # not a file: a device's link, which has its own reporting
+            raise
+        # A file that passed the up-front check and still could not be written (a disk filled,
+        # a folder removed meanwhile): one line, as a bad input is.
+        print(f"cell {args.command}: error: {exc.filename}: cannot write: "
+              f"{exc.strerror or type(exc).__name__}", file=sys.stderr)
+        return 2
 
 
 def entry() -> None:

@@ -21,7 +21,10 @@ import numpy as np
 
 OVERVIEW = (640, 480)
 CLOSE_UP = (240, 180)
-STRIP = 26  #: caption strip height, px
+STRIP = 30  #: caption strip height, px
+#: caption text height, px: readable when a frame is shown at two thirds of its size (the
+#: README's picture puts two frames side by side)
+CAPTION_PX = 16
 #: The close-up camera's eye from the point it looks at (m, world): to the side and above, so it
 #: looks over the bin's walls into the bin and down into the machine's slot and the box.
 CLOSE_UP_EYE = (0.0, -0.22, 0.26)
@@ -59,7 +62,7 @@ class CellRecorder:
         self.frames: list[np.ndarray] = []
 
     def capture(self) -> None:
-        from PIL import Image, ImageDraw
+        from PIL import Image, ImageDraw, ImageFont
 
         overview = _render(self.world, self.eye, self.target, OVERVIEW)
         tool = np.asarray(self.tool_position(), float)
@@ -74,7 +77,9 @@ class CellRecorder:
         draw.rectangle((x0 - 2, y0 - 2, x0 + cw + 1, y0 + ch + 1), outline=(40, 40, 40), width=2)
         frame.paste(Image.fromarray(close), (x0, y0))
         draw.text((x0 + 4, y0 + ch - 14), "gripper close-up", fill=(255, 255, 255))
-        draw.text((8, h + 7), self.caption(), fill=(20, 20, 20))
+        font = ImageFont.load_default(size=CAPTION_PX)
+        draw.text((8, h + (STRIP - CAPTION_PX) // 2 - 1), self.caption(), fill=(20, 20, 20),
+                  font=font)
         self.frames.append(np.asarray(frame))
 
     def save_gif(self, path: str | Path, fps: float = 12.0) -> Path:
@@ -105,12 +110,12 @@ def caption_for(prep: Any) -> Any:
         try:
             force = float(np.linalg.norm(np.asarray(prep.ctx.devices.ft.wrench())[:3]))
             limit = force_limit(tip, prep.ctx.default_guard.max_force)
-            f_text = f"|F| {force:5.1f} N (abort {limit:g} N)"
+            f_text = f"|F| {force:.1f} N (abort {limit:g} N)"
         except Exception:  # noqa: BLE001 -- a lost stream shows as such, never stops a recording
             f_text = "|F| --"
         packed = state.counts.get("packed", 0)
         step = tip.name if tip is not None else "-"
-        return f"t = {state.time:6.1f} s   step: {step:<22s} {f_text}   packed {packed}"
+        return f"t {state.time:.1f} s  |  {step}  |  {f_text}  |  packed {packed}"
 
     return text
 

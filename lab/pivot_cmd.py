@@ -122,13 +122,15 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--nominal",
         action="store_true",
-        help="give the skills the part's nominal pose instead of looking with the wrist camera",
+        help="give the skills the part's nominal pose instead of looking with the wrist camera "
+        "(where the part lies is --pose's)",
     )
     p.add_argument(
         "--pose",
         choices=("nominal", "random"),
         default="nominal",
-        help="nominal: the part near its nominal pose (+-3 mm, +-3 deg); random: anywhere on "
+        help="where the part lies (what the skills are told is --nominal's). nominal: near its "
+        "nominal pose (+-3 mm, +-3 deg); random: anywhere on "
         "the bin floor, any yaw, either end towards the robot, up against the walls",
     )
     add_ideal_argument(p)
@@ -138,10 +140,10 @@ def add_parser(sub: Any) -> None:
         help="run a part the planner declines, at --la/--alpha (reported as forced)",
     )
     p.add_argument(
-        "--la", type=float, default=None, help="with --force: l_a (largest that fits, <= 0.9)"
+        "--la", type=float, default=None, help="with --force: l_a (default: the largest that fits, <= 0.9)"
     )
     p.add_argument(
-        "--alpha", type=float, default=None, help="with --force: alpha in rad (0.3142, 18 deg)"
+        "--alpha", type=float, default=None, help="with --force: alpha in rad (default: 0.3142, 18 deg)"
     )
     p.set_defaults(func=cmd_pivot)
 

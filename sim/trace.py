@@ -24,6 +24,7 @@ class TwinTrace:
     TCP (m, the robot's base frame) and what drives the arm. Buffered; :meth:`close` flushes."""
 
     def __init__(self, path: Path, world: Any, robot: Any) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)  # as --json and --record make theirs
         self._file = path.open("w", buffering=1 << 16)
         self._file.write(HEADER + "\n")
         self._world, self._robot = world, robot

@@ -80,6 +80,22 @@ class _Server(ThreadingHTTPServer):
 
 #: addresses that mean "every address of this machine"
 WILDCARDS = frozenset({"0.0.0.0", "::", ""})
+#: an address of the documentation range (RFC 5737): never reached, only routed to, so that the
+#: system names the interface a visitor from the network would come in on
+_PROBE = ("192.0.2.1", 9)
+
+
+def outward_address() -> str:
+    """The IPv4 address this machine is reached at from its network (a UDP socket "connected"
+    to an unreachable address sends nothing, but is given the outgoing interface's address);
+    its name where it has no network but the loopback."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(_PROBE)
+            address = probe.getsockname()[0]
+    except OSError:
+        return socket.gethostname()
+    return socket.gethostname() if address.startswith("127.") else address
 
 
 class MonitorServer:
@@ -110,9 +126,10 @@ class MonitorServer:
 
     @property
     def url(self) -> str:
-        """The link to open; bound to every address (0.0.0.0, ::), the machine's name: a
-        browser cannot follow a link to 0.0.0.0 from another machine."""
-        host = socket.gethostname() if self.host in WILDCARDS else self.host
+        """The link to open; bound to every address (0.0.0.0, ::), the machine's address on
+        its network: a browser cannot follow a link to 0.0.0.0, and another machine may not
+        resolve this one's name."""
+        host = outward_address() if self.host in WILDCARDS else self.host
         host = f"[{host}]" if ":" in host else host
         return f"http://{host}:{self.port}/"
 

@@ -370,17 +370,23 @@ def test_any_line_of_a_replay_is_the_fold_of_the_lines_before() -> None:
     assert run.marks()["first_failure"] == 1  # line 2 (tick 2): b FAILURE
 
 
-def test_a_monitor_bound_to_every_address_links_to_the_machine_s_name() -> None:
-    """A browser cannot follow http://0.0.0.0:P/ from another machine: the printed link names
-    this machine; a server bound to one address links to that address."""
+def test_a_monitor_bound_to_every_address_links_to_the_machine_s_address() -> None:
+    """A browser cannot follow http://0.0.0.0:P/ from another machine, nor may it resolve this
+    machine's name: the printed link is an address this machine holds (it can listen there);
+    a server bound to one address links to that address."""
     import socket
+    import urllib.parse
 
-    from cell.monitor.server import MonitorServer
+    from cell.monitor.server import MonitorServer, outward_address
 
-    everywhere = MonitorServer("0.0.0.0", 0)
+    everywhere = MonitorServer("0.0.0.0", 0).start()
     one = MonitorServer("127.0.0.1", 0)
     try:
-        assert everywhere.url == f"http://{socket.gethostname()}:{everywhere.port}/"
+        host = urllib.parse.urlsplit(everywhere.url).hostname
+        assert host == outward_address() and host not in ("0.0.0.0", "")
+        if host != socket.gethostname():  # a network: the link is reachable at that address
+            with socket.create_connection((host, everywhere.port), timeout=5):
+                pass
         assert one.url == f"http://127.0.0.1:{one.port}/"
     finally:
         everywhere.close()

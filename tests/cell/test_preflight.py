@@ -262,3 +262,74 @@ def test_unwritable_json_of_sim_fails_in_a_real_interpreter_in_seconds(tmp_path:
     )
     assert_user_error(r.returncode, r.stdout, r.stderr, "sim", "--json")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_trace_into_a_folder_not_made_yet_makes_it(tmp_path: Path) -> None:
+    """As ``--json`` and ``--record`` do: the up-front check lets such a path through, so the
+    writer must make the folder (it once failed after the twin had opened)."""
+    from sim.trace import HEADER, TwinTrace
+
+    class World:
+        def after_step(self, callback: object) -> None:
+            self.callback = callback
+
+    path = tmp_path / "new" / "dir" / "trace.csv"
+    trace = TwinTrace(path, World(), robot=None)
+    trace.close()
+    assert path.read_text() == HEADER + "\n"
+
+
+def test_a_write_that_fails_late_is_one_line_and_exit_2(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import cell.cli as cli
+
+    parser = cli.build_parser()
+
+    def failing(args: object) -> int:
+        raise OSError(28, "No space left on device", "/data/run.json")
+
+    real_parse = parser.parse_args
+
+    def parse(argv: list[str] | None = None) -> object:
+        args = real_parse(argv)
+        args.func = failing
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", parse)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    assert cli.main(["plan", "--part", "bushing"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["cell plan: error: /data/run.json: cannot write: No space left on device"]
+
+
+def test_an_os_error_without_a_file_is_not_called_a_write(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A device's broken link is an OSError too, but it is not an output: it keeps its own
+    reporting, never the bad-input exit code."""
+    import cell.cli as cli
+
+    parser = cli.build_parser()
+    real_parse = parser.parse_args
+
+    def parse(argv: list[str] | None = None) -> object:
+        args = real_parse(argv)
+        args.func = lambda a: (_ for _ in ()).throw(ConnectionResetError(104, "reset"))
+        return args
+
+    monkeypatch.setattr(parser, "parse_args", parse)
+    monkeypatch.setattr(cli, "build_parser", lambda: parser)
+    with pytest.raises(ConnectionResetError):
+        cli.main(["plan", "--part", "bushing"])
+
+
+def test_a_catalogue_that_is_not_there_is_named_at_its_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The file that names the catalogue and the line of its key, not only the missing path."""
+    config = tmp_path / "cell.yaml"
+    config.write_text("cell:\n  name: x\n  catalogue: partz.yaml\n")
+    code, out, err = run_cli(["sim", "--config", str(config), "--cycles", "1"], capsys)
+    assert_user_error(code, out, err, "sim", "cell.yaml:3", "cell.catalogue", "partz.yaml",
+                      "no such file")
