@@ -140,10 +140,12 @@ def add_parser(sub: Any) -> None:
         help="run a part the planner declines, at --la/--alpha (reported as forced)",
     )
     p.add_argument(
-        "--la", type=float, default=None, help="with --force: l_a (default: the largest that fits, <= 0.9)"
+        "--la", type=float, default=None,
+        help="with --force: l_a (default: the largest that fits, <= 0.9)",
     )
     p.add_argument(
-        "--alpha", type=float, default=None, help="with --force: alpha in rad (default: 0.3142, 18 deg)"
+        "--alpha", type=float, default=None,
+        help="with --force: alpha in rad (default: 0.3142, 18 deg)",
     )
     p.set_defaults(func=cmd_pivot)
 
