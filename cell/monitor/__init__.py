@@ -62,7 +62,7 @@ def open_session(
         from cell.monitor.server import MonitorServer, parse_address, warn_if_exposed
 
         host, port = parse_address(address)
-        warn_if_exposed(host, "--monitor")
+        warn_if_exposed(host, "--monitor", command)
         server = MonitorServer(host, port, frames_dir=None)
     try:
         if accepted is not None:
@@ -156,7 +156,7 @@ def serve_replay(path: Path, address: str) -> int:
     took = time.perf_counter() - t0
     folder = path.with_name(run.header["frames"]) if "frames" in run.header else None
     server = MonitorServer(host, port, replay=run, frames_dir=folder, option="--serve")
-    warn_if_exposed(host, "--serve")
+    warn_if_exposed(host, "--serve", "replay")
     print(
         f"cell replay: {path}: {len(run.lines)} lines, ticks 1..{run.lines[-1]['tick']}, "
         f"opened in {took:.2f} s; serving {server.url} (Ctrl-C ends)",

@@ -305,11 +305,13 @@ def _handler(server: MonitorServer) -> type[BaseHTTPRequestHandler]:
     return Handler
 
 
-def warn_if_exposed(host: str, option: str) -> None:
+def warn_if_exposed(host: str, option: str, command: str) -> None:
+    """A line on stderr, headed by the command as its errors are, when ``host`` is not a
+    loopback address: the page shows the cell's state to anyone on the network."""
     if not is_loopback(host):
         print(
-            f"cell: warning: {option} {host}: the monitor is reachable from other machines "
-            "(read-only, no password); use 127.0.0.1 to keep it on this one",
+            f"cell {command}: warning: {option} {host}: the monitor is reachable from other "
+            "machines (read-only, no password); use 127.0.0.1 to keep it on this one",
             file=sys.stderr,
         )
 

@@ -315,10 +315,10 @@ def test_addresses() -> None:
 def test_a_non_loopback_address_warns(capsys: pytest.CaptureFixture[str]) -> None:
     from cell.monitor.server import warn_if_exposed
 
-    warn_if_exposed("127.0.0.1", "--monitor")
+    warn_if_exposed("127.0.0.1", "--monitor", "sim")
     assert capsys.readouterr().err == ""
-    warn_if_exposed("0.0.0.0", "--monitor")
-    assert "warning" in capsys.readouterr().err
+    warn_if_exposed("0.0.0.0", "--monitor", "sim")
+    assert capsys.readouterr().err.startswith("cell sim: warning: --monitor 0.0.0.0:")
 
 
 def test_a_bad_address_is_refused_before_the_twin_opens(tmp_path: Path) -> None:
