@@ -66,6 +66,12 @@ def load_prepared(path: Path | None, sets: Any = (), **bin_overrides: Any) -> An
     return prepare(config, doc)
 
 
+#: the --cycles help of `cell sim` and `cell run`
+CYCLES_HELP = (
+    "cycles to run (default: the configuration's workflow.cycles; the shipped example's is 10)"
+)
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sim",
@@ -76,9 +82,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "bushing-machining example.",
     )
     p.add_argument("--config", type=Path, default=None, help="cell configuration YAML")
-    p.add_argument("--cycles", type=int, default=None,
-                   help="cycles to run (default: the configuration's workflow.cycles; the "
-                   "shipped example's is 10)")
+    p.add_argument("--cycles", type=int, default=None, help=CYCLES_HELP)
     p.add_argument("--seed", type=int, default=None, help="seed of the bin scene (sim.seed)")
     p.add_argument(
         "--fill",
@@ -121,9 +125,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "unless the configuration says `cell.backend: hw` and the device checks pass.",
     )
     p.add_argument("--config", type=Path, required=True, help="cell configuration YAML")
-    p.add_argument("--cycles", type=int, default=None,
-                   help="cycles to run (default: the configuration's workflow.cycles; the "
-                   "shipped example's is 10)")
+    p.add_argument("--cycles", type=int, default=None, help=CYCLES_HELP)
     p.add_argument("--json", type=Path, default=None, help="write the summary as JSON")
     p.add_argument(
         "--resume",

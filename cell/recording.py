@@ -60,6 +60,7 @@ class CellRecorder:
         self.target = t
         self.tool_position, self.caption = tool_position, caption
         self.frames: list[np.ndarray] = []
+        self._font: Any = None  #: the caption's font, loaded by the first capture
 
     def capture(self) -> None:
         from PIL import Image, ImageDraw, ImageFont
@@ -77,9 +78,10 @@ class CellRecorder:
         draw.rectangle((x0 - 2, y0 - 2, x0 + cw + 1, y0 + ch + 1), outline=(40, 40, 40), width=2)
         frame.paste(Image.fromarray(close), (x0, y0))
         draw.text((x0 + 4, y0 + ch - 14), "gripper close-up", fill=(255, 255, 255))
-        font = ImageFont.load_default(size=CAPTION_PX)
+        if self._font is None:
+            self._font = ImageFont.load_default(size=CAPTION_PX)
         draw.text((8, h + (STRIP - CAPTION_PX) // 2 - 1), self.caption(), fill=(20, 20, 20),
-                  font=font)
+                  font=self._font)
         self.frames.append(np.asarray(frame))
 
     def save_gif(self, path: str | Path, fps: float = 12.0) -> Path:

@@ -36,7 +36,13 @@ from drivers.camera import Frame, Intrinsics
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import XY
-from skills.perception.heightmap import HeightMap, PerceptionInputError, dot_last, height_map
+from skills.perception.heightmap import (
+    MM_PER_M,
+    HeightMap,
+    PerceptionInputError,
+    dot_last,
+    height_map,
+)
 
 # Algorithm constants. The figures they quote are from the twin's D435 at the 0.5 m look-down
 # pose: depth noise 1.25 mm (one sigma), a pixel about 1.1 mm on the floor; the catalogue's
@@ -115,9 +121,6 @@ MIN_UPPER = 20
 #: a segment wider than this many times its height (a lying part is as wide as it is tall)
 #: holds several parts side by side
 SIDE_BY_SIDE_WIDTH = 1.6
-#: mm per m: the enclosing rectangle and the clusters are computed in millimetres, units of the
-#: order of a pixel (OpenCV's rectangle takes float32 points)
-MM_PER_M = 1e3  # exact: a metre is 1000 mm
 #: a thin segment narrower than its count of catalogue widths by this share of one is clipped:
 #: its last part partly under a taller neighbour
 STRIP_SHORTFALL = 0.25

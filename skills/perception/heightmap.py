@@ -19,6 +19,9 @@ from skills.axes import DIM
 from skills.status import SkillInputError
 
 _UP = np.array([0.0, 0.0, 1.0])
+#: mm per m, and back: OpenCV's rectangle fits and clusters take float32 points, so the
+#: perception's geometry on the floor runs in millimetres, units of the order of a pixel
+MM_PER_M, M_PER_MM = 1e3, 1e-3
 #: Random three-point planes RANSAC tries. The floor is the largest plane in view, so a try
 #: whose three points all lie on it is common; the least-squares refit on the best one's inliers
 #: then makes the result insensitive to which of those tries won.

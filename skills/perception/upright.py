@@ -21,7 +21,7 @@ from drivers.camera import Frame, Intrinsics
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import XY, Z
-from skills.perception.heightmap import back_project_image
+from skills.perception.heightmap import M_PER_MM, MM_PER_M, back_project_image
 
 #: m: how far beyond its outer radius a standing part may be from where it is expected, by
 #: default: centimetres, so a prediction off by more than the usual few millimetres still finds
@@ -49,8 +49,6 @@ MIN_OF_HOLE, MAX_OF_OUTER = 0.35, 0.65
 #: a fitted rectangle's longer side may be this much of the outer size at most (a square's
 #: rim seen whole, with noise); larger, it holds more than the rim.
 MAX_RECT_OF_OUTER = 1.3
-#: mm per m, and back: the rectangle fit runs in float32 on millimetres
-MM_PER_M, M_PER_MM = 1e3, 1e-3
 
 
 @dataclass(frozen=True)
