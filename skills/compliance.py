@@ -51,21 +51,26 @@ class CompliantPath:
         guard: Guard,
         path: Callable[[], Callable[[float], Pose]],
         length: Callable[[Callable[[float], Pose]], float],
-        speed: float,
+        speed: float | Callable[[float], float],
         acceleration: float,
         compliance: Compliance,
         stop_when: Callable[[], bool] | None = None,
     ) -> None:
         """``path()`` is called when the motion starts (so it can use the measured pose) and
         returns ``s -> Pose``; ``length(path)`` its length in the units of ``speed`` (m, or
-        rad for a pure turn, then ``speed`` is rad/s). ``stop_when`` ends it early."""
+        rad for a pure turn, then ``speed`` is rad/s). ``speed`` may be a function of that
+        length, read at the start: a path whose size is known only then (the Tilt's radius)
+        gets its speed from it. ``stop_when`` ends it early."""
         self.name, self.dev, self.compliance = name, dev, compliance
         self.offset = np.zeros(3)  #: m, tool frame, current give
         self.peak_force = 0.0  #: N, largest force on the compliant axes
         self.progress = 0.0  #: s in [0, 1]
         self.stopped_early = False
         self._path_factory, self._length = path, length
-        self._speed, self._acc, self._stop_when = speed, acceleration, stop_when
+        self._speed_of = speed if callable(speed) else (lambda _length: float(speed))
+        #: the cruise speed of the current run (units of the path's length per s)
+        self.speed = 0.0
+        self._acc, self._stop_when = acceleration, stop_when
         self._pose_at: Callable[[float], Pose] | None = None
         self._t = 0.0
         self._v = 0.0
@@ -78,6 +83,7 @@ class CompliantPath:
     def _start(self) -> None:
         self._pose_at = self._path_factory()
         self._total = max(MIN_LENGTH, float(self._length(self._pose_at)))
+        self.speed = float(self._speed_of(self._total))
         self._t = self.dev.clock.now()
         self._v = 0.0
         self.progress = 0.0
@@ -105,7 +111,7 @@ class CompliantPath:
         # Trapezoid in path length: accelerate, cruise, decelerate to reach s = 1 at rest.
         remaining = (1.0 - self.progress) * self._total
         v_brake = float(np.sqrt(2.0 * self._acc * remaining))  # exact: v^2 = 2 a d at constant a
-        self._v = min(self._speed, self._v + self._acc * dt, max(v_brake, self._acc * dt))
+        self._v = min(self.speed, self._v + self._acc * dt, max(v_brake, self._acc * dt))
         self.progress = min(1.0, self.progress + self._v * dt / self._total)
         force = np.asarray(self.dev.ft.wrench()[FORCE], float) * self._mask
         magnitude = float(np.linalg.norm(force))

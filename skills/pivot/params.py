@@ -108,11 +108,15 @@ class PivotParams:
         0.5, "1", 0.01, 1.0,
         "times approach_speed of the recovery's descent into the hole beside the wall",
     )
-    #: 0.02: with the 2F-85's 20 N grasp the Tilt holds the part at twice the 0.01 m/s a 2 N
-    #: grasp needed (tuning seeds 500-509: the same successes, the Tilt in half the time; at
-    #: 0.03 the light wiring duct fell from 6 to 2 of 10)
+    #: The arc's speed is the part's turning rate times the radius (quasi-static is a bound on
+    #: how fast the part turns), capped at ``tilt_speed``.
     tilt_speed: float = si(
-        0.02, "m/s", 0.001, 0.1, "of the TCP along the arc (slow: quasi-static, Sec. II-B)"
+        0.02, "m/s", 0.001, 0.1, "the TCP's top speed along the arc"
+    )
+    tilt_rate: float = si(
+        180.0 * DEG, "rad/s", 1.0 * DEG, 180.0 * DEG,
+        "how fast the part may turn about G in the Tilt (slow: quasi-static, Sec. II-B); "
+        "the arc runs at this times its radius, at most tilt_speed",
     )
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
     #: theta of Fig. 10 (rad). None: to upright (90 deg), the part carried the whole way with

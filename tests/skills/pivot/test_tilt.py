@@ -210,3 +210,23 @@ def test_the_arc_starts_from_the_measured_tool_pose_not_the_planned_grasp() -> N
     r = np.linalg.norm(moved.position - FRAME.pivot)
     assert np.linalg.norm(targets[0].position - FRAME.pivot) == pytest.approx(r, abs=1e-9)
     assert np.linalg.norm(targets[0].position - moved.position) < 1e-3
+
+
+@pytest.mark.parametrize(
+    ("rate_deg_s", "cap", "radius_rate"),
+    [(30.0, 0.1, True), (180.0, 0.02, False)],
+)
+def test_the_arc_runs_at_the_parts_turning_rate_times_its_radius_up_to_the_cap(
+    rate_deg_s: float, cap: float, radius_rate: bool
+) -> None:
+    d = devices()
+    angle = math.radians(70.0)
+    params = dataclasses.replace(
+        PARAMS, tilt_angle=angle, settle=0.0, tilt_rate=math.radians(rate_deg_s), tilt_speed=cap
+    )
+    tilt = Tilt(FRAME, params, dev(d))
+    run(tilt, d)
+    radius = float(np.linalg.norm(GRASP.position - FRAME.pivot))
+    expected = math.radians(rate_deg_s) * radius if radius_rate else cap
+    assert tilt.arc.speed == pytest.approx(expected, rel=1e-9)
+    assert tilt.arc.speed <= cap
