@@ -76,6 +76,13 @@ class LookParams:
         "distance (0.5 deg: 4 mm from the wide view, 2 mm from here)",
     )
     speed: float = si(0.25, "m/s", 0.01, 1.0, "of the TCP between views")
+    turn_speed: float = si(
+        0.25, "m/s", 0.01, 1.0,
+        "of the TCP, at most, in the move to the close view when it turns the tool to the next "
+        "skill's yaw: a straight move turns the tool along with its path (0.1 m of path a "
+        "radian on the UR5 and its twin), so this bounds the wrist's turn (2.5 rad/s, under "
+        "the UR5's 3.1 rad/s joint speed)",
+    )
     acceleration: float = si(1.0, "m/s^2", 0.05, 3.0, "of the TCP between views")
     guard: Guard = field(default_factory=Guard)
 
@@ -200,11 +207,13 @@ class Look:
     def _over_part(self) -> None:
         r, p = self.result, self.params
         assert r is not None  # the wide view's step fails while nothing is chosen
-        yaw = self._grip_yaw(r) if self._grip_yaw is not None else 0.0
+        yaw, speed = 0.0, p.speed
+        if self._grip_yaw is not None:
+            yaw, speed = self._grip_yaw(r), min(p.speed, p.turn_speed)
         target = camera_over(
             (float(r.center[0]), float(r.center[1])), p.close_height, self.dev, yaw
         )
-        self.dev.arm.move_to(target, p.speed, p.acceleration)
+        self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _refine(self, dets: list[Detection]) -> None:
         """The chosen part's centre and axis as the close view saw them; what the earlier views
