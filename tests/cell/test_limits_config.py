@@ -148,12 +148,12 @@ def test_a_node_override_is_checked_against_its_skills_range(tmp_path) -> None:
 def test_types_and_schema_show_each_key_with_unit_range_and_default() -> None:
     text = describe_types()
     line = next(ln for ln in text.splitlines() if ln.strip().startswith("tilt_speed_m_s"))
-    assert "[0.001, 0.1]" in line and "m/s" in line and "default 0.02" in line
+    assert "[0.001, 0.1]" in line and "m/s" in line and "default 0.07" in line
     assert "tilt_past_tip_deg" in text and "default 4" in text
     props = schema()["$defs"]
     pivot = next(v for k, v in props.items() if k.startswith("SkillsPivot"))
     speed = pivot["properties"]["tilt_speed_m_s"]
-    assert (speed["default"], speed["minimum"], speed["maximum"]) == (0.02, 0.001, 0.1)
+    assert (speed["default"], speed["minimum"], speed["maximum"]) == (0.07, 0.001, 0.1)
 
 
 def test_cli_bad_skill_value_exits_2_without_traceback(tmp_path, capsys) -> None:
