@@ -1,14 +1,16 @@
 """How fast can the pivot go? Tact time and success of the pivot at several Tilt speeds and
 settle times, beside the regrasp baseline, on the same parts and seeds as `cell compare`.
 
-Why: `cell compare` runs the pivot as the paper describes it, quasi-static (Tilt at 0.01 m/s,
-0.3 s settle), and finds it slower than the regrasp. Both methods are to be tuned with
+Why: `cell compare` runs the pivot as the paper describes it, quasi-static (the Tilt bounded by
+the part's turning rate), and finds it slower than the regrasp. Both methods are to be tuned with
 equal care; this measures how much of the gap the Tilt's speed explains. Run by hand:
 
     python bench/pivot_speed.py --part bushing medicine_bottle cookie_can --trials 10 \
         --config 0.01,1.0 0.03,1.0 0.05,0.5
 
-Each ``--config`` is ``tilt_speed_m_s,settle_s``. Prints one line per part and configuration:
+Each ``--config`` is ``tilt_speed_m_s,settle_s``: the arc at that TCP speed for every part (the
+part's turning-rate bound, ``tilt_rate_deg_s``, set to its largest value so the speed given is
+the one run). Prints one line per part and configuration:
 successes, mean tact over successes (simulated s, measured as in `cell compare`), and the ratio
 to the regrasp's mean tact on the same seeds.
 """
@@ -19,6 +21,9 @@ import argparse
 import dataclasses
 import statistics
 import time
+
+#: deg/s, the largest ``skills.pivot.tilt_rate_deg_s`` takes: with it the TCP speed asked decides
+MAX_RATE_DEG_S = 180.0
 
 
 def _fields(values: dict[str, float]) -> dict[str, float]:
@@ -62,7 +67,8 @@ def main() -> None:
         for spec in args.config:
             speed, settle = (float(v) for v in spec.split(","))
             # The configuration's keys, as a cell YAML's skills.pivot section would give them.
-            values = {"tilt_speed_m_s": speed, "settle_s": settle}
+            values = {"tilt_speed_m_s": speed, "tilt_rate_deg_s": MAX_RATE_DEG_S,
+                      "settle_s": settle}
             tuned = dataclasses.replace(
                 setup, params={**setup.params, **_fields(values)}
             )

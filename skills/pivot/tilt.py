@@ -134,8 +134,9 @@ class Tilt:
         a part held far from its pivot (the cookie can, r = 0.11 m) turns at a third of the
         rate of one held close (the bushing, 0.04 m)."""
         p = self.params
-        radius = length / self.angle if self.angle > 0.0 else 0.0
-        return min(p.tilt_speed, p.tilt_rate * radius) if radius > 0.0 else p.tilt_speed
+        if self.angle <= 0.0:  # no arc to turn along: the cap alone
+            return p.tilt_speed
+        return min(p.tilt_speed, p.tilt_rate * length / self.angle)  # length = r * angle
 
     def _ease_past_tip(self) -> bool:
         """Never ends the arc early: eases the jaws once, just before the tip-over angle."""
