@@ -71,7 +71,8 @@ def test_grasp_feels_s_where_it_is_and_closes_pressing_it() -> None:
     result, _ = run(grasp, d, on_tick=surface(d, grasp, top))
     assert result.status is Status.SUCCESS, result.message
     kinds = [c[0] for c in d["arm"].commands]
-    assert kinds == ["path", "path", "force"]  # above the open end, to the standoff, feel S
+    # above the open end, down to the pre-approach, to the standoff, feel S
+    assert kinds == ["path", "path", "path", "force"]
     # the height was measured where the tip met S (within the spring's give at the touch force)
     assert grasp.s_height == pytest.approx(top, abs=2 * PARAMS.touch_force / 20000.0)
     assert grasp.frame.floor_z == pytest.approx(FRAME.floor_z - 0.0015, abs=0.0005)
