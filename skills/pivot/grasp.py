@@ -124,14 +124,14 @@ class Grasp:
 
     def _over_open_end(self) -> None:
         """To ``approach_height`` straight above the pre-approach pose (or level with the tool,
-        if that is higher), turned as the approach needs; then, a separate move, straight down
-        to it: only that vertical leg comes near the bin.
+        if that is higher), turned as the approach needs; the next step goes straight down from
+        there, so only that vertical leg comes near the bin.
 
         Two moves, each stopping at its end, not one path through both: a path runs its corner
         at full speed, and where the first leg is mostly the tilt to alpha (the tool already
-        over the part and turned, as the look leaves it) the tool's mass, a hand's length behind
-        the TCP, swings about it and stops dead at the corner. In the twin that read 60-100 N at
-        the wrist with nothing touched (the tool heading down at 0.5 m/s, commanded 0.2)."""
+        over the part and turned to the grasp's yaw) the tool's mass, a hand's length behind
+        the TCP, swings about it and stops dead at the corner. In the twin that read 68-107 N
+        at the wrist with nothing touched (the tool heading down at 0.52 m/s, commanded 0.2)."""
         p, arm = self.params, self.dev.arm
         pre = self._pre
         above = pre.position + p.approach_height * self.frame.up

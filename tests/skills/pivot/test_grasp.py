@@ -73,6 +73,11 @@ def test_grasp_feels_s_where_it_is_and_closes_pressing_it() -> None:
     kinds = [c[0] for c in d["arm"].commands]
     # above the open end, down to the pre-approach, to the standoff, feel S
     assert kinds == ["path", "path", "path", "force"]
+    # each leg its own move, ending where the next begins: over the pre-approach pose, then on it
+    over, down = d["arm"].commands[0][1], d["arm"].commands[1][1]
+    assert len(over) == 1 and len(down) == 1
+    assert down[0].position[:2] == pytest.approx(over[0].position[:2], abs=1e-9)
+    assert float(over[0].position[2]) >= float(down[0].position[2]) + PARAMS.approach_height - 1e-9
     # the height was measured where the tip met S (within the spring's give at the touch force)
     assert grasp.s_height == pytest.approx(top, abs=2 * PARAMS.touch_force / 20000.0)
     assert grasp.frame.floor_z == pytest.approx(FRAME.floor_z - 0.0015, abs=0.0005)
