@@ -1,18 +1,20 @@
 """A hollow part of the catalogue as one dynamic PyBullet body.
 
-The part is built from flat boxes so that every contact the pivot relies on is a box-box contact
-(Bullet's exact box-box detector, no GJK margin rounding): a round tube is ``N`` staves around the
-hole, a rectangular one four plates; a part with one open end also gets a bottom at its closed end.
+A rectangular part is four flat plates (boxes: Bullet's exact box-box detector, no GJK margin
+rounding); a part with one open end also gets a bottom at its closed end. A round part is round:
+``N`` convex staves around the hole, each with a flat inner face (so a finger in the hole meets
+a plane, as on the rectangular parts) and an outer face that follows the outer circle in
+:data:`ARC_SEGMENTS` flats, so the part rolls on a floor tilted 2 deg as a real tube does.
 Geometry, units and frames:
 
 * Part frame: origin at the centroid of the ``length x outer x outer`` envelope, ``+x`` along the
   axis towards the open end (the closed end of a cup or bottle is at ``-x``). All lengths in m.
-* Round section: stave ``k`` has its outward normal at ``2 pi k / N`` about ``+x`` from ``-z``,
-  its inner face tangent to the hole circle (``hole / 2``) and its outer face at ``outer / 2``.
-  The union is exactly the region between two regular ``N``-gons whose inscribed circles have
-  diameters ``hole`` and ``outer``: a finger sees the free diameter ``hole`` and the floor sees the
-  envelope ``outer``. Stave 0 faces ``-z``, so a part lying with an identity roll rests on a flat
-  face with its centre ``outer / 2`` above the floor.
+* Round section: stave ``k`` is centred on the outward direction ``2 pi k / N`` about ``+x`` from
+  ``-z``; its inner face is tangent to the hole circle (``hole / 2``), its outer face lies on the
+  circle ``outer / 2``. A finger sees the free diameter ``hole`` and the floor the envelope
+  ``outer``. Bullet inflates a convex hull by its collision margin, so each hull is built that
+  margin inside the surface it stands for: the surfaces the contacts meet are where the
+  dimensions say, with edges rounded by the margin.
 * Mass (kg) and inertia are those of the ideal thick-walled tube (plus its bottom disc, same wall
   material, for ``open_ends == 1``), set explicitly; PyBullet's default would be a box's.
 
@@ -21,20 +23,31 @@ Nothing here moves a part after :func:`spawn_part`: the cell's rule is that only
 
 from __future__ import annotations
 
+import atexit
+import hashlib
 import math
+import shutil
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from drivers.parts import Part
-from drivers.pose import Pose, rot_x, rot_y, rot_z
+from drivers.pose import Pose, rot_y, rot_z
 from sim.world import SimWorld, matrix_from_quaternion
 
 #: PyBullet keeps only the first 16 child shapes of a shape array.
 MAX_CHILD_SHAPES = 16
-#: Default number of staves for a round section (a multiple of 4: flat faces at +-y and +-z).
+#: Default number of staves for a round section (a multiple of 4: the hole's flat faces at +-y
+#: and +-z, where the fingers meet it).
 DEFAULT_STAVES = 12
+#: Flats per stave on the outer circle: 12 x 12 = a 144-gon, whose flats tilt 1.25 deg from one to
+#: the next (under the 2 deg a part must roll on) and stay within 0.01 mm of a 34 mm circle.
+ARC_SEGMENTS = 12
+#: Sides of the polygon standing for a round part's bottom disc.
+BOTTOM_SIDES = 48
 #: Upper bound of the collision margin (m): well inside a 3 mm wall.
 MAX_COLLISION_MARGIN = 0.0005
 
@@ -62,29 +75,98 @@ def wall_thickness(part: Part) -> float:
     return 0.5 * (part.outer - part.hole)
 
 
-def _boxes(part: Part, staves: int) -> list[_Box]:
-    """The child boxes of the part, in the part frame."""
+def _boxes(part: Part) -> list[_Box]:
+    """The child boxes of a rectangular part, in the part frame."""
     half_l = 0.5 * part.length
     t = wall_thickness(part)
     r_in, r_out = 0.5 * part.hole, 0.5 * part.outer
     boxes: list[_Box] = []
-    if part.hole_shape == "circle":
-        # Tangential width that closes the outer polygon; the staves then overlap near the hole,
-        # which is harmless inside one body, and nothing reaches inside the hole circle.
-        half_w = r_out * math.tan(math.pi / staves)
-        for k in range(staves):
-            theta = 2.0 * math.pi * k / staves - 0.5 * math.pi
-            rot = rot_x(theta)  # local y -> outward normal (0, cos, sin); stave 0 faces -z
-            centre = rot @ np.array([0.0, 0.5 * (r_in + r_out), 0.0])
-            boxes.append(_Box((half_l, 0.5 * t, half_w), centre, rot))
-    else:
-        eye = np.eye(3)
-        for s in (-1.0, 1.0):
-            # Plates facing +-z span the full outer side; those facing +-y fill between them.
-            off = s * (r_out - 0.5 * t)
-            boxes.append(_Box((half_l, r_out, 0.5 * t), np.array([0.0, 0.0, off]), eye))
-            boxes.append(_Box((half_l, 0.5 * t, r_in), np.array([0.0, off, 0.0]), eye))
+    eye = np.eye(3)
+    for s in (-1.0, 1.0):
+        # Plates facing +-z span the full outer side; those facing +-y fill between them.
+        off = s * (r_out - 0.5 * t)
+        boxes.append(_Box((half_l, r_out, 0.5 * t), np.array([0.0, 0.0, off]), eye))
+        boxes.append(_Box((half_l, 0.5 * t, r_in), np.array([0.0, off, 0.0]), eye))
     return boxes
+
+
+def _prism(section: NDArray[np.float64], x0: float, x1: float) -> NDArray[np.float64]:
+    """Vertices (n, 3) of a prism along ``x`` from ``x0`` to ``x1`` over a convex ``(y, z)``
+    polygon (n / 2, 2) given counter-clockwise: first the ``x0`` end, then the ``x1`` end."""
+    n = len(section)
+    return np.vstack(
+        [np.column_stack([np.full(n, x0), section]), np.column_stack([np.full(n, x1), section])]
+    )
+
+
+def round_pieces(
+    part: Part, staves: int = DEFAULT_STAVES, margin: float = 0.0
+) -> list[NDArray[np.float64]]:
+    """The convex pieces of a round part (each a prism's vertices, see :func:`_prism`), built
+    ``margin`` inside the surfaces they stand for: the staves, then the bottom if it has one."""
+    half_l = 0.5 * part.length - margin
+    r_in, r_out = 0.5 * part.hole + margin, 0.5 * part.outer - margin
+    step = 2.0 * math.pi / staves
+    r_corner = r_in / math.cos(0.5 * step)  # the hole polygon's corners
+    pieces = []
+    for k in range(staves):
+        a0 = step * k - 0.5 * math.pi - 0.5 * step
+        a1 = a0 + step
+        arc = np.linspace(a0, a1, ARC_SEGMENTS + 1)
+        ring = [(r_corner * math.cos(a0), r_corner * math.sin(a0))]
+        ring += [(r_out * math.cos(a), r_out * math.sin(a)) for a in arc]
+        ring.append((r_corner * math.cos(a1), r_corner * math.sin(a1)))
+        # Counter-clockwise about +x in (y, z): inner corner a0, out along the arc, back in at a1.
+        pieces.append(_prism(np.array(ring), -half_l, half_l))
+    bottom = _bottom(part)
+    if bottom is not None:
+        centre, t_b = bottom
+        # A disc reaching half-way into the staves: closes the hole, stays inside the envelope.
+        r_b = 0.25 * (part.hole + part.outer) - margin
+        ang = 2.0 * math.pi * np.arange(BOTTOM_SIDES) / BOTTOM_SIDES
+        disc = np.column_stack([np.cos(ang), np.sin(ang)]) * r_b
+        half_t = 0.5 * t_b - margin
+        pieces.append(_prism(disc, centre[0] - half_t, centre[0] + half_t))
+    return pieces
+
+
+def _obj_text(pieces: list[NDArray[np.float64]]) -> str:
+    """A Wavefront OBJ with one object per convex piece (PyBullet makes each a convex hull of a
+    compound) and outward-wound faces (the camera renders it)."""
+    lines: list[str] = []
+    base = 1
+    for i, verts in enumerate(pieces):
+        n = len(verts) // 2
+        lines.append(f"o piece{i}")
+        lines += [f"v {x:.9f} {y:.9f} {z:.9f}" for x, y, z in verts]
+        lo = [base + j for j in range(n)]
+        hi = [base + n + j for j in range(n)]
+        # The x0 end faces -x: its counter-clockwise (y, z) ring reversed; the x1 end as given.
+        lines += [f"f {lo[0]} {lo[j + 1]} {lo[j]}" for j in range(1, n - 1)]
+        lines += [f"f {hi[0]} {hi[j]} {hi[j + 1]}" for j in range(1, n - 1)]
+        for j in range(n):
+            a, b = j, (j + 1) % n
+            lines.append(f"f {lo[a]} {lo[b]} {hi[b]} {hi[a]}")
+        base += 2 * n
+    return "\n".join(lines) + "\n"
+
+
+_MESH_DIR: Path | None = None
+
+
+def _mesh_file(pieces: list[NDArray[np.float64]]) -> str:
+    """Path of an OBJ holding ``pieces``, written once per process into a private temporary
+    folder (PyBullet reads meshes only from files); named by content, so a part's file is
+    reused and two parts never share one."""
+    global _MESH_DIR
+    if _MESH_DIR is None:
+        _MESH_DIR = Path(tempfile.mkdtemp(prefix="pivot-cell-parts-"))
+        atexit.register(shutil.rmtree, _MESH_DIR, True)
+    text = _obj_text(pieces)
+    path = _MESH_DIR / f"{hashlib.sha1(text.encode()).hexdigest()[:16]}.obj"
+    if not path.exists():
+        path.write_text(text)
+    return str(path)
 
 
 def _bottom(part: Part) -> tuple[NDArray[np.float64], float] | None:
@@ -130,14 +212,14 @@ def mass_properties(part: Part) -> MassProperties:
 def hull_vertices(part: Part, staves: int = DEFAULT_STAVES) -> NDArray[np.float64]:
     """Vertices of the outer envelope in the part frame (m), shape (n, 3).
 
-    Round: the outer ``N``-gon (corners at ``outer / 2 / cos(pi / N)``) at both ends; rectangular:
-    the eight corners. The lowest point of the part is always one of these.
+    Round: the outer circle's ``N x`` :data:`ARC_SEGMENTS` corners at both ends; rectangular: the
+    eight corners. The lowest point of the part is always one of these.
     """
     half_l, r_out = 0.5 * part.length, 0.5 * part.outer
     if part.hole_shape == "circle":
-        rc = r_out / math.cos(math.pi / staves)
-        ang = 2.0 * math.pi * (np.arange(staves) + 0.5) / staves - 0.5 * math.pi
-        ring = np.stack([np.cos(ang), np.sin(ang)], axis=1) * rc
+        n = staves * ARC_SEGMENTS
+        ang = 2.0 * math.pi * np.arange(n) / n - 0.5 * math.pi - math.pi / staves
+        ring = np.stack([np.cos(ang), np.sin(ang)], axis=1) * r_out
     else:
         ring = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float) * r_out
     ends = [np.column_stack([np.full(len(ring), s * half_l), ring]) for s in (-1.0, 1.0)]
@@ -214,6 +296,37 @@ class PartBody:
         return float(math.asin(min(1.0, abs(self.axis()[2]))))
 
 
+def _box_shapes(world: SimWorld, part: Part) -> tuple[int, int]:
+    """Collision and visual shape of a rectangular part: its plates and its bottom plate."""
+    p = world.p
+    boxes = _boxes(part)
+    half_extents = [list(b.half_extents) for b in boxes]
+    positions = [b.position.tolist() for b in boxes]
+    orientations = [Pose(rotation=b.rotation).quaternion.tolist() for b in boxes]
+    bottom = _bottom(part)
+    if bottom is not None:
+        centre, t_b = bottom
+        half_extents.append([0.5 * t_b, 0.5 * part.hole, 0.5 * part.hole])
+        positions.append(centre.tolist())
+        orientations.append([0.0, 0.0, 0.0, 1.0])
+    types = [p.GEOM_BOX] * len(half_extents)
+    if len(types) > MAX_CHILD_SHAPES:
+        raise ValueError(f"{len(types)} child shapes; PyBullet keeps only {MAX_CHILD_SHAPES}")
+    collision = p.createCollisionShapeArray(
+        shapeTypes=types,
+        halfExtents=half_extents,
+        collisionFramePositions=positions,
+        collisionFrameOrientations=orientations,
+    )
+    visual = p.createVisualShapeArray(
+        shapeTypes=types,
+        halfExtents=half_extents,
+        visualFramePositions=positions,
+        visualFrameOrientations=orientations,
+    )
+    return collision, visual
+
+
 def spawn_part(
     world: SimWorld,
     part: Part,
@@ -221,7 +334,7 @@ def spawn_part(
     lateral_friction: float = 1.0,
     *,
     staves: int = DEFAULT_STAVES,
-    rolling_friction: float = 1e-4,
+    rolling_friction: float = 5e-4,
     spinning_friction: float = 1e-3,
     rgba: tuple[float, float, float, float] = (0.70, 0.72, 0.75, 1.0),
     sleep_threshold: float | None = None,
@@ -232,8 +345,12 @@ def spawn_part(
     body's, so the cell keeps 1.0 here and puts the per-contact values on fingers and floor.
     ``rolling_friction`` / ``spinning_friction`` (m) are small on purpose: the part must pivot
     freely about its floor contact. Bullet combines them as ``r_part * mu_other + r_other *
-    mu_part``, so with fixtures at 0 the effective value is this one times the floor's friction.
-    ``staves`` (round sections only) must leave room for the bottom within 16 child shapes.
+    mu_part``, so with fixtures at 0 the effective value is this one times the floor's friction:
+    0.1-0.3 mm on the cell's floors (0.25-0.6), a rolling resistance of about 1 % of a
+    bushing's radius, as a hard part on a plastic bin floor has. Under 0.05 mm the 144-gon's
+    contact wanders and a round part left lying starts rolling by itself within seconds; a
+    round part on a floor tilted 2 deg rolls either way.
+    ``staves`` (round sections only): the pieces around the hole, within 16 with the bottom.
     ``sleep_threshold``: let the part fall asleep once it moves slower than this (Bullet's
     velocity threshold, about m/s) -- a part left standing (packed in a box, in a slot) otherwise
     creeps about 1 mm a minute on the solver's jitter; contact with a moving body wakes it.
@@ -244,49 +361,13 @@ def spawn_part(
     if lateral_friction < 0 or rolling_friction < 0 or spinning_friction < 0:
         raise ValueError("friction coefficients must be >= 0")
     p = world.p
-    boxes = _boxes(part, staves)
-    types = [p.GEOM_BOX] * len(boxes)
-    half_extents = [list(b.half_extents) for b in boxes]
-    radii = [0.0] * len(boxes)
-    lengths = [0.0] * len(boxes)
-    positions = [b.position.tolist() for b in boxes]
-    orientations = [Pose(rotation=b.rotation).quaternion.tolist() for b in boxes]
-    bottom = _bottom(part)
-    if bottom is not None:
-        centre, t_b = bottom
-        if part.hole_shape == "circle":
-            # A disc reaching half-way into the staves: closes the hole, stays inside the envelope.
-            types.append(p.GEOM_CYLINDER)
-            half_extents.append([0.0, 0.0, 0.0])
-            radii.append(0.25 * (part.hole + part.outer))
-            lengths.append(t_b)
-            orientations.append(Pose(rotation=rot_y(0.5 * math.pi)).quaternion.tolist())
-        else:
-            types.append(p.GEOM_BOX)
-            half_extents.append([0.5 * t_b, 0.5 * part.hole, 0.5 * part.hole])
-            radii.append(0.0)
-            lengths.append(0.0)
-            orientations.append([0.0, 0.0, 0.0, 1.0])
-        positions.append(centre.tolist())
-    if len(types) > MAX_CHILD_SHAPES:
-        raise ValueError(f"{len(types)} child shapes; PyBullet keeps only {MAX_CHILD_SHAPES}")
-
-    collision = p.createCollisionShapeArray(
-        shapeTypes=types,
-        halfExtents=half_extents,
-        radii=radii,
-        lengths=lengths,
-        collisionFramePositions=positions,
-        collisionFrameOrientations=orientations,
-    )
-    visual = p.createVisualShapeArray(
-        shapeTypes=types,
-        halfExtents=half_extents,
-        radii=radii,
-        lengths=lengths,
-        visualFramePositions=positions,
-        visualFrameOrientations=orientations,
-    )
+    margin = min(MAX_COLLISION_MARGIN, 0.25 * wall_thickness(part))
+    if part.hole_shape == "circle":
+        mesh = _mesh_file(round_pieces(part, staves, margin))
+        collision = p.createCollisionShape(p.GEOM_MESH, fileName=mesh)
+        visual = p.createVisualShape(p.GEOM_MESH, fileName=mesh)
+    else:
+        collision, visual = _box_shapes(world, part)
     mass = mass_properties(part)
     body = p.createMultiBody(
         baseMass=part.mass,
@@ -298,7 +379,6 @@ def spawn_part(
     )
     if body < 0:
         raise RuntimeError(f"PyBullet could not create part {part.name!r}")
-    margin = min(MAX_COLLISION_MARGIN, 0.25 * wall_thickness(part))
     p.changeDynamics(
         body,
         -1,

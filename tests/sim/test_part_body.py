@@ -10,6 +10,7 @@ import pytest
 from cell.catalogue import load_catalogue
 from drivers.pose import Pose, rot_x
 from sim.part_body import (
+    ARC_SEGMENTS,
     hull_vertices,
     lying_pose,
     mass_properties,
@@ -50,18 +51,31 @@ def test_every_part_comes_to_rest_lying(name: str) -> None:
         assert np.linalg.norm(lin) < 0.01 and np.linalg.norm(ang) < 0.1
 
 
-@pytest.mark.parametrize(("staves", "roll"), [(12, 0.2), (10, 0.0), (7, 0.0)])
-def test_a_round_part_settles_on_a_flat_stave(staves: int, roll: float) -> None:
-    part = CATALOGUE.get("bushing")
-    with SimWorld(seed=1) as world:
-        _floor(world)
-        start = lying_pose(part, 0.0, 0.0, 0.0)
-        rolled = Pose(start.position + [0.0, 0.0, 0.002], start.rotation @ rot_x(roll))
-        body = spawn_part(world, part, rolled, staves=staves)
-        for _ in range(125):
-            world.step()
-        assert abs(body.axis()[2]) < math.sin(math.radians(2.0))
-        assert body.pose().position[2] == pytest.approx(0.5 * part.outer, abs=0.0015)
+@pytest.mark.parametrize("name", ["bushing", "medicine_bottle", "cookie_can"])
+@pytest.mark.parametrize("staves", [12, 8])
+def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(
+    name: str, staves: int
+) -> None:
+    part = CATALOGUE.get(name)
+    for tilt_deg, rolls in ((2.0, True), (0.0, False)):
+        with SimWorld(seed=1) as world:
+            g = world.settings.gravity
+            tilt = math.radians(tilt_deg)
+            world.p.setGravity(0.0, g * math.sin(tilt), -g * math.cos(tilt))  # downhill is +y
+            _floor(world)
+            start = _lifted(lying_pose(part, 0.0, 0.0, 0.0), 0.001)
+            body = spawn_part(world, part, start, staves=staves)
+            for _ in range(250):  # 2 s
+                world.step()
+            travelled = body.pose().position[1] - start.position[1]
+            turned = math.acos(float(np.clip(body.pose().rotation[2, 2], -1.0, 1.0)))
+            if rolls:  # rolled, not slid: the travel is the turn times the radius
+                assert travelled > 0.1
+                assert abs(body.axis()[2]) < 0.01
+                assert body.velocity()[1][0] < -1.0  # turning about its axis: rolling to +y
+            else:
+                assert abs(travelled) < 0.0005 and turned < 0.01
+            assert body.pose().position[2] == pytest.approx(0.5 * part.outer, abs=0.001)
 
 
 def _probe(world: SimWorld, width: float, thickness: float = 0.008, length: float = 0.03) -> int:
@@ -159,6 +173,6 @@ def test_child_shape_count_is_within_pybullets_16() -> None:
             body = spawn_part(world, part, Pose(np.array([0.0, 0.0, 0.5])))
             n = len(world.p.getCollisionShapeData(body.body_id, -1))
             assert n == (12 if part.hole_shape == "circle" else 4) + (part.open_ends == 1)
-    assert hull_vertices(CATALOGUE.get("bushing")).shape == (24, 3)
+    assert hull_vertices(CATALOGUE.get("bushing")).shape == (2 * 12 * ARC_SEGMENTS, 3)
     with SimWorld() as world, pytest.raises(ValueError, match="staves"):
         spawn_part(world, CATALOGUE.get("bushing"), Pose(), staves=16)
