@@ -52,10 +52,7 @@ def test_every_part_comes_to_rest_lying(name: str) -> None:
 
 
 @pytest.mark.parametrize("name", ["bushing", "medicine_bottle", "cookie_can"])
-@pytest.mark.parametrize("staves", [12, 8])
-def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(
-    name: str, staves: int
-) -> None:
+def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(name: str) -> None:
     part = CATALOGUE.get(name)
     for tilt_deg, rolls in ((2.0, True), (0.0, False)):
         with SimWorld(seed=1) as world:
@@ -64,7 +61,7 @@ def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(
             world.p.setGravity(0.0, g * math.sin(tilt), -g * math.cos(tilt))  # downhill is +y
             _floor(world)
             start = _lifted(lying_pose(part, 0.0, 0.0, 0.0), 0.001)
-            body = spawn_part(world, part, start, staves=staves)
+            body = spawn_part(world, part, start)
             for _ in range(250):  # 2 s
                 world.step()
             travelled = body.pose().position[1] - start.position[1]
