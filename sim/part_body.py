@@ -107,24 +107,15 @@ def round_pieces(
     half_l = 0.5 * part.length - margin
     r_in, r_out = 0.5 * part.hole + margin, 0.5 * part.outer - margin
     step = 2.0 * math.pi / staves
-    # Each stave reaches past its neighbours' edges, its inner face running on along the same
-    # line (into the wall: the hole is convex) for 3 margins. Bullet rounds every hull edge by
-    # the margin; edge to edge, two rounded staves leave a groove on the inner and the outer
-    # face, and a pad corner caught in one held the jaws shut at 50 N when they opened to let
-    # a packed part go. Overlapping, each rounded edge lies inside the neighbour.
-    half = 0.5 * step
-    reach = math.atan(math.tan(half) + 3.0 * margin / r_in) - half if margin > 0 else 0.0
-    reach = min(reach, math.acos(min(1.0, r_in / r_out)) - half)  # stay inside the envelope
-    reach = max(reach, 0.0)
+    r_corner = r_in / math.cos(0.5 * step)  # the hole polygon's corners
     pieces = []
     for k in range(staves):
-        mid = step * k - 0.5 * math.pi
-        a0, a1 = mid - half - reach, mid + half + reach
-        r_end = r_in / math.cos(half + reach)  # the inner face's ends, on its own line
+        a0 = step * k - 0.5 * math.pi - 0.5 * step
+        a1 = a0 + step
         arc = np.linspace(a0, a1, ARC_SEGMENTS + 1)
-        ring = [(r_end * math.cos(a0), r_end * math.sin(a0))]
+        ring = [(r_corner * math.cos(a0), r_corner * math.sin(a0))]
         ring += [(r_out * math.cos(a), r_out * math.sin(a)) for a in arc]
-        ring.append((r_end * math.cos(a1), r_end * math.sin(a1)))
+        ring.append((r_corner * math.cos(a1), r_corner * math.sin(a1)))
         # Counter-clockwise about +x in (y, z): inner corner a0, out along the arc, back in at a1.
         pieces.append(_prism(np.array(ring), -half_l, half_l))
     bottom = _bottom(part)
