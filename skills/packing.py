@@ -101,6 +101,10 @@ class PackParams:
         0.002, "m", 0.0, 0.01, "the last +x push may go beyond the back_off it closes"
     )
     release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
+    release_speed: float = si(
+        0.02, "m/s", 0.001, 0.15,
+        "each finger's while letting go, and the arm's following the outer one out",
+    )
     weight_check: float = si(
         0.5, "1", 0.0, 1.0, "fraction of the part's weight the wrench must lose; 0: no check"
     )
@@ -302,8 +306,14 @@ class PackInBox(SequenceSkill):
         arm.move_to(arm.tool_pose(), p.approach_speed, p.acceleration)
 
     def _release(self) -> None:
-        gripper = self.dev.gripper
-        gripper.open(gripper.width() + self.params.release)
+        """Open by ``release`` with the finger in the hole held where it is: the jaws open
+        symmetrically, so the arm follows the outer finger out by half the opening at the
+        fingers' speed. Opening in place moved the inner finger across the hole, and a round
+        part wedged against the +y wall caught it there (the twin read 48 N, 9 N*m)."""
+        gripper, arm, p = self.dev.gripper, self.dev.arm, self.params
+        gripper.open(gripper.width() + p.release, p.release_speed)
+        dx, dy = 0.5 * p.release * self._x[XY]
+        arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
     def _withdraw(self) -> None:
         p = self.params

@@ -188,6 +188,37 @@ def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
     assert d["arm"].pose.position[2] > pack.contacts["+y"].position[2] + 0.03
 
 
+def test_pack_in_box_lets_go_with_the_inner_finger_held_still() -> None:
+    """The jaws open symmetrically; the arm follows the outer finger (tool +x) out by half the
+    opening, so the finger in the hole stays where it is."""
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    forces = {"push -z onto the floor": (0, 0, 10.0), "push +x": (-10.0, 0, 0),
+              "push +y": (0, -10.0, 0)}
+    seen: dict[str, object] = {}
+
+    def on_tick(_: int) -> None:
+        arm = d["arm"]
+        arm.blocked = pack.step in forces
+        if pack.step in forces and arm.state is MotionState.MOVING and arm.force is not None:
+            push_back(d, forces[pack.step])
+        elif pack.step not in forces:
+            d["ft"].value = np.zeros(6)
+        if pack.step == "relax the push" and "before" not in seen:
+            seen["before"] = arm.pose
+            seen["commands"] = len(arm.commands)
+
+    result, _ = run(pack, d, on_tick=on_tick)
+    assert result.status is Status.SUCCESS, result.message
+    before = seen["before"]
+    # after the relax (a move to where the TCP is): the let go's, then the withdrawal's
+    relax, let_go, _ = [c for c in d["arm"].commands[seen["commands"] - 1 :] if c[0] == "path"]
+    assert relax[1][-1].position == pytest.approx(before.position)
+    moved = let_go[1][-1].position - before.position
+    x = before.rotation[:, 0]  # the outer finger's side
+    assert moved == pytest.approx(0.5 * pack.params.release * x, abs=1e-9)
+
+
 def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
     d = devices()
     pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
