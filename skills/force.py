@@ -50,7 +50,9 @@ class ForcePush:
 
     A ``free`` axis is for a push into a round neighbour met off its centre line: held there, the
     pushed part shoves the neighbour sideways along the contact's slope; free, the pushed part
-    itself gives way along that axis.
+    itself gives way along that axis. ``lean`` (N, base frame, on free axes only) presses the
+    part along a free axis as it goes: a part pushed along a row leans on the wall beside it, so
+    it meets its neighbour on their centre line and pushes it along the row, not off the wall.
     """
 
     def __init__(
@@ -66,8 +68,10 @@ class ForcePush:
         still_speed: float = STILL_SPEED,
         contact_ratio: float = CONTACT_RATIO,
         free: tuple[int, ...] = (),
+        lean: ArrayLike = (0.0, 0.0, 0.0),
     ) -> None:
-        """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``."""
+        """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``;
+        ``lean``: the force (N) pressed along them."""
         d = np.asarray(direction, float)
         axis = int(np.argmax(np.abs(d)))
         if np.count_nonzero(d) != 1:
@@ -76,6 +80,11 @@ class ForcePush:
         if axis in free or any(a not in range(DIM) for a in free):
             raise ValueError(f"free axes must be other base axes than the push's, got {free}")
         self.free = tuple(free)
+        self.lean = np.asarray(lean, float)
+        if self.lean.shape != (DIM,) or any(
+            self.lean[a] != 0.0 for a in range(DIM) if a not in self.free
+        ):
+            raise ValueError(f"a push leans only along its free axes, got {lean} with {free}")
         self.force, self.speed, self.settle = force, speed, settle
         self.still_speed, self.contact_ratio = still_speed, contact_ratio
         self._reach = reach if callable(reach) else (lambda r=float(reach): r)
@@ -107,9 +116,10 @@ class ForcePush:
         limits = [0.0] * WRENCH_DIM
         limits[self.axis] = self.speed
         for axis in self.free:
-            # Nothing pressed beyond what was read at the start: only a contact moves it.
+            # Nothing pressed beyond what was read at the start but the lean: a contact, or the
+            # lean until one, moves it.
             selection[axis] = True
-            wrench[axis] = float(-self._ref[axis])
+            wrench[axis] = float(-self._ref[axis] + self.lean[axis])
             limits[axis] = self.speed
         arm.force_mode(selection, wrench, limits)
 

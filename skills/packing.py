@@ -91,8 +91,8 @@ class PackParams:
     lift_off: float = si(
         0.0005, "m", 0.0, 0.005, "back up after the floor contact, so the part slides freely"
     )
-    #: back after the +x contact, so the +y push does not rub along the +x neighbour (two
-    #: 12-sided parts sliding past each other catch corner on corner and stop the push short)
+    #: back after the +x contact, so the +y push does not rub along the +x neighbour (pressed
+    #: together, two parts sliding past each other stopped the push short)
     back_off: float = si(0.001, "m", 0.0, 0.01, "back after the +x contact")
     #: the last +x push closes ``back_off`` and may go this much further before it counts as
     #: nothing felt: room for the part not sitting exactly ``back_off`` off its +x contact
@@ -100,7 +100,15 @@ class PackParams:
     push_again_margin: float = si(
         0.002, "m", 0.0, 0.01, "the last +x push may go beyond the back_off it closes"
     )
+    lean_force: float = si(
+        2.0, "N", 0.0, 20.0,
+        "pressed +y during the +x pushes: the part slides along the wall or the row before it",
+    )
     release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
+    release_clearance: float = si(
+        0.001, "m", 0.0, 0.01,
+        "the finger in the hole moves off the wall once the jaws are open, before withdrawing",
+    )
     release_speed: float = si(
         0.02, "m/s", 0.001, 0.15,
         "each finger's while letting go, and the arm's following the outer one out",
@@ -122,7 +130,8 @@ class PackInBox(SequenceSkill):
     ``+x``, ``+y``) and ``placed_xy`` where the part's axis ended (m, from the arm's pose).
 
     Steps: over the place, read the hanging part; down into the box and onto its floor; push
-    ``+x``, ``+y`` and ``+x`` again; let go, withdraw up, check the weight stayed in the box.
+    ``+x``, ``+y`` and ``+x`` again; let go with the finger in the hole held still, move the open
+    hand off the wall, withdraw up, check the weight stayed in the box.
     """
 
     def __init__(
@@ -176,16 +185,18 @@ class PackInBox(SequenceSkill):
             return ForcePush(
                 name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
                 settle=p.contact_settle, still_speed=p.still_speed, free=free,
+                lean=(0.0, p.lean_force, 0.0) if free else (0.0, 0.0, 0.0),
             )
 
         self.floor = push(
             "push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot, ()
         )
-        # The +x pushes give way along y. Held in y, the part (set down ``offset`` short along
-        # -y too) met its round neighbour below the centre line and shoved the row off the +y
-        # wall (the twin measured 3.5 mm); free, it slides along y off the neighbour instead.
-        # A row of the twin's 12-sided parts squeezed against the +x wall still buckles off the
-        # +y wall now and then (docs/pivot_in_hand.md, cell sim).
+        # The +x pushes give way along y and lean +y with ``lean_force``. Held in y, the part
+        # (set down ``offset`` short along -y too) met its round neighbour below the centre line
+        # and shoved the row off the +y wall (the twin measured 3.5 mm); free but not leaning,
+        # it still met it below the line and the row buckled 2-4 mm off the wall; leaning, it
+        # slides up to the wall (or the row before it) on the way and meets the neighbour on
+        # their centre line.
         self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,))
         self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach, ())
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
@@ -243,7 +254,12 @@ class PackInBox(SequenceSkill):
             # Hold where the part actually is, not where the push aimed: letting go under the
             # push's preload (up to 50 N seen) wedges the fingers.
             dev.move("relax the push", g, self._relax),
-            dev.grip("let go", g, self._release),
+            # The arm's follow and the jaws each finish before the hand moves on: a hand still
+            # following the outer finger out once the jaws stopped pressed the inner finger
+            # back into the wall.
+            dev.move("let go", g, self._release),
+            dev.grip("jaws open", g, lambda: None),
+            dev.move("off the wall", g, self._off_the_wall),
             dev.move("withdraw up", g, self._withdraw),
             wait("settle", dev, g, p.settle),
             check("part left in the box", dev, g, self._let_go),
@@ -314,6 +330,14 @@ class PackInBox(SequenceSkill):
         gripper.open(gripper.width() + p.release, p.release_speed)
         dx, dy = 0.5 * p.release * self._x[XY]
         arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
+
+    def _off_the_wall(self) -> None:
+        """Move the open hand towards the hole's centre by ``release_clearance``: the finger
+        in the hole, still touching the wall it gripped, dragged the part up and 5 mm aside as
+        it withdrew (the twin measured it)."""
+        p = self.params
+        dx, dy = -p.release_clearance * self._x[XY]
+        self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
     def _withdraw(self) -> None:
         p = self.params

@@ -43,3 +43,28 @@ def test_packing_pushes_along_x_give_way_along_y_and_the_y_push_holds_x() -> Non
     assert pack.push_x.free == (1,) and pack.push_x_again.free == (1,)
     assert pack.push_y.free == () and pack.floor.free == ()
     assert np.allclose(pack.place_xy, PLACE[:2])
+
+
+def test_a_lean_presses_along_its_free_axis_on_top_of_the_reference() -> None:
+    d = devices()
+    push_back(d, (0.3, -0.4, -1.5))
+    push = ForcePush(
+        "push +x", dev(d), Guard(), (1, 0, 0), 6.0, 0.01, 0.01, free=(1,), lean=(0, 2.0, 0)
+    )
+    push.motion.tick()
+    _, wrench, _ = d["arm"].force
+    assert wrench[0] == pytest.approx(-0.3 + 6.0) and wrench[1] == pytest.approx(0.4 + 2.0)
+
+
+@pytest.mark.parametrize(("free", "lean"), [((1,), (0, 0, 2.0)), ((), (0, 2.0, 0)), ((1,), (1, 2))])
+def test_a_lean_off_the_free_axes_is_refused(free: tuple[int, ...], lean: tuple) -> None:
+    with pytest.raises(ValueError, match="leans only"):
+        ForcePush("push +x", dev(devices()), Guard(), (1, 0, 0), 6.0, 0.01, 0.01, free=free,
+                  lean=lean)
+
+
+def test_packing_x_pushes_lean_towards_the_y_wall_and_the_others_do_not() -> None:
+    pack = PackInBox(PLACE, PART, dev(devices()))
+    assert pack.push_x.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
+    assert pack.push_x_again.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
+    assert not pack.push_y.lean.any() and not pack.floor.lean.any()

@@ -211,12 +211,17 @@ def test_pack_in_box_lets_go_with_the_inner_finger_held_still() -> None:
     result, _ = run(pack, d, on_tick=on_tick)
     assert result.status is Status.SUCCESS, result.message
     before = seen["before"]
-    # after the relax (a move to where the TCP is): the let go's, then the withdrawal's
-    relax, let_go, _ = [c for c in d["arm"].commands[seen["commands"] - 1 :] if c[0] == "path"]
+    # after the relax (a move to where the TCP is): the let go's, off the wall, the withdrawal
+    paths = [c for c in d["arm"].commands[seen["commands"] - 1 :] if c[0] == "path"]
+    relax, let_go, off, withdraw = paths
     assert relax[1][-1].position == pytest.approx(before.position)
     moved = let_go[1][-1].position - before.position
     x = before.rotation[:, 0]  # the outer finger's side
     assert moved == pytest.approx(0.5 * pack.params.release * x, abs=1e-9)
+    # then the open hand moves towards the hole's centre, so the inner finger leaves the wall
+    back = off[1][-1].position - let_go[1][-1].position
+    assert back == pytest.approx(-pack.params.release_clearance * x, abs=1e-9)
+    assert withdraw[1][-1].position[2] > off[1][-1].position[2] + 0.03
 
 
 def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
