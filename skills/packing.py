@@ -109,6 +109,10 @@ class PackParams:
         0.001, "m", 0.0, 0.01,
         "the finger in the hole moves off the wall once the jaws are open, before withdrawing",
     )
+    release_follow: float = si(
+        0.5, "1", 0.0, 1.0,
+        "share of the opening the arm follows the outer finger out by (0.5: the inner one stays)",
+    )
     release_speed: float = si(
         0.02, "m/s", 0.001, 0.15,
         "each finger's while letting go, and the arm's following the outer one out",
@@ -328,7 +332,7 @@ class PackInBox(SequenceSkill):
         part wedged against the +y wall caught it there (the twin read 48 N, 9 N*m)."""
         gripper, arm, p = self.dev.gripper, self.dev.arm, self.params
         gripper.open(gripper.width() + p.release, p.release_speed)
-        dx, dy = 0.5 * p.release * self._x[XY]
+        dx, dy = p.release_follow * p.release * self._x[XY]
         arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
     def _off_the_wall(self) -> None:
