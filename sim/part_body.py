@@ -24,6 +24,7 @@ Nothing here moves a part after :func:`spawn_part`: the cell's rule is that only
 from __future__ import annotations
 
 import atexit
+import functools
 import hashlib
 import math
 import shutil
@@ -154,15 +155,17 @@ def _obj_text(pieces: list[NDArray[np.float64]]) -> str:
 _MESH_DIR: Path | None = None
 
 
-def _mesh_file(pieces: list[NDArray[np.float64]]) -> str:
-    """Path of an OBJ holding ``pieces``, written once per process into a private temporary
-    folder (PyBullet reads meshes only from files); named by content, so a part's file is
-    reused and two parts never share one."""
+@functools.lru_cache(maxsize=64)
+def _round_mesh_file(part: Part, staves: int, margin: float) -> str:
+    """Path of an OBJ holding the part's :func:`round_pieces`, written once per process into a
+    private temporary folder (PyBullet reads meshes only from files); named by content, so a
+    part's file is reused and two parts never share one. Cached: a bin fill spawns the same
+    part many times, and each spawn would build and hash the same text again."""
     global _MESH_DIR
     if _MESH_DIR is None:
         _MESH_DIR = Path(tempfile.mkdtemp(prefix="pivot-cell-parts-"))
         atexit.register(shutil.rmtree, _MESH_DIR, True)
-    text = _obj_text(pieces)
+    text = _obj_text(round_pieces(part, staves, margin))
     path = _MESH_DIR / f"{hashlib.sha1(text.encode()).hexdigest()[:16]}.obj"
     if not path.exists():
         path.write_text(text)
@@ -363,7 +366,7 @@ def spawn_part(
     p = world.p
     margin = min(MAX_COLLISION_MARGIN, 0.25 * wall_thickness(part))
     if part.hole_shape == "circle":
-        mesh = _mesh_file(round_pieces(part, staves, margin))
+        mesh = _round_mesh_file(part, staves, margin)
         collision = p.createCollisionShape(p.GEOM_MESH, fileName=mesh)
         visual = p.createVisualShape(p.GEOM_MESH, fileName=mesh)
     else:

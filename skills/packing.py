@@ -184,28 +184,28 @@ class PackInBox(SequenceSkill):
         )
 
         def push(
-            name: str, direction: tuple[float, float, float], reach: float, free: tuple[int, ...]
+            name: str, direction: tuple[float, float, float], reach: float,
+            free: tuple[int, ...] = (), lean: tuple[float, float, float] = (0.0, 0.0, 0.0),
         ) -> ForcePush:
             return ForcePush(
                 name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
-                settle=p.contact_settle, still_speed=p.still_speed, free=free,
-                lean=(0.0, p.lean_force, 0.0) if free else (0.0, 0.0, 0.0),
+                settle=p.contact_settle, still_speed=p.still_speed, free=free, lean=lean,
             )
 
-        self.floor = push(
-            "push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot, ()
-        )
+        lean_y = (0.0, p.lean_force, 0.0)
+
+        self.floor = push("push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot)
         # The +x pushes give way along y and lean +y with ``lean_force``. Held in y, the part
         # (set down ``offset`` short along -y too) met its round neighbour below the centre line
         # and shoved the row off the +y wall (the twin measured 3.5 mm); free but not leaning,
         # it still met it below the line and the row buckled 2-4 mm off the wall; leaning, it
         # slides up to the wall (or the row before it) on the way and meets the neighbour on
         # their centre line.
-        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,))
-        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach, ())
+        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,), lean_y)
+        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach)
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
         self.push_x_again = push(
-            "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,)
+            "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,), lean_y
         )
 
     # --- the phases --------------------------------------------------------------------------
@@ -327,9 +327,10 @@ class PackInBox(SequenceSkill):
 
     def _release(self) -> None:
         """Open by ``release`` with the finger in the hole held where it is: the jaws open
-        symmetrically, so the arm follows the outer finger out by half the opening at the
-        fingers' speed. Opening in place moved the inner finger across the hole, and a round
-        part wedged against the +y wall caught it there (the twin read 48 N, 9 N*m)."""
+        symmetrically, so the arm follows the outer finger out by ``release_follow`` of the
+        opening (half: the inner finger stays) at the fingers' speed. Opening in place moved the
+        inner finger across the hole, and a round part wedged against the +y wall caught it
+        there (the twin read 48 N, 9 N*m)."""
         gripper, arm, p = self.dev.gripper, self.dev.arm, self.params
         gripper.open(gripper.width() + p.release, p.release_speed)
         dx, dy = p.release_follow * p.release * self._x[XY]

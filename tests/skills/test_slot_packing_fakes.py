@@ -159,21 +159,31 @@ def test_pick_from_slot_force_spike_and_halt_stop_the_arm() -> None:
 
 
 # --------------------------------------------------------------------------- PackInBox
-def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
-    d = devices()
-    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
-    forces = {"push -z onto the floor": (0, 0, 10.0), "push +x": (-10.0, 0, 0),
-              "push +y": (0, -10.0, 0)}
+#: What each push meets: the floor, then a wall or neighbour on +x and on +y (N, base frame).
+PACK_CONTACTS = {"push -z onto the floor": (0, 0, 10.0), "push +x": (-10.0, 0, 0),
+                 "push +y": (0, -10.0, 0)}
+
+
+def run_pack(pack: PackInBox, d: dict, watch=None):  # type: ignore[no-untyped-def]
+    """Run ``pack`` with each push blocked by its contact; ``watch(step)`` sees every tick."""
 
     def on_tick(_: int) -> None:
         arm = d["arm"]
-        arm.blocked = pack.step in forces
-        if pack.step in forces and arm.state is MotionState.MOVING and arm.force is not None:
-            push_back(d, forces[pack.step])
-        elif pack.step not in forces:
+        arm.blocked = pack.step in PACK_CONTACTS
+        if pack.step in PACK_CONTACTS and arm.state is MotionState.MOVING and arm.force is not None:
+            push_back(d, PACK_CONTACTS[pack.step])
+        elif pack.step not in PACK_CONTACTS:
             d["ft"].value = np.zeros(6)
+        if watch is not None:
+            watch(pack.step)
 
-    result, _ = run(pack, d, on_tick=on_tick)
+    return run(pack, d, on_tick=on_tick)
+
+
+def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    result, _ = run_pack(pack, d)
     assert result.status is Status.SUCCESS, result.message
     assert set(pack.contacts) == {"floor", "+x", "+y"}
     # every push ran in force mode, pressing contact_force along its axis only
@@ -193,22 +203,14 @@ def test_pack_in_box_lets_go_with_the_inner_finger_held_still() -> None:
     opening, so the finger in the hole stays where it is."""
     d = devices()
     pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
-    forces = {"push -z onto the floor": (0, 0, 10.0), "push +x": (-10.0, 0, 0),
-              "push +y": (0, -10.0, 0)}
     seen: dict[str, object] = {}
 
-    def on_tick(_: int) -> None:
-        arm = d["arm"]
-        arm.blocked = pack.step in forces
-        if pack.step in forces and arm.state is MotionState.MOVING and arm.force is not None:
-            push_back(d, forces[pack.step])
-        elif pack.step not in forces:
-            d["ft"].value = np.zeros(6)
-        if pack.step == "relax the push" and "before" not in seen:
-            seen["before"] = arm.pose
-            seen["commands"] = len(arm.commands)
+    def watch(step: str) -> None:
+        if step == "relax the push" and "before" not in seen:
+            seen["before"] = d["arm"].pose
+            seen["commands"] = len(d["arm"].commands)
 
-    result, _ = run(pack, d, on_tick=on_tick)
+    result, _ = run_pack(pack, d, watch)
     assert result.status is Status.SUCCESS, result.message
     before = seen["before"]
     # after the relax (a move to where the TCP is): the let go's, off the wall, the withdrawal
