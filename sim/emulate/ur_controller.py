@@ -774,6 +774,9 @@ class URController:
             "watchdog_trips_at": list(self.log.watchdog_trips_at),
             "speed_slider": self._slider,
             "pauses": len(self.log.pauses),
+            # every slider-to-0 that arrived, a move running or not: the stopL, on the other
+            # socket, may have ended the move first on a loaded machine
+            "slider_zeros": len(self.log.pauses) + len(self.log.rest_stop_arrivals),
         }
 
 
