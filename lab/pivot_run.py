@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cell.reach import ur5_reach
 from drivers.devices import Devices
@@ -47,9 +48,10 @@ from sim.uncertainty import Draws, Uncertainty
 from sim.world import PhysicsSettings, SimWorld
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
-from skills.perception.look import Look, LookParams
+from skills.perception.bin_parts import Detection
+from skills.perception.look import Look, LookParams, tool_yaw
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
-from skills.pivot.clearance import EndChoice, bin_walls, choose_end
+from skills.pivot.clearance import EndChoice, bin_walls, choose_end, likely_grasp_rotation
 from skills.reposition import Reposition, RepositionParams, plan_reposition
 from skills.status import Failure, Status, StepResult
 
@@ -410,16 +412,21 @@ def run_trial(
                 frame, center=np.array([t["x"], t["y"], 0.5 * setup.part.outer]), yaw=t["yaw"]
             )
         early = "look"  #: the phase a failure before the Grasp is counted in
-        if setup.perceive:
-            failure, looked = look_near(
-                setup, tw, frame, setup.nominal_center(), t_end, on_frame, frame_every, seen
-            )
-            frame = looked or frame
         walls = bin_obstacles(setup.layout)
         width = dev.gripper.finger_width
 
         def choose(f: PivotFrame) -> EndChoice:
             return choose_end(f, params, walls, width, setup.part.open_ends, reach=ur5_reach)
+
+        def grasp_rotation(f: PivotFrame) -> NDArray[np.float64]:
+            return likely_grasp_rotation(f, params.alpha, setup.part.open_ends)
+
+        if setup.perceive:
+            failure, looked = look_near(
+                setup, tw, frame, setup.nominal_center(), t_end, on_frame, frame_every, seen,
+                grasp_rotation,
+            )
+            frame = looked or frame
 
         choice = choose(frame)
         repositioned = False
@@ -439,7 +446,8 @@ def run_trial(
                     early = "look"
                     target_xy = (float(move.target.center[0]), float(move.target.center[1]))
                     failure, looked = look_near(
-                        setup, tw, frame, target_xy, t_end, on_frame, frame_every, seen
+                        setup, tw, frame, target_xy, t_end, on_frame, frame_every, seen,
+                        grasp_rotation,
                     )
                     frame = looked or frame
                 choice = choose(frame)
@@ -556,10 +564,17 @@ def look_near(
     on_frame: Callable[[SimWorld, SimRobot], None] | None,
     frame_every: int,
     seen: dict[str, float],
+    grip: Callable[[PivotFrame], NDArray[np.float64]] | None = None,
 ) -> tuple[StepResult | None, PivotFrame | None]:
     """The wrist camera's look for the part near ``near`` (the pivot's and the regrasp's trials
     alike): the look's failure, or ``frame`` moved to what it saw (``seen`` gets x, y, yaw);
-    (None, None) when it saw nothing."""
+    (None, None) when it saw nothing. ``grip``: the rotation the next skill holds the tool at
+    over a part lying in a frame; the look's close view is turned to its yaw."""
+
+    def seen_frame(d: Detection) -> PivotFrame:
+        centre = np.array([d.center[0], d.center[1], 0.5 * setup.part.outer])
+        return dataclasses.replace(frame, center=centre, yaw=d.yaw)
+
     look = Look(
         tw.dev,
         [setup.part],
@@ -567,14 +582,14 @@ def look_near(
         (setup.layout.bin_center[0], setup.layout.bin_center[1]),
         near,
         setup.look,
+        grip_yaw=None if grip is None else (lambda d: tool_yaw(grip(seen_frame(d)))),
     )
     result = run_skill("look", look, tw.world, tw.robot, t_end, on_frame, frame_every)
     if result is not None or look.result is None:
         return result, None
     d = look.result
     seen.update({"x": float(d.center[0]), "y": float(d.center[1]), "yaw": d.yaw})
-    centre = np.array([d.center[0], d.center[1], 0.5 * setup.part.outer])
-    return None, dataclasses.replace(frame, center=centre, yaw=d.yaw)
+    return None, seen_frame(d)
 
 
 def run_skill(  # type: ignore[no-untyped-def]

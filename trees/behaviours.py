@@ -31,14 +31,14 @@ from skills.home import go_home, put_back
 from skills.offtick import OffTick, runs_in_real_time
 from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
-from skills.perception.look import Look
+from skills.perception.look import Look, tool_yaw
 from skills.perception.pick_order import freest_first
 from skills.pivot import Align as AlignSkill
 from skills.pivot import Grasp as GraspSkill
 from skills.pivot import PickFromAbove as PickFromAboveSkill
 from skills.pivot import PivotFrame
 from skills.pivot import Tilt as TiltSkill
-from skills.pivot.clearance import bin_walls, choose_end, lying_part
+from skills.pivot.clearance import bin_walls, choose_end, likely_grasp_rotation, lying_part
 from skills.reposition import Reposition as RepositionSkill
 from skills.reposition import RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
@@ -177,8 +177,24 @@ class Perceive(SkillBehaviour):
             g.bin_view_xy,
             (float(near[0]), float(near[1])),
             self.settings(),
+            grip_yaw=self._grip_yaw,
         )
         return _TolerantLook(self.look)
+
+    def _grip_yaw(self, d: Detection) -> float:
+        """The yaw the pivot's Grasp will hold the tool at over ``d`` (the look's last view is
+        turned to it): the end the plan prefers when both clear, without its sweeps."""
+        ctx, g = self.ctx, self.ctx.geometry
+        if d.part != ctx.part.name:
+            return 0.0
+        frame = PivotFrame(
+            ctx.part.section(ctx.devices.gripper.finger_width),
+            np.array([d.center[0], d.center[1], g.bin_floor_z + 0.5 * ctx.part.outer]),
+            d.yaw,
+            floor_z=g.bin_floor_z,
+        )
+        pivot = ctx.section("pivot")
+        return tool_yaw(likely_grasp_rotation(frame, pivot.alpha, ctx.part.open_ends))
 
     def on_success(self) -> None:
         dets = list(self.look.detections)

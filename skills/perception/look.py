@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,13 +33,31 @@ DOWN = np.diag([1.0, -1.0, -1.0])
 #: five times the shift between the views that a 0.5 deg hand-eye error makes (4 mm from the
 #: wide view, see LookParams.close_height).
 SAME_PART_DISTANCE = 0.02
+#: a closing line whose horizontal part is shorter than this (of a unit vector: within 0.6 deg of
+#: vertical) has no yaw to turn the camera to
+VERTICAL_X = 0.01
 
 
-def camera_over(xy: tuple[float, float], height: float, dev: Devices) -> Pose:
-    """Tool pose (pointing down) with the optical centre ``height`` above ``xy`` (m)."""
+def camera_over(
+    xy: tuple[float, float], height: float, dev: Devices, yaw: float = 0.0
+) -> Pose:
+    """Tool pose (pointing down, turned ``yaw`` rad about the vertical) with the optical centre
+    ``height`` above ``xy`` (m)."""
     assert dev.camera is not None
-    offset = DOWN @ dev.camera.tool_T_camera().position
-    return Pose(np.array([xy[0], xy[1], height]) - offset, DOWN)
+    c, s = math.cos(yaw), math.sin(yaw)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ DOWN
+    offset = rotation @ dev.camera.tool_T_camera().position
+    return Pose(np.array([xy[0], xy[1], height]) - offset, rotation)
+
+
+def tool_yaw(rotation: np.ndarray) -> float:
+    """The yaw (rad) :func:`camera_over` takes for a tool whose closing line (x) points as in
+    ``rotation``'s, seen from above: the look's last view turned to it leaves the next skill
+    only the tilt to make. A closing line that is vertical has no yaw: 0."""
+    x = rotation[:, 0]
+    if math.hypot(float(x[0]), float(x[1])) < VERTICAL_X:
+        return 0.0
+    return math.atan2(float(x[1]), float(x[0]))
 
 
 @dataclass(frozen=True)
@@ -57,6 +76,13 @@ class LookParams:
         "distance (0.5 deg: 4 mm from the wide view, 2 mm from here)",
     )
     speed: float = si(0.25, "m/s", 0.01, 1.0, "of the TCP between views")
+    turn_speed: float = si(
+        0.25, "m/s", 0.01, 1.0,
+        "of the TCP, at most, in the move to the close view when it turns the tool to the next "
+        "skill's yaw: a straight move turns the tool along with its path (0.1 m of path a "
+        "radian on the UR5 and its twin), so this bounds the wrist's turn (2.5 rad/s, under "
+        "the UR5's 3.1 rad/s joint speed)",
+    )
     acceleration: float = si(1.0, "m/s^2", 0.05, 3.0, "of the TCP between views")
     guard: Guard = field(default_factory=Guard)
 
@@ -108,8 +134,14 @@ class Look:
         view_xy: tuple[float, float],
         near_xy: tuple[float, float],
         params: LookParams | None = None,
+        grip_yaw: Callable[[Detection], float] | None = None,
     ) -> None:
+        """``grip_yaw``: the yaw (rad, as :func:`tool_yaw` gives it) the next skill holds the tool
+        at over the chosen part. The close view is taken turned to it, so the wrist turns during
+        the look's fast move between views rather than in the next skill's slower approach (a
+        tube's pivot from its outer end turns the wrist by half a turn)."""
         self.params = params if params is not None else LookParams()
+        self._grip_yaw = grip_yaw
         self.dev, self.catalogue, self.roi = dev, catalogue, roi
         self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
@@ -175,8 +207,13 @@ class Look:
     def _over_part(self) -> None:
         r, p = self.result, self.params
         assert r is not None  # the wide view's step fails while nothing is chosen
-        target = camera_over((float(r.center[0]), float(r.center[1])), p.close_height, self.dev)
-        self.dev.arm.move_to(target, p.speed, p.acceleration)
+        yaw, speed = 0.0, p.speed
+        if self._grip_yaw is not None:
+            yaw, speed = self._grip_yaw(r), min(p.speed, p.turn_speed)
+        target = camera_over(
+            (float(r.center[0]), float(r.center[1])), p.close_height, self.dev, yaw
+        )
+        self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _refine(self, dets: list[Detection]) -> None:
         """The chosen part's centre and axis as the close view saw them; what the earlier views

@@ -315,6 +315,25 @@ class EndChoice:
     tried: tuple[Clearance, ...]
 
 
+def points_outward(frame: PivotFrame, base_xy: Sequence[float] = (0.0, 0.0)) -> bool:
+    """Whether the frame's open end points away from the robot's base: the end
+    :func:`choose_end` prefers among those that clear."""
+    radial = np.asarray(frame.center[XY], float) - np.asarray(base_xy, float)
+    return float(frame.u[XY] @ radial) > 0.0
+
+
+def likely_grasp_rotation(
+    frame: PivotFrame, alpha: float, open_ends: int, base_xy: Sequence[float] = (0.0, 0.0)
+) -> NDArray[np.float64]:
+    """The Grasp's tool rotation at the end :func:`choose_end` prefers when both clear (a
+    tube's outward end; the one open end otherwise), without the clearance sweeps: cheap
+    enough for a tick, for the look to turn its last view to (the sweeps may still pick the
+    other end; then the Grasp turns the wrist itself)."""
+    if open_ends >= 2 and not points_outward(frame, base_xy):  # exact: a tube
+        frame = replace(frame, yaw=frame.yaw + math.pi)
+    return frame.grasp_rotation(alpha)
+
+
 def choose_end(
     frame: PivotFrame,
     params: PivotParams,
@@ -341,11 +360,9 @@ def choose_end(
         or pivot_clearance(f, params, obstacles, finger_width, margin)
         for f in frames
     ]
-    radial = np.asarray(frame.center[XY], float) - np.asarray(base_xy, float)
 
     def rank(i: int) -> tuple[bool, bool, float]:
-        outward = float(frames[i].u[XY] @ radial) > 0.0
-        return (tried[i].clear, outward, tried[i].distance)
+        return (tried[i].clear, points_outward(frames[i], base_xy), tried[i].distance)
 
     best = max(range(len(frames)), key=rank)
     return EndChoice(frames[best], tried[best], tuple(tried))

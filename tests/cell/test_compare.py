@@ -77,9 +77,14 @@ def test_compare_one_trial(tmp_path: Path, capsys) -> None:
     assert p["seed"] == r["seed"] == 100
     assert p["true_pose"] == r["true_pose"]
     assert p["frictions"] == r["frictions"] and p["mass"] == r["mass"]
-    # Both looked with the camera (the default) and saw the same part.
+    # Both looked with the camera (the default) and saw the same part: the pivot's close view
+    # is turned to its Grasp's yaw (the regrasp's is not: turned, its tact grew), so the
+    # hand-eye error shows a little differently in the two.
     assert data["pose_source"] == "camera"
-    assert p["perceived_pose"] is not None and p["perceived_pose"] == r["perceived_pose"]
+    pp, rp = p["perceived_pose"], r["perceived_pose"]
+    assert pp is not None and rp is not None
+    assert math.dist((pp["x"], pp["y"]), (rp["x"], rp["y"])) < 0.002
+    assert abs(pp["yaw"] - rp["yaw"]) < math.radians(1.0)
     # The pivot's rows carry cell pivot's force and shove keys, measured.
     assert p["grip_force_n"] > 0 and p["peak_force_n"]["tilt"] > 0 and p["shove_mm"] >= 0
     for row in (p, r):
