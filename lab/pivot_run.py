@@ -51,7 +51,7 @@ from skills.mechanics.planner import PivotPlan
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look, LookParams, tool_yaw
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
-from skills.pivot.clearance import EndChoice, bin_walls, choose_end, likely_grasp_rotation
+from skills.pivot.clearance import EndChoice, bin_walls, choose_end
 from skills.reposition import Reposition, RepositionParams, plan_reposition
 from skills.status import Failure, Status, StepResult
 
@@ -419,7 +419,10 @@ def run_trial(
             return choose_end(f, params, walls, width, setup.part.open_ends, reach=ur5_reach)
 
         def grasp_rotation(f: PivotFrame) -> NDArray[np.float64]:
-            return likely_grasp_rotation(f, params.alpha, setup.part.open_ends)
+            """The Grasp's rotation at the end the plan will choose, sweeps and all: a view
+            turned to the other end's yaw left the Grasp a wrist turn past its joint limit
+            after a drag against a wall (target unreachable)."""
+            return choose(f).frame.grasp_rotation(params.alpha)
 
         if setup.perceive:
             failure, looked = look_near(
