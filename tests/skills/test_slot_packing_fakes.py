@@ -198,9 +198,10 @@ def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
     assert d["arm"].pose.position[2] > pack.contacts["+y"].position[2] + 0.03
 
 
-def test_pack_in_box_lets_go_with_the_inner_finger_held_still() -> None:
-    """The jaws open symmetrically; the arm follows the outer finger (tool +x) out by half the
-    opening, so the finger in the hole stays where it is."""
+def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall() -> None:
+    """The jaws open symmetrically; the arm follows the outer finger (tool +x) out by
+    ``release_follow`` of the opening, under half, so the finger in the hole moves off the wall
+    it pressed, towards the hole's centre, and never into it."""
     d = devices()
     pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
     seen: dict[str, object] = {}
@@ -219,7 +220,11 @@ def test_pack_in_box_lets_go_with_the_inner_finger_held_still() -> None:
     assert relax[1][-1].position == pytest.approx(before.position)
     moved = let_go[1][-1].position - before.position
     x = before.rotation[:, 0]  # the outer finger's side
-    assert moved == pytest.approx(0.5 * pack.params.release * x, abs=1e-9)
+    follow = pack.params.release_follow
+    assert 0.0 < follow < 0.5
+    assert moved == pytest.approx(follow * pack.params.release * x, abs=1e-9)
+    # the inner finger (at -x, moving -x by half the opening) ends off the wall by this much
+    assert float((0.5 - follow) * pack.params.release) > 0.0005
     # then the open hand moves towards the hole's centre, so the inner finger leaves the wall
     back = off[1][-1].position - let_go[1][-1].position
     assert back == pytest.approx(-pack.params.release_clearance * x, abs=1e-9)
