@@ -115,7 +115,8 @@ class PackParams:
     #: twin it sank past the middle of the wall's stave, the contact's normal turned over, and the
     #: withdrawal carried the part up out of the box (seed 62401, sixth packing). At 0.35 the
     #: inner finger ends 0.9 mm off that wall towards the hole's centre; seeds 62401-62405 then
-    #: packed 50 of 50 with no abort (45 of 45 and a stop at 0.5).
+    #: packed 50 of 50 with no abort (45 of 45 and a stop at 0.5); 62501-62503, run once with
+    #: each, 26 of 30 judged home and no stop (22 of 23 and a stop at 0.5).
     release_follow: float = si(
         0.35, "1", 0.0, 1.0,
         "share of the opening the arm follows the outer finger out by (0.5: the inner one would "
