@@ -33,7 +33,7 @@ from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import XY, Z
 from skills.force import ForcePush
-from skills.motion import Guard, GuardedMotion, Sequence, wait
+from skills.motion import Guard, GuardedMotion, Sequence, Settled, wait
 from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
@@ -114,9 +114,10 @@ class PackParams:
     #: acceleration), and an arm a little ahead pressed the inner pad's tip into the wall: in the
     #: twin it sank past the middle of the wall's stave, the contact's normal turned over, and the
     #: withdrawal carried the part up out of the box (seed 62401, sixth packing). At 0.35 the
-    #: inner finger ends 0.9 mm off that wall towards the hole's centre; seeds 62401-62405 then
-    #: packed 50 of 50 with no abort (45 of 45 and a stop at 0.5); 62501-62503, run once with
-    #: each, 26 of 30 judged home and no stop (22 of 23 and a stop at 0.5).
+    #: inner finger ends 0.9 mm off that wall towards the hole's centre, and the arm follows the
+    #: opening the gripper reports rather than a move of its own: seeds 62401-62405 and
+    #: 62501-62503 then packed 78 of 80 judged home with no stop and no abort (at 0.5 and a timed
+    #: move, 67 of 68 and two stops; at 0.35 and a timed move, 76 of 80).
     release_follow: float = si(
         0.35, "1", 0.0, 1.0,
         "share of the opening the arm follows the outer finger out by (0.5: the inner one would "
@@ -171,6 +172,9 @@ class PackInBox(SequenceSkill):
         self.contacts: dict[str, Pose] = {}
         self.placed_xy: NDArray[np.float64] | None = None
         self.reference = WrenchReference(dev)
+        self._jaws_still = Settled(dev.gripper, dev.clock, p.settle)  #: the let go's end
+        self._open_from = 0.0  #: m, the jaws' reported opening when the let go began
+        self._let_go_from = Pose()  #: the TCP's pose when the let go began
         self._make_contact_moves()
         self.sequence = Sequence(
             "pack in box",
@@ -267,11 +271,11 @@ class PackInBox(SequenceSkill):
             # Hold where the part actually is, not where the push aimed: letting go under the
             # push's preload (up to 50 N seen) wedges the fingers.
             dev.move("relax the push", g, self._relax),
-            # The arm's follow and the jaws each finish before the hand moves on: a hand still
-            # following the outer finger out once the jaws stopped pressed the inner finger
-            # back into the wall.
-            dev.move("let go", g, self._release),
-            dev.grip("jaws open", g, lambda: None),
+            # The arm follows the opening the gripper reports, tick by tick, and the jaws settle
+            # before the hand moves on: an arm moved on its own clock ran ahead of jaws that
+            # started late and pressed the inner pad into the wall.
+            GuardedMotion("let go", self._release, self._follow_opening, dev.arm, dev.ft,
+                          dev.clock, g),
             dev.move("off the wall", g, self._off_the_wall),
             dev.move("withdraw up", g, self._withdraw),
             wait("settle", dev, g, p.settle),
@@ -336,15 +340,25 @@ class PackInBox(SequenceSkill):
 
     def _release(self) -> None:
         """Open by ``release`` with the finger in the hole kept near where it is: the jaws open
-        symmetrically, so the arm follows the outer finger out by ``release_follow`` of the
-        opening (a little under half: the inner finger eases off the wall it pressed, never
-        into it) at the fingers' speed. Opening in place moved the inner finger across the
-        hole, and a round part wedged against the +y wall caught it there (the twin read 48 N,
-        9 N*m)."""
-        gripper, arm, p = self.dev.gripper, self.dev.arm, self.params
-        gripper.open(gripper.width() + p.release, p.release_speed)
-        dx, dy = p.release_follow * p.release * self._x[XY]
-        arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
+        symmetrically, and :meth:`_follow_opening` moves the arm after the outer finger.
+        Opening in place moved the inner finger across the hole, and a round part wedged
+        against the +y wall caught it there (the twin read 48 N, 9 N*m)."""
+        gripper, p = self.dev.gripper, self.params
+        self._open_from = gripper.width()
+        self._let_go_from = self.dev.arm.tool_pose()
+        self._jaws_still.reset()
+        gripper.open(self._open_from + p.release, p.release_speed)
+
+    def _follow_opening(self) -> bool:
+        """Keep the arm ``release_follow`` of the *reported* opening after the outer finger (a
+        little under half: the inner finger eases off the wall it pressed, never into it); done
+        once the jaws have stood still for ``settle``. Following what the gripper reports, the
+        arm can lag the jaws but never lead them, however late they start."""
+        p, start = self.params, self._let_go_from
+        opened = max(0.0, self.dev.gripper.width() - self._open_from)
+        dx, dy = p.release_follow * opened * self._x[XY]
+        self.dev.arm.servo(Pose(start.position + np.array([dx, dy, 0.0]), start.rotation))
+        return self._jaws_still()
 
     def _off_the_wall(self) -> None:
         """Move the open hand towards the hole's centre by ``release_clearance``: the finger
