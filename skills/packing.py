@@ -125,7 +125,7 @@ class PackParams:
     )
     release_speed: float = si(
         0.02, "m/s", 0.001, 0.15,
-        "each finger's while letting go, and the arm's following the outer one out",
+        "each finger's while letting go (the arm follows the opening the gripper reports)",
     )
     weight_check: float = si(
         0.5, "1", 0.0, 1.0, "fraction of the part's weight the wrench must lose; 0: no check"

@@ -14,7 +14,7 @@ import numpy as np
 from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
-from drivers.pose import Pose
+from drivers.pose import Pose, rot_z
 from skills.axes import XY, Z
 from skills.frames import frame_step
 from skills.motion import Guard, GuardedMotion, Sequence
@@ -46,8 +46,7 @@ def camera_over(
     """Tool pose (pointing down, turned ``yaw`` rad about the vertical) with the optical centre
     ``height`` above ``xy`` (m)."""
     assert dev.camera is not None
-    c, s = math.cos(yaw), math.sin(yaw)
-    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ DOWN
+    rotation = rot_z(yaw) @ DOWN
     offset = rotation @ dev.camera.tool_T_camera().position
     return Pose(np.array([xy[0], xy[1], height]) - offset, rotation)
 
