@@ -94,6 +94,9 @@ class Grasp:
         self._press_offset = 0.0  #: m the press regulation has moved the TCP down since
         self._moved_at = 0.0  #: s (clock), the last tick the fingers moved
         self._t = 0.0
+        #: N, the press at S read each tick since the fingers last moved: the confirmation
+        #: averages these (one sample after the arm stops caught the contact mid-bounce)
+        self._settled_press: list[float] = []
         self.sequence = Sequence("grasp", self._steps())
 
     def _steps(self) -> list[GuardedMotion]:
@@ -182,7 +185,9 @@ class Grasp:
         self.dev.arm.servo(Pose(position, self.rotation))
         if gripper.moving():
             self._moved_at = now
+            self._settled_press.clear()
             return False
+        self._settled_press.append(pressing)
         return now - self._moved_at >= p.close_settle
 
     def _close_failed(self) -> str | None:
@@ -201,7 +206,7 @@ class Grasp:
         if result.status is Status.SUCCESS:
             self.dev.arm.stop()
             gripper, p = self.dev.gripper, self.params
-            pressing = float(world_force(self.dev) @ UP)
+            pressing = self.settled_press
             if not gripper.object_detected():
                 return StepResult(
                     Status.FAILURE, "grasp: missed, the fingers closed on nothing", Failure.MISSED
@@ -213,6 +218,16 @@ class Grasp:
                     "outer finger lost the top surface", Failure.MISSED,
                 )
         return result
+
+    @property
+    def settled_press(self) -> float:
+        """N, S's press as the wrist read it while the closed fingers stood still (the mean
+        over ``close_settle``): the press regulation keeps the contact moving a little, and the
+        stiff contact rings, so a single reading swung 10 N either way in the twin (a can whose
+        press read 5.3 N after the arm stopped had averaged 15 N while settled)."""
+        if not self._settled_press:
+            return float(world_force(self.dev) @ UP)
+        return float(np.mean(self._settled_press))
 
     def halt(self) -> None:
         self.sequence.halt()

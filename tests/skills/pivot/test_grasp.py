@@ -111,6 +111,44 @@ def test_grasp_fails_as_a_miss_when_the_fingers_close_on_nothing() -> None:
     assert d["gripper"].width() < grasp.opening - PARAMS.width_tolerance
 
 
+def settled_reading(d, grasp: Grasp, hook, scale):
+    """``hook``, with the wrist's reading scaled by ``scale(i)`` on each tick ``i`` once the
+    closed fingers stand still (a contact that rings, or an outer finger that let S go)."""
+    ft, gripper = d["ft"], d["gripper"]
+
+    def wrapped(i: int) -> None:
+        hook(i)
+        if grasp._touched is not None and not gripper.moving():
+            ft.value = ft.value * scale(i)
+
+    return wrapped
+
+
+@pytest.mark.parametrize("phase", [0, 1])
+def test_grasp_confirms_the_press_from_its_mean_while_settled_not_one_ringing_sample(
+    phase: int,
+) -> None:
+    # The press at S swings between 1.7 and 0.3 of itself tick by tick once the jaws stopped:
+    # whichever sample comes last, its mean holds S.
+    d = devices(closing_speed=0.05)
+    grasp = make_grasp(d)
+    hook = surface(d, grasp, s_top())
+    result, _ = run(grasp, d, on_tick=settled_reading(
+        d, grasp, hook, lambda i: 1.7 if (i + phase) % 2 else 0.3))
+    assert result.status is Status.SUCCESS, result.message
+    assert grasp.settled_press >= PARAMS.press_confirm * grasp.press
+
+
+def test_grasp_fails_as_a_miss_when_s_reads_unpressed_all_the_while_settled() -> None:
+    d = devices(closing_speed=0.05)
+    grasp = make_grasp(d)
+    hook = surface(d, grasp, s_top())
+    result, _ = run(grasp, d, on_tick=settled_reading(d, grasp, hook, lambda i: 0.1))
+    assert result.status is Status.FAILURE and result.code is Failure.MISSED
+    assert d["gripper"].object_detected()  # the jaws held: it was the press that failed
+    assert grasp.settled_press < PARAMS.press_confirm * grasp.press
+
+
 def test_pinch_press_is_what_friction_alone_cannot_hold() -> None:
     # F (cos a / mu - sin a): 20 N at 16.3 deg with mu 0.5 needs 32.8 N; a high friction none.
     assert pinch_press(20.0, math.radians(16.3), 0.5) == pytest.approx(
