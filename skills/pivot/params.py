@@ -68,8 +68,8 @@ class PivotParams:
     close_settle: float = si(0.2, "s", 0.0, 2.0, "the fingers stand still this long: closed")
     press_confirm: float = si(
         0.5, "1", 0.0, 1.0,
-        "share of the press at S the closed grasp must still read, else the outer finger lost "
-        "the top surface",
+        "share of the press at S the closed grasp must still read (its mean while the fingers "
+        "stood still), else the outer finger lost the top surface",
     )
     width_tolerance: float = si(
         0.006, "m", 0.0, 0.03,
