@@ -46,10 +46,10 @@ MAX_CHILD_SHAPES = 16
 DEFAULT_STAVES = 12
 #: Flats per stave on the outer circle: 12 x 13 = a 156-gon. A part on a flat tips over its next
 #: edge on a floor tilted more than half a flat's turn, 1.15 deg (under the 2 deg a part must
-#: roll on), and the flats stay within 0.01 mm of a 34 mm circle. Odd, so that a flat, not an edge, lies at the middle of stave 0,
-#: which faces down in :func:`lying_pose`: with 12 a part was laid on an edge, balanced there, and
-#: the solver's jitter grew until a light one (the 15 g cup, 48 mm) rolled off by itself within
-#: seconds on a level floor.
+#: roll on), and the flats stay within 0.01 mm of a 34 mm circle. Odd, so that a flat, not an
+#: edge, lies at the middle of stave 0, which faces down in :func:`lying_pose`: with 12 a part
+#: was laid on an edge, balanced there, and the solver's jitter grew until a light one (the 15 g
+#: cup, 48 mm) rolled off by itself within seconds on a level floor.
 ARC_SEGMENTS = 13
 #: Sides of the polygon standing for a round part's bottom disc.
 BOTTOM_SIDES = 48
