@@ -44,13 +44,13 @@ MAX_CHILD_SHAPES = 16
 #: Default number of staves for a round section (a multiple of 4: the hole's flat faces at +-y
 #: and +-z, where the fingers meet it).
 DEFAULT_STAVES = 12
-#: Flats per stave on the outer circle: 12 x 13 = a 156-gon. A part on a flat tips over its next
-#: edge on a floor tilted more than half a flat's turn, 1.15 deg (under the 2 deg a part must
-#: roll on), and the flats stay within 0.01 mm of a 34 mm circle. Odd, so that a flat, not an
-#: edge, lies at the middle of stave 0, which faces down in :func:`lying_pose`: with 12 a part
-#: was laid on an edge, balanced there, and the solver's jitter grew until a light one (the 15 g
-#: cup, 48 mm) rolled off by itself within seconds on a level floor.
-ARC_SEGMENTS = 13
+#: Flats per stave on the outer circle: 12 x 12 = a 144-gon, whose flats tilt 1.25 deg from one to
+#: the next (under the 2 deg a part must roll on) and stay within 0.01 mm of a 34 mm circle.
+#: Even, so an edge, not a flat, lies at the middle of stave 0, which faces down in
+#: :func:`lying_pose`: a part is laid balanced on that edge, and in some trial worlds the
+#: solver's jitter grows until it rolls off by itself (``bench/parts_at_rest.py``). 13 halved
+#: those rolls but did not end them and cost the pivot trials elsewhere (docs/pivot_in_hand.md).
+ARC_SEGMENTS = 12
 #: Sides of the polygon standing for a round part's bottom disc.
 BOTTOM_SIDES = 48
 #: Upper bound of the collision margin (m). Bullet rounds each hull's edges by its margin, so two

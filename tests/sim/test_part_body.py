@@ -75,10 +75,19 @@ def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(n
             assert body.pose().position[2] == pytest.approx(0.5 * part.outer, abs=0.001)
 
 
-@pytest.mark.parametrize("name", ["bushing", "medicine_bottle", "cookie_can", "plastic_cup"])
+ROLLS_OFF = pytest.mark.xfail(
+    strict=True, reason="twin artifact: laid balanced on an edge of its 144-gon, the part rolls "
+    "off by itself (bench/parts_at_rest.py, docs/pivot_in_hand.md)",
+)
+
+
+@pytest.mark.parametrize("name", [
+    "bushing", "medicine_bottle",
+    pytest.param("cookie_can", marks=ROLLS_OFF), pytest.param("plastic_cup", marks=ROLLS_OFF),
+])
 def test_a_round_part_left_lying_on_a_level_floor_stays_put(name: str) -> None:
-    # Laid on an edge of its polygon instead of a flat, a part balances there and the solver's
-    # jitter grows until it rolls off by itself (the 15 g cup after 7 s): real parts do not.
+    # Real round parts left lying on a level floor stay put. The twin lays them on an edge of
+    # the polygon, balanced, and the solver's jitter grows until a can or the 15 g cup rolls off.
     part = CATALOGUE.get(name)
     with SimWorld(seed=1) as world:
         _floor(world, friction=0.35)
