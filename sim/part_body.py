@@ -240,8 +240,9 @@ def hull_vertices(part: Part, staves: int = DEFAULT_STAVES) -> NDArray[np.float6
 def lying_pose(part: Part, x: float, y: float, yaw: float, floor_z: float = 0.0) -> Pose:
     """Pose of ``part`` resting on a floor at height ``floor_z`` (m), axis horizontal at ``yaw``.
 
-    The part's ``+x`` axis points along ``(cos yaw, sin yaw, 0)``; a flat stave or plate faces
-    down, so the centre is ``outer / 2`` above the floor.
+    The part's ``+x`` axis points along ``(cos yaw, sin yaw, 0)``; stave 0 or a plate faces
+    down (a round part rests on the edge at stave 0's middle, see :data:`ARC_SEGMENTS`), so the
+    centre is ``outer / 2`` above the floor.
     """
     return Pose(np.array([x, y, floor_z + 0.5 * part.outer]), rot_z(yaw))
 
