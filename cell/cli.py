@@ -188,6 +188,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         full_tilt=args.full_tilt,
         equation=args.equation,
         hook_depth=args.hook_depth,
+        hold_reach=args.hold_reach,
     )
     frictions = _frictions(args)
     plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
@@ -302,6 +303,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=PlannerOptions.hook_depth,
         help="how far the inner finger's tip must reach behind the rim, m (0.005)",
+    )
+    p.add_argument(
+        "--hold-reach",
+        type=float,
+        default=PlannerOptions.hold_reach,
+        help="how far the inner finger must reach past the rim contact H to keep the part "
+        "through Align, m (0.012)",
     )
     p.add_argument(
         "--full-tilt",

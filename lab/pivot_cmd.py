@@ -417,9 +417,11 @@ def cmd_pivot(args: argparse.Namespace) -> int:
     bar = Progress(len(seeds), "trials")
     results: list[TrialResult] = []
     recorded: Path | None = None
+    traced = False
     first = 0
     if args.record is not None:
-        results.append(_recorded_trial(setup, seeds[0], args.record))
+        result, traced = _recorded_trial(setup, seeds[0], args.record)
+        results.append(result)
         recorded = args.record
         first = 1
         _progress(bar, 1, sum(r.success for r in results), time.perf_counter() - wall0)
@@ -465,12 +467,15 @@ def cmd_pivot(args: argparse.Namespace) -> int:
     print(_format_summary(summary, results, wall))
     print(
         f"wrote {args.json}"
-        + (f", {recorded} and {trace_path(recorded)}" if recorded else "")
+        + (f", {recorded}" if recorded else "")
+        + (f" and {trace_path(recorded)}" if recorded and traced else "")
     )
     return 0
 
 
-def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
+def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> tuple[TrialResult, bool]:
+    """The first trial, filmed; and whether it got as far as a contact trace (a Grasp that
+    fails has none to plot)."""
     from lab.pivot_run import run_trial
     from sim.recorder import Recorder
 
@@ -504,7 +509,8 @@ def _recorded_trial(setup: TrialSetup, seed: int, path: Path) -> TrialResult:
             f"{setup.part.name}, seed {seed}: {verdict} (final grasp {result.final_grasp}, "
             f"longest free {result.longest_free_s:.2f} s)",
         )
-    return result
+        return result, True
+    return result, False
 
 
 def trace_path(gif: Path) -> Path:

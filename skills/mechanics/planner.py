@@ -30,6 +30,18 @@ finger's length, so the planner requires ``e_H <= finger_length - palm_margin``.
 keeps long parts with a large alpha (the cookie can, the wiring duct) at a small ``l_a``, as the
 paper's Table 3 has them (0.28 and 0.53).
 
+The planner bounds the reach from below too: ``e_H >= hold_reach``. Through Align the part
+turns about the rim while the inner finger alone keeps it (Sec. III-C), and what keeps the
+finger in the hole is its length past H: with a short reach the rim slides off the tip as the part swings upright. The
+hook criterion above does not see this, because a wide, short hole gets its hook at a small
+alpha (the plastic cup's 7.3 deg), where the tip reaches only 6.2 mm past H: planned so, the
+cup's inner finger left the hole in 19 of 30 trials in the twin (seeds 60000). Cup trials on its
+tuning seeds (500-509) with the plan's reach at 10.3, 12.3 and 14.3 mm: 3, 1 and 0 of 10 left
+the hole. The default bound, 12 mm, plans the cup at 14.3 mm (the margin's 2 deg on top of it);
+it is the length of finger the rim may roll along before the tip comes out.
+A part that cannot have that reach at any stable alpha whose approach is clear is refused, with
+what the finger would meet on the way down.
+
 The jaw opening at the grasp is the distance between the finger faces along the closing line,
 ``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
 
@@ -91,6 +103,7 @@ class PlannerOptions:
     equation: str = "auto"
     hook_depth: float = 0.005  # m the inner finger's tip must reach behind the rim
     palm_margin: float = 0.010  # m kept between the rim and the palm (finger base)
+    hold_reach: float = 0.012  # m the inner finger must reach past the rim contact H
     alpha_margin: float = math.radians(2.0)  # rad kept inside the feasible set's edge
     approach_distance: float = 0.06  # m the fingers travel along their axis onto the part
     contact_tolerance: float = 0.001  # m a finger may cut into the part (it sets onto S and H)
@@ -108,6 +121,8 @@ class PlannerOptions:
             )
         if not math.isfinite(self.hook_depth) or self.hook_depth < 0:
             raise ValueError(f"hook_depth must be >= 0 m, got {self.hook_depth:g}")
+        if not math.isfinite(self.hold_reach) or self.hold_reach < 0:
+            raise ValueError(f"hold_reach must be >= 0 m, got {self.hold_reach:g}")
         if not 0 < self.la_step <= 1:
             raise ValueError(f"la_step must lie in (0, 1], got {self.la_step:g}")
 
@@ -308,7 +323,10 @@ def plan_pivot(
                 section, la, al, frictions, beta_req, options.equation, options.beta_samples
             )
             fits = (jaw_opening(section, la, al) <= usable + LENGTH_ROUNDING) & (al >= alpha_hook)
-            fits &= reach_depth(section, la, al) <= reach_max + LENGTH_ROUNDING
+            reach = reach_depth(section, la, al)
+            fits &= (reach <= reach_max + LENGTH_ROUNDING) & (
+                reach >= options.hold_reach - LENGTH_ROUNDING
+            )
             return ok & fits, ok
 
         both, ok = feasible(alphas)
@@ -361,8 +379,9 @@ def plan_pivot(
             f"stroke too short: every stable (l_a, alpha) with alpha >= "
             f"{math.degrees(alpha_hook):.1f} deg (to hook the hole) needs a jaw opening above "
             f"{usable * 1e3:.0f} mm (stroke {gripper.stroke * 1e3:.0f} mm less "
-            f"{gripper.clearance * 1e3:.0f} mm approach clearance) or a finger longer than "
-            f"{gripper.finger_length * 1e3:.0f} mm"
+            f"{gripper.clearance * 1e3:.0f} mm approach clearance), a finger longer than "
+            f"{gripper.finger_length * 1e3:.0f} mm or one that reaches less than "
+            f"{options.hold_reach * 1e3:.0f} mm past the rim"
         )
     else:
         reason = (

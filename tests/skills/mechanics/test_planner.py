@@ -13,6 +13,7 @@ from skills.mechanics.planner import (
     hook_alpha,
     jaw_opening,
     plan_pivot,
+    reach_depth,
 )
 from skills.mechanics.region import check_tilt
 
@@ -29,10 +30,44 @@ def test_bushing_plan_is_stable_along_the_tilt_and_fits_the_stroke() -> None:
     assert check_tilt(section, plan.l_a, plan.alpha, Frictions(), section.tip_angle).ok
     assert plan.alpha >= plan.alpha_hook
     assert plan.opening_m + Gripper().clearance <= Gripper().stroke
-    # alpha keeps the margin above the smallest feasible alpha, which is the hook angle here
-    # (the mechanics alone would accept a flatter gripper at l_a = 0.9, see test_balance)
+    # alpha keeps the margin above the smallest feasible alpha, which is where the inner
+    # finger reaches hold_reach past H here (the mechanics alone would accept a flatter gripper
+    # at l_a = 0.9, see test_balance, and the hook a flatter one too)
     assert plan.alpha == pytest.approx(plan.alpha_min + PlannerOptions().alpha_margin)
-    assert plan.alpha_min == pytest.approx(plan.alpha_hook, abs=1e-6)
+    assert plan.alpha_min > plan.alpha_hook
+    assert reach_depth(section, plan.l_a, plan.alpha_min) == pytest.approx(
+        PlannerOptions().hold_reach, abs=1e-6
+    )
+    without = plan_pivot(BUSHING, options=PlannerOptions(hold_reach=0.0))
+    assert without.alpha_min == pytest.approx(without.alpha_hook, abs=1e-6)
+
+
+CUP = load_catalogue(None).get("plastic_cup")
+
+
+def test_a_wide_short_hole_is_tilted_until_the_finger_reaches_past_the_rim() -> None:
+    # The cup's hook comes at 7.3 deg (a 39 mm chord), where the finger reaches 6 mm past H and
+    # the rim slides off it in Align; the reach bound tilts it further.
+    section = CUP.section(0.020)
+    hooked = plan_pivot(CUP, options=PlannerOptions(hold_reach=0.0))
+    held = plan_pivot(CUP)
+    assert hooked.pivotable and held.pivotable
+    assert reach_depth(section, hooked.l_a, hooked.alpha) < PlannerOptions().hold_reach
+    assert reach_depth(section, held.l_a, held.alpha) >= PlannerOptions().hold_reach
+    assert held.alpha > hooked.alpha
+
+
+def test_a_part_that_cannot_be_reached_into_far_enough_is_refused_naming_the_approach() -> None:
+    # The thick bushing's 22 mm hole under 40 mm outer: every alpha that reaches 12 mm past H
+    # has the inner finger cut into the wall below the hole on the way down.
+    plan = plan_pivot(THICK)
+    assert not plan.pivotable
+    assert plan.reason.startswith("approach blocked: ") and "wall below the hole" in plan.reason
+
+
+def test_bad_hold_reach_raises() -> None:
+    with pytest.raises(ValueError, match="hold_reach must be >= 0 m"):
+        PlannerOptions(hold_reach=-0.001)
 
 
 def test_long_part_is_limited_by_the_stroke() -> None:
@@ -109,7 +144,7 @@ def test_approach_blocked_by_the_wall_below_a_narrow_hole_names_it() -> None:
 
 
 def test_the_planner_passes_a_blocked_approach_over_for_one_that_is_clear() -> None:
-    plan = plan_pivot(THICK)
+    plan = plan_pivot(THICK, options=PlannerOptions(hold_reach=0.0))
     assert plan.pivotable and plan.l_a is not None and plan.alpha is not None
     assert plan.l_a < 0.9  # 0.9 is blocked (above); the next clear l_a is taken
     assert approach_problem(THICK.section(0.020), plan.l_a, plan.alpha) is None
@@ -125,7 +160,9 @@ def test_every_table3_plan_has_a_clear_approach() -> None:
 
 
 def test_a_gripper_whose_fingers_cannot_get_in_is_refused_with_the_approach() -> None:
-    plan = plan_pivot(THICK, Gripper(finger_thickness=0.05))
+    plan = plan_pivot(
+        THICK, Gripper(finger_thickness=0.05), options=PlannerOptions(hold_reach=0.0)
+    )
     assert not plan.pivotable
     assert plan.reason.startswith("approach blocked: ")
 
