@@ -32,15 +32,15 @@ paper's Table 3 has them (0.28 and 0.53).
 
 The planner bounds the reach from below too: ``e_H >= hold_reach``. Through Align the part
 turns about the rim while the inner finger alone keeps it (Sec. III-C), and what keeps the
-finger in the hole is its length past H: with a short reach the rim slides off the tip as the part swings upright. The
-hook criterion above does not see this, because a wide, short hole gets its hook at a small
-alpha (the plastic cup's 7.3 deg), where the tip reaches only 6.2 mm past H: planned so, the
-cup's inner finger left the hole in 19 of 30 trials in the twin (seeds 60000). Cup trials on its
-tuning seeds (500-509) with the plan's reach at 10.3, 12.3 and 14.3 mm: 3, 1 and 0 of 10 left
-the hole. The default bound, 12 mm, plans the cup at 14.3 mm (the margin's 2 deg on top of it);
-it is the length of finger the rim may roll along before the tip comes out.
-A part that cannot have that reach at any stable alpha whose approach is clear is refused, with
-what the finger would meet on the way down.
+finger in the hole is its length past H: with a short reach the rim slides off the tip as the
+part swings upright. The hook criterion above does not see this: a wide, short hole gets its
+hook at a small alpha (the plastic cup's 7.3 deg), where the tip reaches only 6.2 mm past H.
+Planned so, the cup's inner finger left the hole in 19 of 30 trials in the twin (seeds 60000);
+on its tuning seeds (500-509), with the plan's reach at 10.3, 12.3 and 14.3 mm, 3, 1 and 0 of
+10 did. The default bound, 12 mm, plans the cup at 14.3 mm (the margin's 2 deg on top of it):
+the length of finger the rim may roll along before the tip comes out. A part that cannot have
+that reach at any stable alpha whose approach is clear is refused, with what the finger would
+meet on the way down.
 
 The jaw opening at the grasp is the distance between the finger faces along the closing line,
 ``l cos(alpha) + delta sin(alpha)`` (the projection of S - H on it), plus the approach clearance.
@@ -142,6 +142,7 @@ class PivotPlan:
     beta_stable_max: float | None = None
     opening_m: float | None = None
     alpha_hook: float | None = None
+    reach_m: float | None = None  #: e_H, how far the inner finger reaches past H (m)
     frictions: Frictions = Frictions()
     gripper: Gripper = Gripper()
 
@@ -167,6 +168,7 @@ class PivotPlan:
             "beta_required": self.beta_required,
             "opening_m": self.opening_m,
             "alpha_hook": self.alpha_hook,
+            "reach_m": self.reach_m,
             "stroke_m": self.gripper.stroke,
             "finger_width_m": self.gripper.finger_width,
             "mu": {"S": self.frictions.mu_s, "H": self.frictions.mu_h, "G": self.frictions.mu_g},
@@ -367,6 +369,7 @@ def plan_pivot(
                 beta_stable_max=end,
                 opening_m=float(jaw_opening(section, la, alpha)),
                 alpha_hook=alpha_hook,
+                reach_m=float(reach_depth(section, la, alpha)),
                 **common,
             )
     if approach_blocked is not None:
