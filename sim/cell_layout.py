@@ -15,6 +15,16 @@ from dataclasses import dataclass
 from drivers.layout import CellLayout
 from sim.world import SimWorld
 
+#: m, the floor's rolling friction. Bullet combines a contact's as ``r_part * mu_floor +
+#: r_floor * mu_part`` (parts at mu 1.0, ``spawn_part``'s 5e-4): 0.33-0.5 mm for a part lying in
+#: the bin on the cell's floors (mu_G 0.25-0.6), a hard part on a plastic floor. A round part is
+#: laid balanced on an edge of its 144-gon and the solver's jitter tips some off it; with the
+#: part's share alone (0.1-0.3 mm) the roll then grew on its own in some trial worlds (the cup
+#: up to 137 mm, a 200 g jar 36 mm within 6 s), with this they settle on a flat a few mm on. The
+#: floor's, not the part's: the part's own value also acts at the fingers, where the paper's
+#: contacts turn freely. Below 0.6 mm, so a bushing still rolls down a floor tilted 2 deg.
+FLOOR_ROLLING = 2e-4
+
 
 @dataclass(frozen=True)
 class CellBodies:
@@ -35,8 +45,10 @@ def _static_boxes(
     base: tuple[float, float, float],
     friction: float,
     rgba: tuple[float, float, float, float],
+    rolling: float = 0.0,
 ) -> int:
-    """One static body of axis-aligned boxes ``(half_extents, centre offset)`` around ``base``."""
+    """One static body of axis-aligned boxes ``(half_extents, centre offset)`` around ``base``;
+    ``rolling``: its rolling friction (m), see :func:`build_cell`."""
     p = world.p
     kwargs = {
         "shapeTypes": [p.GEOM_BOX] * len(boxes),
@@ -52,7 +64,7 @@ def _static_boxes(
         baseVisualShapeIndex=visual,
         basePosition=list(base),
     )
-    p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0)
+    p.changeDynamics(body, -1, lateralFriction=friction, restitution=0.0, rollingFriction=rolling)
     p.changeVisualShape(body, -1, rgbaColor=list(rgba))
     return body
 
@@ -78,6 +90,7 @@ def build_cell(
     floor_friction: float = 0.4,
     fixture_friction: float = 0.5,
     z_offset: float = 0.0,
+    floor_rolling: float = FLOOR_ROLLING,
 ) -> CellBodies:
     """Create the fixtures of ``layout`` (validated first) as static bodies.
 
@@ -85,9 +98,11 @@ def build_cell(
     with parts at 1.0 it is the part-floor ``mu_G`` of the paper. ``fixture_friction`` is used for
     the bin, machine and tray. ``z_offset`` (m) raises every fixture above where the layout puts
     it: the cell's true height against the configured one (:mod:`sim.uncertainty`).
+    ``floor_rolling`` (m) is the floor's rolling friction, the resistance a part lying in the bin
+    meets when it rolls (:data:`FLOOR_ROLLING`).
     """
     layout = (layout or CellLayout()).validate()
-    if floor_friction < 0 or fixture_friction < 0:
+    if floor_friction < 0 or fixture_friction < 0 or floor_rolling < 0:
         raise ValueError("friction coefficients must be >= 0")
     ft = layout.floor_thickness
     floor = _static_boxes(
@@ -96,6 +111,7 @@ def build_cell(
         (0.0, 0.0, z_offset - 0.5 * ft),
         floor_friction,
         (0.55, 0.55, 0.52, 1.0),
+        floor_rolling,
     )
     bin_ = _static_boxes(
         world,

@@ -346,7 +346,7 @@ def spawn_part(
     lateral_friction: float = 1.0,
     *,
     staves: int = DEFAULT_STAVES,
-    rolling_friction: float = 1e-3,
+    rolling_friction: float = 5e-4,
     spinning_friction: float = 1e-3,
     rgba: tuple[float, float, float, float] = (0.70, 0.72, 0.75, 1.0),
     sleep_threshold: float | None = None,
@@ -357,13 +357,10 @@ def spawn_part(
     body's, so the cell keeps 1.0 here and puts the per-contact values on fingers and floor.
     ``rolling_friction`` / ``spinning_friction`` (m) are small on purpose: the part must pivot
     freely about its floor contact. Bullet combines them as ``r_part * mu_other + r_other *
-    mu_part``, so with fixtures at 0 the effective value is this one times the floor's friction:
-    0.25-0.6 mm on the cell's floors (0.25-0.6), a rolling resistance of 1-3 % of a part's
-    radius, as a hard part on a plastic bin floor has; a round part on a floor tilted 2 deg
-    still rolls (the bushing needs 0.6 mm or less). The part is laid balanced on an edge of
-    its 144-gon and the solver's jitter tips some off it; at half this value (0.1-0.3 mm) the
-    roll then grew on its own in some trial worlds (the cup up to 137 mm, a 200 g jar 36 mm
-    within 6 s), where at this value they settle on a flat 1-3 mm on.
+    mu_part``, so with fixtures at 0 the effective value is this one times the other body's
+    friction: 0.1-0.3 mm on the cell's floors (0.25-0.6), to which the floor adds its own
+    (:data:`sim.cell_layout.FLOOR_ROLLING`). Under 0.05 mm the 144-gon's contact wanders and a
+    round part left lying starts rolling by itself within seconds.
     ``staves`` (round sections only): the pieces around the hole, within 16 with the bottom.
     ``sleep_threshold``: let the part fall asleep once it moves slower than this (Bullet's
     velocity threshold, about m/s) -- a part left standing (packed in a box, in a slot) otherwise

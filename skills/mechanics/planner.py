@@ -374,8 +374,8 @@ def plan_pivot(
             )
     if approach_blocked is not None:
         reason = (
-            f"{approach_blocked}; every other stable (l_a, alpha) that fits the stroke is "
-            "blocked too"
+            f"{approach_blocked}; every other stable (l_a, alpha) that fits the stroke and "
+            f"reaches {options.hold_reach * 1e3:.0f} mm past the rim is blocked too"
         )
     elif stable_somewhere:
         reason = (

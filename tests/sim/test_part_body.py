@@ -9,6 +9,7 @@ import pytest
 
 from cell.catalogue import load_catalogue
 from drivers.pose import Pose, rot_x
+from sim.cell_layout import FLOOR_ROLLING
 from sim.part_body import (
     ARC_SEGMENTS,
     hull_vertices,
@@ -23,11 +24,12 @@ CATALOGUE = load_catalogue()
 
 
 def _floor(world: SimWorld, friction: float = 0.4) -> int:
-    """A 2 m x 2 m box floor with its top at z = 0 (a plane does not collide with compounds)."""
+    """A 2 m x 2 m box floor with its top at z = 0 (a plane does not collide with compounds),
+    rolling like the cell's floor."""
     p = world.p
     shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[1.0, 1.0, 0.05])
     floor = p.createMultiBody(0.0, shape, basePosition=[0.0, 0.0, -0.05])
-    p.changeDynamics(floor, -1, lateralFriction=friction)
+    p.changeDynamics(floor, -1, lateralFriction=friction, rollingFriction=FLOOR_ROLLING)
     return floor
 
 
@@ -78,9 +80,9 @@ def test_a_round_part_rolls_down_a_floor_tilted_2_deg_and_rests_on_a_level_one(n
 @pytest.mark.parametrize("name", ["bushing", "medicine_bottle", "cookie_can", "plastic_cup"])
 def test_a_round_part_left_lying_on_a_level_floor_comes_to_rest(name: str) -> None:
     # Real round parts left lying on a level floor stay put. The twin lays them on an edge of the
-    # polygon, balanced, and the solver's jitter tips a can or the cup off it; with the rolling
-    # resistance of a hard part on a bin floor it settles on the next flat within a few mm (at
-    # 0.15 mm, 5e-4 here, the roll grew instead and took the cup 14-137 mm away).
+    # polygon, balanced, and the solver's jitter tips a can or the cup off it; with the floor's
+    # rolling resistance (FLOOR_ROLLING) it settles on a flat within a few mm (with the part's
+    # share alone the roll grew instead and took the cup 14-137 mm away).
     part = CATALOGUE.get(name)
     with SimWorld(seed=1) as world:
         _floor(world, friction=0.35)
