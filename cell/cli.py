@@ -189,7 +189,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         full_tilt=args.full_tilt,
         equation=args.equation,
         hook_depth=args.hook_depth,
-        hold_reach=args.hold_reach,
+        hold_share=args.hold_share,
     )
     frictions = _frictions(args)
     plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
@@ -306,11 +306,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="how far the inner finger's tip must reach behind the rim, m (0.005)",
     )
     p.add_argument(
-        "--hold-reach",
+        "--hold-share",
         type=float,
-        default=PlannerOptions.hold_reach,
+        default=PlannerOptions.hold_share,
         help="how far the inner finger must reach past the rim contact H to keep the part "
-        "through Align, m (0.012)",
+        "through Align, as a share of the hole's free room (0.4)",
     )
     p.add_argument(
         "--full-tilt",

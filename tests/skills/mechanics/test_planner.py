@@ -10,6 +10,7 @@ from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import (
     PlannerOptions,
     approach_problem,
+    hole_room,
     hook_alpha,
     jaw_opening,
     plan_pivot,
@@ -30,44 +31,46 @@ def test_bushing_plan_is_stable_along_the_tilt_and_fits_the_stroke() -> None:
     assert check_tilt(section, plan.l_a, plan.alpha, Frictions(), section.tip_angle).ok
     assert plan.alpha >= plan.alpha_hook
     assert plan.opening_m + Gripper().clearance <= Gripper().stroke
-    # alpha keeps the margin above the smallest feasible alpha, which is where the inner
-    # finger reaches hold_reach past H here (the mechanics alone would accept a flatter gripper
-    # at l_a = 0.9, see test_balance, and the hook a flatter one too)
+    # alpha keeps the margin above the smallest feasible alpha, which is the hook angle here
+    # (the mechanics alone would accept a flatter gripper at l_a = 0.9, see test_balance); the
+    # finger then reaches past H more than the hold share of the room
     assert plan.alpha == pytest.approx(plan.alpha_min + PlannerOptions().alpha_margin)
-    assert plan.alpha_min > plan.alpha_hook
-    assert reach_depth(section, plan.l_a, plan.alpha_min) == pytest.approx(
-        PlannerOptions().hold_reach, abs=1e-6
-    )
-    without = plan_pivot(BUSHING, options=PlannerOptions(hold_reach=0.0))
-    assert without.alpha_min == pytest.approx(without.alpha_hook, abs=1e-6)
+    assert plan.alpha_min == pytest.approx(plan.alpha_hook, abs=1e-6)
+    room = hole_room(BUSHING, 0.020)
+    assert reach_depth(section, plan.l_a, plan.alpha) > PlannerOptions().hold_share * room
 
 
 CUP = load_catalogue(None).get("plastic_cup")
 
 
-def test_a_wide_short_hole_is_tilted_until_the_finger_reaches_past_the_rim() -> None:
+def test_a_wide_hole_is_tilted_until_the_finger_reaches_far_enough_past_the_rim() -> None:
     # The cup's hook comes at 7.3 deg (a 39 mm chord), where the finger reaches 6 mm past H and
-    # the rim slides off it in Align; the reach bound tilts it further.
+    # the rim slides off it in Align; the hold share tilts it until it reaches 40 % of the room.
     section = CUP.section(0.020)
-    hooked = plan_pivot(CUP, options=PlannerOptions(hold_reach=0.0))
+    room = hole_room(CUP, 0.020)
+    hooked = plan_pivot(CUP, options=PlannerOptions(hold_share=0.0))
     held = plan_pivot(CUP)
     assert hooked.pivotable and held.pivotable
-    assert reach_depth(section, hooked.l_a, hooked.alpha) < PlannerOptions().hold_reach
-    assert reach_depth(section, held.l_a, held.alpha) >= PlannerOptions().hold_reach
+    assert reach_depth(section, hooked.l_a, hooked.alpha) < PlannerOptions().hold_share * room
     assert held.alpha > hooked.alpha
+    assert held.alpha_min is not None and held.alpha_min > held.alpha_hook
+    assert reach_depth(section, held.l_a, held.alpha_min) == pytest.approx(
+        PlannerOptions().hold_share * room, abs=1e-6
+    )
 
 
-def test_a_part_that_cannot_be_reached_into_far_enough_is_refused_naming_the_approach() -> None:
-    # The thick bushing's 22 mm hole under 40 mm outer: every alpha that reaches 12 mm past H
-    # has the inner finger cut into the wall below the hole on the way down.
-    plan = plan_pivot(THICK)
+def test_a_hold_share_no_alpha_reaches_is_refused_naming_it() -> None:
+    # A 20 mm-long ring cannot reach 90 % of its room past the rim with any plan that is stable,
+    # fits the stroke and comes down clear.
+    ring = Part(name="ring", length=0.020, outer=0.042, hole=0.034, mass=0.03)
+    plan = plan_pivot(ring, options=PlannerOptions(hold_share=0.9))
     assert not plan.pivotable
-    assert plan.reason.startswith("approach blocked: ") and "wall below the hole" in plan.reason
+    assert "past the rim" in plan.reason
 
 
-def test_bad_hold_reach_raises() -> None:
-    with pytest.raises(ValueError, match="hold_reach must be >= 0 m"):
-        PlannerOptions(hold_reach=-0.001)
+def test_bad_hold_share_raises() -> None:
+    with pytest.raises(ValueError, match="hold_share must lie in"):
+        PlannerOptions(hold_share=1.5)
 
 
 def test_long_part_is_limited_by_the_stroke() -> None:
@@ -144,7 +147,7 @@ def test_approach_blocked_by_the_wall_below_a_narrow_hole_names_it() -> None:
 
 
 def test_the_planner_passes_a_blocked_approach_over_for_one_that_is_clear() -> None:
-    plan = plan_pivot(THICK, options=PlannerOptions(hold_reach=0.0))
+    plan = plan_pivot(THICK)
     assert plan.pivotable and plan.l_a is not None and plan.alpha is not None
     assert plan.l_a < 0.9  # 0.9 is blocked (above); the next clear l_a is taken
     assert approach_problem(THICK.section(0.020), plan.l_a, plan.alpha) is None
@@ -160,9 +163,7 @@ def test_every_table3_plan_has_a_clear_approach() -> None:
 
 
 def test_a_gripper_whose_fingers_cannot_get_in_is_refused_with_the_approach() -> None:
-    plan = plan_pivot(
-        THICK, Gripper(finger_thickness=0.05), options=PlannerOptions(hold_reach=0.0)
-    )
+    plan = plan_pivot(THICK, Gripper(finger_thickness=0.05))
     assert not plan.pivotable
     assert plan.reason.startswith("approach blocked: ")
 
