@@ -21,7 +21,7 @@ The Grasp is steered by what a real cell senses, not by the heights a twin knows
    cell counts on (``pinch_friction``). Without it the close drags S towards the rim and shoves
    the part (the twin measured l_a 0.9 -> 0.3 and the part pushed 4 mm).
 4. The grasp is confirmed from what the wrist and the jaws report: the fingers stopped (the
-   unit's object flag), at an opening within ``width_tolerance`` of the one the plan puts H at,
+   unit's object flag), at an opening within ``rim_tolerance`` of the one the plan puts H at,
    with S pressed. A close that ran past H (the inner finger missed the rim) fails as a miss.
 """
 
@@ -196,7 +196,7 @@ class Grasp:
         if not self.touch.contact:
             return "the outer finger found no top surface where the part should lie"
         p, width = self.params, self.dev.gripper.width()
-        if width < self.opening - p.width_tolerance:
+        if width < self.opening - p.rim_tolerance:
             return (f"the jaws closed to {width * 1e3:.1f} mm, past the rim at "
                     f"{self.opening * 1e3:.1f} mm: the inner finger missed it")
         return None

@@ -73,7 +73,19 @@ class PivotParams:
     )
     width_tolerance: float = si(
         0.006, "m", 0.0, 0.03,
-        "the jaws may close this far past the planned rim contact before it counts as a miss",
+        "Align's close on the wall may end this far inside the wall's width before it counts as "
+        "no wall between the fingers",
+    )
+    #: 0.012, not Align's 0.006: a light part starts turning about G under the unit's 20 N pinch
+    #: before the close is done, and the jaws follow it -- the 15 g cup's ran 6.1-6.4 mm past the
+    #: planned rim contact in the twin with the inner finger on the rim, and at 0.006 those
+    #: grasps were called misses (cup 7/10 on its tuning seeds 500-509, 10/10 at 0.012; the other
+    #: four Table 3 parts 10/10 at both). A finger that misses the rim closes onto the wall's
+    #: section or shut, far narrower.
+    rim_tolerance: float = si(
+        0.012, "m", 0.0, 0.05,
+        "the Grasp's close may run this far past the planned rim contact before it counts as a "
+        "miss (a light part turning about G under the pinch lets the jaws follow it)",
     )
     close_lead: float = si(0.001, "m", 0.0, 0.01, "the palm leads the outer finger closing")
     close_speed: float = si(

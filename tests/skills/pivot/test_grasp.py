@@ -108,7 +108,7 @@ def test_grasp_fails_as_a_miss_when_the_fingers_close_on_nothing() -> None:
     grasp = make_grasp(d)
     result, _ = run(grasp, d, on_tick=surface(d, grasp, s_top()))
     assert result.status is Status.FAILURE and result.code is Failure.MISSED
-    assert d["gripper"].width() < grasp.opening - PARAMS.width_tolerance
+    assert d["gripper"].width() < grasp.opening - PARAMS.rim_tolerance
 
 
 def settled_reading(d, grasp: Grasp, hook, scale):
