@@ -154,6 +154,7 @@ def _format_plan(plan: PivotPlan) -> str:
             lines.append(f"delta         {plan.delta_m * 1e3:.2f} mm")
         return "\n".join(lines)
     assert plan.alpha is not None and plan.delta_m is not None and plan.opening_m is not None
+    assert plan.reach_m is not None
     ub = plan.beta_ub
     lines += [
         "verdict       pivotable",
@@ -163,7 +164,7 @@ def _format_plan(plan: PivotPlan) -> str:
         f"{_deg(plan.alpha_min)} deg + margin; hooking the hole needs >= "
         f"{_deg(plan.alpha_hook)} deg)",
         f"delta         {plan.delta_m * 1e3:.2f} mm",
-        f"reach past H  {(plan.reach_m or 0.0) * 1e3:.1f} mm (the inner finger, along it)",
+        f"reach past H  {plan.reach_m * 1e3:.1f} mm (the inner finger, along it)",
         f"stable beta   0 .. {_deg(plan.beta_stable_max)} deg"
         + (f"  (beta_ub {_deg(ub)} deg)" if ub is not None else "  (whole tilt)"),
         f"required      0 .. {_deg(plan.beta_required)} deg",

@@ -111,6 +111,25 @@ def test_grasp_fails_as_a_miss_when_the_fingers_close_on_nothing() -> None:
     assert d["gripper"].width() < grasp.opening - PARAMS.rim_tolerance
 
 
+@pytest.mark.parametrize(("past", "ok"), [(0.009, True), (0.015, False)])
+def test_jaws_that_follow_a_turning_part_past_the_rim_are_a_grasp_within_the_rim_tolerance(
+    past: float, ok: bool
+) -> None:
+    # A light part turning about G under the pinch lets the jaws close past the planned rim
+    # contact before they stall on it: 9 mm past (over Align's 6 mm wall tolerance, within the
+    # Grasp's 12 mm) is a grasp, 15 mm past is a miss.
+    opening = FRAME.opening(PARAMS.l_a, PARAMS.alpha)
+    assert PARAMS.width_tolerance < 0.009 < PARAMS.rim_tolerance < 0.015
+    d = devices(object_width=opening - past, closing_speed=0.05)
+    grasp = make_grasp(d)
+    result, _ = run(grasp, d, on_tick=surface(d, grasp, s_top()))
+    if ok:
+        assert result.status is Status.SUCCESS, result.message
+    else:
+        assert result.status is Status.FAILURE and result.code is Failure.MISSED
+        assert "past the rim" in result.message
+
+
 def settled_reading(d, grasp: Grasp, hook, scale):
     """``hook``, with the wrist's reading scaled by ``scale(i)`` on each tick ``i`` once the
     closed fingers stand still (a contact that rings, or an outer finger that let S go)."""
