@@ -307,6 +307,50 @@ class _Timer:
         return self.clock.now() - self.t0 >= self.seconds
 
 
+class Steady:
+    """Completion test of a hold that lets a part come to rest: the wrist's force has stayed
+    within ``band`` (N, peak to peak of its magnitude) for ``window`` s, or ``longest`` s have
+    passed since the hold began.
+
+    A part still moving against the fingers changes the load the wrist carries; one at rest, or
+    one no finger touches any more, leaves it steady. So the hold lasts as long as the part
+    needs, never a fixed time tuned to one part: a light part already standing clear of the
+    fingers is not left waiting untouched."""
+
+    def __init__(
+        self, ft: ForceTorqueSensor, clock: Clock, band: float, window: float, longest: float
+    ) -> None:
+        self.ft, self.clock = ft, clock
+        self.band, self.window, self.longest = band, window, longest
+        self.t0: float | None = None  #: s (clock time) the hold began
+        self._samples: list[tuple[float, float]] = []  #: (clock time, |F|) within the window
+
+    def start(self) -> None:
+        self.t0 = self.clock.now()
+        self._samples = []
+
+    def done(self) -> bool:
+        assert self.t0 is not None, "a hold is done only once started"
+        now = self.clock.now()
+        if now - self.t0 >= self.longest:
+            return True
+        force = float(np.linalg.norm(self.ft.wrench()[FORCE]))
+        self._samples.append((now, force))
+        self._samples = [(t, f) for t, f in self._samples if now - t <= self.window]
+        if now - self.t0 < self.window:
+            return False
+        values = [f for _, f in self._samples]
+        return max(values) - min(values) <= self.band
+
+
+def wait_steady(
+    name: str, dev: Devices, guard: Guard, band: float, window: float, longest: float
+) -> GuardedMotion:
+    """Hold still under the guard until the wrist reads steady (:class:`Steady`)."""
+    steady = Steady(dev.ft, dev.clock, band, window, longest)
+    return GuardedMotion(name, steady.start, steady.done, dev.arm, dev.ft, dev.clock, guard)
+
+
 def wait(name: str, dev: Devices, guard: Guard, seconds: float) -> GuardedMotion:
     """Hold still for ``seconds`` under the guard (let a part settle)."""
     timer = _Timer(dev.clock, seconds)

@@ -168,7 +168,19 @@ class PivotParams:
         0.004, "m", 0.0, 0.02, "the most the TCP gives way along the fingers (0: rigid)"
     )
     tilt_timeout: float = si(20.0, "s", 1.0, 600.0, "the longest the arc may take")
-    settle: float = si(0.3, "s", 0.0, 5.0, "to let the standing part come to rest")
+    settle: float = si(
+        0.3, "s", 0.0, 5.0, "the longest the Tilt waits for the standing part to come to rest"
+    )
+    #: The wait ends as soon as the wrist's force holds within ``stand_band`` for
+    #: ``stand_window`` (a part still rocking against the fingers moves it; one at rest, or
+    #: free of the fingers, does not). 1 N is ten times the FT300's noise (about 0.1 N rms);
+    #: 0.05 s is five of its samples.
+    stand_band: float = si(
+        1.0, "N", 0.05, 20.0, "the wrist's force varies less than this: the part is at rest"
+    )
+    stand_window: float = si(
+        0.05, "s", 0.01, 1.0, "over this long, for the Tilt's wait to end before settle"
+    )
     #: 2.0 rad/s (115 deg/s), ``narrow_speed`` 0.05 m/s and ``slide_speed`` 0.1 m/s: the
     #: standing part waits free between the Tilt and the hole grasp (Sec. IV-B: it must stand on
     #: its own meanwhile), and the less it waits the less it drifts and the sooner a pad touches

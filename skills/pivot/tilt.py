@@ -27,7 +27,7 @@ from drivers.pose import Pose
 from skills.axes import Z
 from skills.compliance import Compliance, CompliantPath
 from skills.mechanics.contact import HALF_PI
-from skills.motion import Guard, Sequence, wait
+from skills.motion import Guard, Sequence, wait_steady
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 from skills.status import StepResult
@@ -81,7 +81,12 @@ class Tilt:
         )
         self.sequence = Sequence(
             "tilt",
-            [self.arc.motion(), wait("let the part stand", dev, self.guard, p.settle)],
+            [
+                self.arc.motion(),
+                wait_steady(
+                    "let the part stand", dev, self.guard, p.stand_band, p.stand_window, p.settle
+                ),
+            ],
         )
 
     def _path(self) -> Callable[[float], Pose]:

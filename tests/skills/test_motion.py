@@ -13,7 +13,7 @@ from drivers.arm import ArmStatus, MotionState
 from drivers.devices import Devices
 from drivers.health import DeviceError
 from drivers.pose import Pose
-from skills.motion import Guard, GuardedMotion, Sequence, wait
+from skills.motion import Guard, GuardedMotion, Sequence, wait, wait_steady
 from skills.status import SkillInputError, Status
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
 
@@ -309,6 +309,31 @@ def test_wait_holds_for_its_seconds_of_the_cell_clock_and_commands_nothing() -> 
     assert result.status is Status.SUCCESS
     assert ticks * d["clock"].dt == pytest.approx(0.3, abs=d["clock"].dt)
     assert d["arm"].commands == [] and d["arm"].stops == 0
+
+
+def test_a_steady_wait_ends_once_the_wrist_force_holds_still_for_its_window() -> None:
+    d = devices()
+    w = wait_steady("stand", dev(d), Guard(), band=1.0, window=0.05, longest=0.3)
+    result, ticks = run(w, d)  # nothing loads the fingers: steady from the start
+    assert result.status is Status.SUCCESS
+    assert ticks * d["clock"].dt == pytest.approx(0.05, abs=d["clock"].dt)
+    assert d["arm"].commands == [] and d["arm"].stops == 0
+
+
+def test_a_steady_wait_lasts_while_the_part_rocks_on_the_fingers_but_not_past_its_longest() -> None:
+    d = devices()
+    rocking = lambda i: setattr(d["ft"], "value", np.array([0, 0, 5.0 * (i % 2), 0, 0, 0]))  # noqa: E731,E501
+    w = wait_steady("stand", dev(d), Guard(), band=1.0, window=0.05, longest=0.3)
+    result, ticks = run(w, d, on_tick=rocking)
+    assert result.status is Status.SUCCESS
+    assert ticks * d["clock"].dt == pytest.approx(0.3, abs=d["clock"].dt)
+
+    d = devices()
+    settling = lambda i: setattr(d["ft"], "value", np.array([0, 0, 5.0 * (i % 2) if i < 10 else 2.0, 0, 0, 0]))  # noqa: E731,E501
+    w = wait_steady("stand", dev(d), Guard(), band=1.0, window=0.05, longest=0.3)
+    result, ticks = run(w, d, on_tick=settling)
+    assert result.status is Status.SUCCESS
+    assert 10 < ticks < 10 + 0.05 / d["clock"].dt + 2  # the window after the rocking stopped
 
 
 def test_wait_is_guarded_a_push_while_holding_still_fails_it() -> None:
