@@ -191,6 +191,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         equation=args.equation,
         hook_depth=args.hook_depth,
         hold_share=args.hold_share,
+        side_room=args.side_room,
     )
     frictions = _frictions(args)
     plans = [plan_pivot(catalogue.get(n), gripper, frictions, options) for n in names]
@@ -312,6 +313,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=PlannerOptions.hold_share,
         help="how far the inner finger must reach past the rim contact H to keep the part "
         "through Align, as a share of the hole's free room (0.4)",
+    )
+    p.add_argument(
+        "--side-room",
+        type=float,
+        default=PlannerOptions.side_room,
+        help="room the pad needs on either side in the hole, m: for the pose's error across "
+        "the part and the pad's turn in the hole (0.0015)",
     )
     p.add_argument(
         "--full-tilt",

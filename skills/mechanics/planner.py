@@ -105,6 +105,13 @@ class PlannerOptions:
     hook_depth: float = 0.005  # m the inner finger's tip must reach behind the rim
     palm_margin: float = 0.010  # m kept between the rim and the palm (finger base)
     hold_share: float = 0.4  # of the hole's free room the inner finger must reach past H
+    #: m the pad must have free on either side in the hole: for the error of the pose the Grasp
+    #: steers by across the part (the hand-eye calibration's 1 mm and the camera's) and for the
+    #: pad's turn in the hole in Align. Measured in the twin, with the exact pose as well: a
+    #: 20 mm pad in a 21 mm hole closed past the rim in 10 of 10 Grasps, in a 22 mm hole the
+    #: Align jammed it against the wall (force guard) in 7 of 10; 2 mm a side (the narrow tube)
+    #: pivots 9 of 10.
+    side_room: float = 0.0015
     alpha_margin: float = math.radians(2.0)  # rad kept inside the feasible set's edge
     approach_distance: float = 0.06  # m the fingers travel along their axis onto the part
     contact_tolerance: float = 0.001  # m a finger may cut into the part (it sets onto S and H)
@@ -122,6 +129,8 @@ class PlannerOptions:
             )
         if not math.isfinite(self.hook_depth) or self.hook_depth < 0:
             raise ValueError(f"hook_depth must be >= 0 m, got {self.hook_depth:g}")
+        if not math.isfinite(self.side_room) or self.side_room < 0:
+            raise ValueError(f"side_room must be >= 0 m, got {self.side_room:g}")
         if not math.isfinite(self.hold_share) or not 0 <= self.hold_share <= 1:
             raise ValueError(f"hold_share must lie in [0, 1], got {self.hold_share:g}")
         if not 0 < self.la_step <= 1:
@@ -309,6 +318,16 @@ def plan_pivot(
             pivotable=False,
             reason=f"hole narrower than the finger: d = {part.hole * 1e3:.1f} mm <= "
             f"w = {gripper.finger_width * 1e3:.1f} mm",
+            **common,
+        )
+    side = 0.5 * (part.hole - gripper.finger_width)  # exact: the pad centred in the hole
+    if side < options.side_room:
+        return PivotPlan(
+            pivotable=False,
+            reason=f"the pad nearly fills the hole: the {gripper.finger_width * 1e3:.1f} mm pad "
+            f"leaves {side * 1e3:.1f} mm on either side in the {part.hole * 1e3:.1f} mm hole, less "
+            f"than the {options.side_room * 1e3:.1f} mm the pose's error across the part and the "
+            f"pad's turn in the hole need",
             **common,
         )
     section = part.section(gripper.finger_width)

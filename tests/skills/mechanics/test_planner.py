@@ -91,6 +91,13 @@ def test_refusals_carry_their_reason() -> None:
     assert plan_pivot(bottle).reason.startswith("deformable part")
     rail = Part("mounting_rail", 0.083, 0.0076, 0.0064, "rectangle", 0.02)
     assert plan_pivot(rail).reason.startswith("hole narrower than the finger")
+    # A pad that nearly fills the hole has no room for the pose's error and its turn: 0.5 mm
+    # either side of a 20 mm pad in a 21 mm hole is refused, 4 mm in the bushing's 28 is not.
+    small_cup = Part("small_cup", 0.070, 0.025, 0.021, "circle", 0.015)
+    tight = plan_pivot(small_cup)
+    assert not tight.pivotable and tight.reason.startswith("the pad nearly fills the hole")
+    assert plan_pivot(small_cup, options=PlannerOptions(side_room=0.0004)).reason != tight.reason
+    assert plan_pivot(BUSHING).pivotable
     slippery = plan_pivot(BUSHING, frictions=Frictions(0.0, 0.0, 0.0))
     assert not slippery.pivotable and slippery.reason.startswith("no stable path")
 
@@ -136,6 +143,9 @@ def test_finger_wider_than_hole_raises_from_the_library() -> None:
 # --- the approach at alpha ------------------------------------------------------------------
 
 THICK = Part(name="thick_bushing", length=0.060, outer=0.040, hole=0.022, mass=0.15)
+#: the approach's checks alone: the thick bushing's 1 mm either side of the pad is refused by
+#: the default side room before any approach is looked at
+NO_SIDE_ROOM = PlannerOptions(side_room=0.0)
 
 
 def test_approach_blocked_by_the_wall_below_a_narrow_hole_names_it() -> None:
@@ -147,7 +157,7 @@ def test_approach_blocked_by_the_wall_below_a_narrow_hole_names_it() -> None:
 
 
 def test_the_planner_passes_a_blocked_approach_over_for_one_that_is_clear() -> None:
-    plan = plan_pivot(THICK)
+    plan = plan_pivot(THICK, options=NO_SIDE_ROOM)
     assert plan.pivotable and plan.l_a is not None and plan.alpha is not None
     assert plan.l_a < 0.9  # 0.9 is blocked (above); the next clear l_a is taken
     assert approach_problem(THICK.section(0.020), plan.l_a, plan.alpha) is None
@@ -163,7 +173,7 @@ def test_every_table3_plan_has_a_clear_approach() -> None:
 
 
 def test_a_gripper_whose_fingers_cannot_get_in_is_refused_with_the_approach() -> None:
-    plan = plan_pivot(THICK, Gripper(finger_thickness=0.05))
+    plan = plan_pivot(THICK, Gripper(finger_thickness=0.05), options=NO_SIDE_ROOM)
     assert not plan.pivotable
     assert plan.reason.startswith("approach blocked: ")
 
