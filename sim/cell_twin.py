@@ -31,6 +31,10 @@ from sim.robot import SimRobot
 from sim.scenes import dropped_bin_fill
 from sim.world import PhysicsSettings, SimWorld
 
+#: m a part already packed may move while the next one is packed (the packing's own tolerance:
+#: the judge's largest gap between neighbours)
+PACKED_MOVE = 0.002
+
 
 @dataclass(frozen=True)
 class TwinOptions:
@@ -130,6 +134,10 @@ class SimCellBackend:
             world.close()
             raise
         self.packed_bodies: list[int] = [b.body_id for b in self._packed_at_start]
+        #: body id -> where its centre stood (m, floor plane) when it was judged packed
+        self.packed_where: dict[int, np.ndarray] = {
+            b.body_id: b.pose().position[:2].copy() for b in self._packed_at_start
+        }
 
     def _fill(self, count: int, rng: np.random.Generator, resume: Any = None) -> list[PartBody]:
         """Put ``count`` parts into the bin as ``options.fill`` says (after a crash, those the
@@ -235,6 +243,7 @@ class SimCellBackend:
         self.world.p.removeBody(body.body_id)
         self.bodies = [b for b in self.bodies if b.body_id != body.body_id]
         self.packed_bodies = [i for i in self.packed_bodies if i != body.body_id]
+        self.packed_where.pop(body.body_id, None)
 
     def refill_bin(self, count: int, seed: int) -> list[PartBody]:
         """A person tips ``count`` new parts into the empty bin, as ``options.fill`` says
@@ -310,10 +319,27 @@ class SimCellBackend:
                     for j, g in a.neighbour_gaps.items()
                 }.items()
             )
+            # A packing must leave the parts already in the box where they were put: each is
+            # compared with where it stood when its own packing was judged.
+            moved = {
+                i: float(np.linalg.norm(b.pose().position[:2] - self.packed_where[b.body_id]))
+                for i, b in enumerate(packed)
+                if b.body_id in self.packed_where and b.body_id != body.body_id
+            }
+            self.packed_where.setdefault(body.body_id, body.pose().position[:2].copy())
+            # First, as the cause: a packed part shoved away opens the gaps the rest reports.
+            failure = pv.failure
+            worst = max(moved.items(), key=lambda kv: kv[1], default=None)
+            if worst is not None and worst[1] > PACKED_MOVE:
+                failure = (
+                    f"part {worst[0]}: a packed part moved {1e3 * worst[1]:.1f} mm from where it "
+                    f"was put"
+                )
             return {
-                "ok": pv.success,
-                "failure": pv.failure,
+                "ok": failure is None,
+                "failure": failure,
                 "parts": len(packed),
+                "moved_mm": round(1e3 * worst[1], 2) if worst is not None else 0.0,
                 "gaps_mm": [round(1e3 * g, 2) for _, g in gaps],
                 "max_neighbour_gap_mm": round(1e3 * pv.max_neighbour_gap_m, 2),
                 "max_home_gap_mm": round(1e3 * pv.max_home_gap_m, 2),
