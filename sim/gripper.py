@@ -36,7 +36,6 @@ one mu_S.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
@@ -90,8 +89,6 @@ class SimGripper:
         self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
         self._still = 0  # consecutive control steps with both fingers still
-        #: each finger's position over the last ``stall_steps`` control steps (m, oldest first)
-        self._history: deque[tuple[float, float]] = deque(maxlen=self._stall_steps + 1)
         self._steps = 0  # control steps since the last command
         self._active = False  # a command is in progress (fingers not yet arrived or stalled)
         self._stalled = False
@@ -207,7 +204,6 @@ class SimGripper:
         self._active = True
         self._stalled = False
         self._still = 0
-        self._history.clear()
         self._steps = 0
 
     def _release(self) -> None:
@@ -291,21 +287,15 @@ class SimGripper:
         if self._target is None:
             return
         self._steps += 1
-        (qa, _), (qb, _) = states[0][:2], states[1][:2]
+        (qa, va), (qb, vb) = states[0][:2], states[1][:2]
         half = self._target / 2
         if abs(qa - half) < ARRIVED and abs(qb - half) < ARRIVED:
             self._active = False
             self._stalled = False
             self._target = None
             return
-        # Still: each finger moved less than stall_speed * stall_time over the last stall_time,
-        # as the unit's encoder sees it -- a mean, not the joint's instantaneous velocity, which
-        # chatters by 10 mm/s where two pads press a thin wall and would never read still.
-        self._history.append((qa, qb))
-        oldest_a, oldest_b = self._history[0]
-        reach = self.spec.stall_speed * self.spec.stall_time
-        moved = max(abs(qa - oldest_a), abs(qb - oldest_b))
-        self._still = self._still + 1 if moved < reach else 0
+        still = self.spec.stall_speed
+        self._still = self._still + 1 if abs(va) < still and abs(vb) < still else 0
         width = qa + qb
         if self._stalled:
             if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:

@@ -177,24 +177,3 @@ def test_the_opening_is_reported_in_counts_at_the_poll_rate(world: SimWorld) -> 
     polls = 40 * g.spec.poll_hz / world.settings.control_hz
     assert changes <= polls + 1
     assert changes >= 0.5 * polls
-
-
-def test_fingers_chattering_in_place_on_a_thin_wall_count_as_stalled(robot: SimRobot) -> None:
-    """Two pads pinching a standing part's 4 mm wall: the contact solver rocks each finger at
-    10 mm/s while its position stays within 0.03 mm. The unit sees its encoder, not the joint's
-    instantaneous velocity: that is a stall, the object detected (an instantaneous-velocity
-    test never saw it still and the close timed out)."""
-    g = robot.gripper
-    g.close(force=20.0, speed=0.05)
-    half = 0.0017  # m, each finger stopped by the wall
-    for i in range(100):  # 0.8 s of control steps
-        wobble = 0.00003 * (1 if i % 2 else -1)
-        velocity = 0.01 * (1 if i % 2 else -1)
-        g._watch([(half + wobble, velocity), (half - wobble, -velocity)])
-    assert g._stalled and not g._active
-    # A finger still travelling (5 mm/s, above the unit's 2 mm/s) is not stalled.
-    g.close(force=20.0, speed=0.05)
-    for i in range(100):
-        q = 0.02 - 0.005 * i * 0.008
-        g._watch([(q, -0.005), (q, -0.005)])
-    assert g._active and not g._stalled
