@@ -8,7 +8,8 @@ equal care; this measures how much of the gap the Tilt's speed explains. Run by 
     python bench/pivot_speed.py --part bushing medicine_bottle cookie_can --trials 10 \
         --config 0.01,1.0 0.03,1.0 0.05,0.5
 
-Each ``--config`` is ``tilt_speed_m_s,settle_s``: the arc at that TCP speed for every part (the
+Each ``--config`` is ``tilt_speed_m_s,settle_s`` (``settle_s``: the longest the Tilt waits for
+the wrist to read steady): the arc at that TCP speed for every part (the
 part's turning-rate bound, ``tilt_rate_deg_s``, set to its largest value so the speed given is
 the one run). Prints one line per part and configuration:
 successes, mean tact over successes (simulated s, measured as in `cell compare`), and the ratio

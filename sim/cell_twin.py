@@ -320,21 +320,24 @@ class SimCellBackend:
                 }.items()
             )
             # A packing must leave the parts already in the box where they were put: each is
-            # compared with where it stood when its own packing was judged.
+            # compared with where it stood after the last packing judged good with it in the box.
             moved = {
                 i: float(np.linalg.norm(b.pose().position[:2] - self.packed_where[b.body_id]))
                 for i, b in enumerate(packed)
                 if b.body_id in self.packed_where and b.body_id != body.body_id
             }
-            self.packed_where.setdefault(body.body_id, body.pose().position[:2].copy())
-            # First, as the cause: a packed part shoved away opens the gaps the rest reports.
-            failure = pv.failure
             worst = max(moved.items(), key=lambda kv: kv[1], default=None)
+            failure = pv.failure
             if worst is not None and worst[1] > PACKED_MOVE:
-                failure = (
-                    f"part {worst[0]}: a packed part moved {1e3 * worst[1]:.1f} mm from where it "
-                    f"was put"
+                shoved = (
+                    f"part {worst[0]} (body {packed[worst[0]].body_id}): a packed part moved "
+                    f"{1e3 * worst[1]:.1f} mm from where it was put"
                 )
+                # First, as the cause: a packed part shoved away opens the gaps the rest reports.
+                failure = shoved if failure is None else f"{shoved}; {failure}"
+            if failure is None:  # a good packing: where every part in the box now stands
+                for b in packed:
+                    self.packed_where.setdefault(b.body_id, b.pose().position[:2].copy())
             return {
                 "ok": failure is None,
                 "failure": failure,

@@ -336,8 +336,11 @@ class Steady:
             return True
         force = float(np.linalg.norm(self.ft.wrench()[FORCE]))
         self._samples.append((now, force))
-        self._samples = [(t, f) for t, f in self._samples if now - t <= self.window]
-        if now - self.t0 < self.window:
+        # Keep the newest sample at or before the window's start too, so the samples always
+        # span the whole window: a long tick never leaves one reading to call steady alone.
+        while len(self._samples) > 1 and now - self._samples[1][0] >= self.window:
+            self._samples.pop(0)
+        if now - self.t0 < self.window or len(self._samples) < 2:
             return False
         values = [f for _, f in self._samples]
         return max(values) - min(values) <= self.band

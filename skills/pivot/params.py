@@ -178,8 +178,9 @@ class PivotParams:
     )
     #: The wait ends as soon as the wrist's force holds within ``stand_band`` for
     #: ``stand_window`` (a part still rocking against the fingers moves it; one at rest, or
-    #: free of the fingers, does not). 1 N is ten times the FT300's noise (about 0.1 N rms);
-    #: 0.05 s is five of its samples.
+    #: free of the fingers, does not), and at ``settle`` at the latest (a window longer than
+    #: ``settle`` makes it a fixed wait of ``settle``). 1 N is ten times the FT300's noise
+    #: (about 0.1 N rms); 0.05 s is five of its samples.
     stand_band: float = si(
         1.0, "N", 0.05, 20.0, "the wrist's force varies less than this: the part is at rest"
     )

@@ -47,4 +47,19 @@ def test_a_packing_that_shoved_a_packed_part_fails(twin) -> None:  # type: ignor
     verdict = _judge_packing_of(twin, second)
     assert verdict["moved_mm"] == pytest.approx(5.0, abs=0.3)
     assert not verdict["ok"]
-    assert verdict["failure"].startswith("part 0: a packed part moved")
+    assert verdict["failure"].startswith(f"part 0 (body {first.body_id}): a packed part moved")
+
+
+def test_a_place_is_recorded_by_a_good_packing_only_and_forgotten_with_the_part(twin) -> None:  # type: ignore[no-untyped-def]
+    first, second = (b for b in twin.bodies if b.body_id in twin.packed_bodies)
+    # A good packing records where a part without a place stands.
+    del twin.packed_where[second.body_id]
+    assert _judge_packing_of(twin, second)["ok"]
+    assert np.allclose(twin.packed_where[second.body_id], second.pose().position[:2])
+    # A packing judged bad (a part still lying in the bin) records nothing for it.
+    in_bin = next(b for b in twin.bodies if b.body_id not in twin.packed_bodies)
+    assert not _judge_packing_of(twin, in_bin)["ok"]
+    assert in_bin.body_id not in twin.packed_where
+    # A part a person takes out is no longer compared.
+    twin.remove_part(first)
+    assert first.body_id not in twin.packed_where

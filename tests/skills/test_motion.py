@@ -336,6 +336,19 @@ def test_a_steady_wait_lasts_while_the_part_rocks_on_the_fingers_but_not_past_it
     assert 10 < ticks < 10 + 0.05 / d["clock"].dt + 2  # the window after the rocking stopped
 
 
+def test_a_steady_wait_never_ends_on_one_reading_after_a_long_tick() -> None:
+    """A tick longer than the window: the reading before it still counts, so a force that
+    jumped across the long tick is not steady."""
+    d = devices()
+    w = wait_steady("stand", dev(d), Guard(), band=1.0, window=0.05, longest=1.0)
+    w.tick()  # starts; one reading at 0 N
+    d["clock"].t += 0.2  # one long tick
+    d["ft"].value = np.array([0, 0, 5.0, 0, 0, 0])
+    assert w.tick().status is Status.RUNNING  # 0 N then 5 N across the window: not steady
+    d["clock"].t += 0.06
+    assert w.tick().status is Status.SUCCESS  # 5 N held over the window
+
+
 def test_wait_is_guarded_a_push_while_holding_still_fails_it() -> None:
     d = devices()
     w = wait("settle", dev(d), Guard(max_force=20.0), 5.0)

@@ -96,7 +96,8 @@ def test_refusals_carry_their_reason() -> None:
     small_cup = Part("small_cup", 0.070, 0.025, 0.021, "circle", 0.015)
     tight = plan_pivot(small_cup)
     assert not tight.pivotable and tight.reason.startswith("the pad nearly fills the hole")
-    assert plan_pivot(small_cup, options=PlannerOptions(side_room=0.0004)).reason != tight.reason
+    looser = plan_pivot(small_cup, options=PlannerOptions(side_room=0.0004))
+    assert not looser.reason.startswith("the pad nearly fills the hole")
     assert plan_pivot(BUSHING).pivotable
     slippery = plan_pivot(BUSHING, frictions=Frictions(0.0, 0.0, 0.0))
     assert not slippery.pivotable and slippery.reason.startswith("no stable path")
