@@ -148,13 +148,8 @@ class PivotParams:
     #: upright before the arc ends is not pressed into the floor. Far smaller than the play of
     #: the inner finger in the hole, so that finger never leaves it.
     tilt_ease: float = si(0.003, "m", 0.0, 0.01, "the jaws ease near the tip-over angle")
-    #: 0: the ease comes as the part reaches its tip-over angle, where its weight starts to
-    #: stand it up; easing 3 deg earlier let a light part go a tenth of a second sooner and it
-    #: stood untouched that much longer before Align's turn met it again (tuning seeds
-    #: 500-529: plastic cup 25 -> 27 of 30; 520-529: square box 4 -> 7 of 10; the four other
-    #: parts 20/20 or 19/20 either way).
     ease_before_tip: float = si(
-        0.0, "rad", 0.0, 20.0 * DEG, "the ease starts this far before tip-over"
+        3.0 * DEG, "rad", 0.0, 20.0 * DEG, "the ease starts this far before tip-over"
     )
     tilt_floor_clearance: float = si(
         0.003, "m", 0.0, 0.02, "kept between the fingertips and the floor on the arc"

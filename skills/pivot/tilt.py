@@ -144,8 +144,7 @@ class Tilt:
         return min(p.tilt_speed, p.tilt_rate * length / self.angle)  # length = r * angle
 
     def _ease_past_tip(self) -> bool:
-        """Never ends the arc early: eases the jaws once, ``ease_before_tip`` short of the
-        tip-over angle (by default at it)."""
+        """Never ends the arc early: eases the jaws once, just before the tip-over angle."""
         p = self.params
         if not self.eased and self.theta >= self.tip - p.ease_before_tip:
             self.eased = True
