@@ -340,7 +340,7 @@ class Steady:
         # span the whole window: a long tick never leaves one reading to call steady alone.
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.window:
             self._samples.pop(0)
-        if now - self.t0 < self.window or len(self._samples) < 2:
+        if now - self.t0 < self.window or len(self._samples) <= 1:  # a spread needs two
             return False
         values = [f for _, f in self._samples]
         return max(values) - min(values) <= self.band
