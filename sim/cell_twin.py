@@ -321,10 +321,12 @@ class SimCellBackend:
             )
             # A packing must leave the parts already in the box where they were put: each is
             # compared with where it stood after the last packing judged good with it in the box.
+            # (the centres the judge above read, one per part: the world is not asked again)
+            where = self.packed_where
             moved = {
-                i: float(np.linalg.norm(b.pose().position[:2] - self.packed_where[b.body_id]))
+                i: float(np.linalg.norm(np.subtract(pv.parts[i].center, where[b.body_id])))
                 for i, b in enumerate(packed)
-                if b.body_id in self.packed_where and b.body_id != body.body_id
+                if b.body_id in where and b.body_id != body.body_id
             }
             worst = max(moved.items(), key=lambda kv: kv[1], default=None)
             failure = pv.failure
@@ -336,8 +338,8 @@ class SimCellBackend:
                 # First, as the cause: a packed part shoved away opens the gaps the rest reports.
                 failure = shoved if failure is None else f"{shoved}; {failure}"
             if failure is None:  # a good packing: where every part in the box now stands
-                for b in packed:
-                    self.packed_where.setdefault(b.body_id, b.pose().position[:2].copy())
+                for b, judged in zip(packed, pv.parts, strict=True):
+                    self.packed_where.setdefault(b.body_id, np.asarray(judged.center))
             return {
                 "ok": failure is None,
                 "failure": failure,

@@ -320,27 +320,24 @@ class Steady:
     def __init__(
         self, ft: ForceTorqueSensor, clock: Clock, band: float, window: float, longest: float
     ) -> None:
-        self.ft, self.clock = ft, clock
-        self.band, self.window, self.longest = band, window, longest
-        self.t0: float | None = None  #: s (clock time) the hold began
-        self._samples: list[tuple[float, float]] = []  #: (clock time, |F|) within the window
+        self.ft, self.clock, self.band, self.window = ft, clock, band, window
+        self._timer = _Timer(clock, longest)  #: the hold's upper bound
+        self._samples: list[tuple[float, float]] = []  #: (clock time, |F|) spanning the window
 
     def start(self) -> None:
-        self.t0 = self.clock.now()
+        self._timer.start()
         self._samples = []
 
     def done(self) -> bool:
-        assert self.t0 is not None, "a hold is done only once started"
-        now = self.clock.now()
-        if now - self.t0 >= self.longest:
+        if self._timer.done():
             return True
-        force = float(np.linalg.norm(self.ft.wrench()[FORCE]))
-        self._samples.append((now, force))
-        # Keep the newest sample at or before the window's start too, so the samples always
-        # span the whole window: a long tick never leaves one reading to call steady alone.
+        now = self.clock.now()
+        self._samples.append((now, float(np.linalg.norm(self.ft.wrench()[FORCE]))))
+        # Keep the newest reading at or before the window's start as well: the readings always
+        # span the whole window, so a long tick never leaves one reading to call steady alone.
         while len(self._samples) > 1 and now - self._samples[1][0] >= self.window:
             self._samples.pop(0)
-        if now - self.t0 < self.window or len(self._samples) <= 1:  # a spread needs two
+        if now - self._samples[0][0] < self.window:  # not a whole window read yet
             return False
         values = [f for _, f in self._samples]
         return max(values) - min(values) <= self.band
