@@ -42,6 +42,14 @@ How it moves, and why:
   commands); what the arm reports (state, commanded joints) is at once, as a controller
   acknowledges a command before it moves. Force mode's own loop runs on the controller without
   the lag; a protective stop holds at once.
+* **servoj** (:meth:`SimArm.set_servo_tracking`, off by default): a UR follows each
+  ``servoL`` target by ``servoj``, which UR describes as a P-controller (``gain``) on the error
+  from the current position projected ``lookahead_time`` ahead with the current velocity:
+  ``q'' = gain (q_goal - q - lookahead q')``. At the driver's 0.1 s and 300 that is a filter of
+  about 2.8 Hz, damping 0.87, trailing a steady stream by ``lookahead`` seconds; a stream whose
+  targets arrive unevenly (two in one controller cycle, none in the next) moves the arm
+  smoothly. Off, a target is reached within the step, as the twin's own ticks land one per
+  step. The emulated controller turns it on with each ``servoL``'s values.
 * **Protective stop**: like a UR5 at its default 150 N safety limit, the arm faults with
   ``protective_stop=True`` and holds where it is when the force on the tool (less its weight)
   stays above :data:`PROTECTIVE_FORCE`; the next motion command clears it. Position control
@@ -243,6 +251,10 @@ class SimArm:
         # The command lag: the last lag + 1 steps' (q_from, q_to), the oldest actuated.
         self._lag = 0
         self._line: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque()
+        # servoj's tracking law (lookahead s, gain) or None: the target reached within a step.
+        self._servoj: tuple[float, float] | None = None
+        self._goal: NDArray[np.float64] | None = None  # joints that reach the servo target
+        self._ref_speed = np.zeros(6)  # rad/s, the servo reference's joint speeds
         world.before_step(self._control)
         world.before_substep(self._actuate)
 
@@ -255,6 +267,17 @@ class SimArm:
             raise ValueError(f"the command lag must be a whole number of steps >= 0, got {steps}")
         self._lag = int(steps)
         self._line.clear()
+
+    def set_servo_tracking(self, lookahead: float | None, gain: float | None = None) -> None:
+        """How a servo target is followed: None (the default) reaches it within a control step;
+        ``(lookahead s, gain)`` follows it by UR's ``servoj`` law (see the module doc), as the
+        emulated controller runs each ``servoL`` with the driver's own values."""
+        if lookahead is None:
+            self._servoj = None
+            return
+        if lookahead <= 0.0 or gain is None or gain <= 0.0:
+            raise ValueError(f"servoj needs lookahead > 0 and gain > 0, got {lookahead}, {gain}")
+        self._servoj = (float(lookahead), float(gain))
 
     def set_speed_fraction(self, fraction: float) -> None:
         """The UR's speed slider (0-1), as its controller applies it: the timing of a path or
@@ -396,6 +419,7 @@ class SimArm:
         self._leave_force_mode()
         if self._mode != "servo":
             self._last_target = None
+            self._goal = None
         self._servo_target = target
         self._mode = "servo"
         self._path = None
@@ -455,6 +479,7 @@ class SimArm:
         self._path = None
         self._servo_target = None
         self._last_target = None
+        self._goal = None
         self._send(self._q_to, np.zeros(6))
 
     def _start_motion(self) -> None:
@@ -621,7 +646,26 @@ class SimArm:
 
     def _follow_servo(self) -> None:
         assert self._servo_target is not None
+        if self._servoj is None:
+            self._track(self._servo_target, servo=True)
+            return
+        # servoj: the joints that reach the target are tracked as without the law (the same
+        # reach checks), then the reference follows them by
+        # q'' = gain * (goal - (q + lookahead * q')), the damping term taken implicitly so
+        # any gain and lookahead in UR's ranges stays stable at the control step.
+        lookahead, gain = self._servoj
+        here = self._q_to
+        if self._goal is None:
+            self._goal, self._ref_speed = here.copy(), np.zeros(6)
+        self._q_to = self._goal
         self._track(self._servo_target, servo=True)
+        if self._state is MotionState.FAULT:
+            return
+        goal = self._q_to
+        k = self._dt * gain
+        speed = (self._ref_speed + k * (goal - here)) / (1.0 + k * lookahead)
+        self._goal, self._ref_speed, self._q_to = goal, speed, here
+        self._advance_to(here + speed * self._dt)
 
     def _actuate(self) -> None:
         """Before each physics substep: joint targets interpolated through the step, or torques.

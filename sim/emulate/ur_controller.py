@@ -191,7 +191,9 @@ class ArmBackend(Protocol):
         """Straight lines through ``poses``, blended at the intermediate ones."""
         ...
 
-    def servo(self, pose: Sequence[float]) -> None: ...
+    def servo(self, pose: Sequence[float], lookahead: float, gain: float) -> None:
+        """servoj on the pose's joints, with the command's lookahead time (s) and gain."""
+        ...
 
     def force_mode(self, selection: Sequence[int], wrench: Sequence[float],
                    limits: Sequence[float]) -> None:
@@ -638,7 +640,9 @@ class URController:
         elif cmd == 8:
             b.zero_ft()
         elif cmd == 24:  # servoL: the script runs servoj on get_inverse_kin(pose)
-            b.servo(self._floats(inputs, prog, 0, 6))
+            # registers 6-10: speed, acceleration (unused), time, lookahead_time, gain
+            lookahead, gain = self._floats(inputs, prog, 9, 2)
+            b.servo(self._floats(inputs, prog, 0, 6), lookahead, gain)
             prog.mode = "servo"
         elif cmd == 16:  # servoStop: kill the servo thread, stopl(a)
             a = float(self._in(inputs, prog, "float", 0))
@@ -1291,7 +1295,7 @@ class StillArm:
                     acceleration: float) -> None:
         self.commands.append("move_linear")
 
-    def servo(self, pose: Sequence[float]) -> None:
+    def servo(self, pose: Sequence[float], lookahead: float, gain: float) -> None:
         self.commands.append("servo")
 
     def force_mode(self, selection: Sequence[int], wrench: Sequence[float],
@@ -1354,9 +1358,10 @@ class TwinArmBackend:
 
         self.arm.move_path([Pose.from_rotvec(p[:3], p[3:]) for p in poses], speed, acceleration)
 
-    def servo(self, pose: Sequence[float]) -> None:
+    def servo(self, pose: Sequence[float], lookahead: float, gain: float) -> None:
         from drivers.pose import Pose
 
+        self.arm.set_servo_tracking(lookahead, gain)
         self.arm.servo(Pose.from_rotvec(pose[:3], pose[3:]))
 
     def force_mode(self, selection: Sequence[int], wrench: Sequence[float],

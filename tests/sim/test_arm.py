@@ -177,6 +177,44 @@ def test_servo_follows_a_streamed_line(world: SimWorld, robot: SimRobot) -> None
     assert arm.status().state is MotionState.STOPPED
 
 
+def _stream(world: SimWorld, arm: SimArm, per_step: list[int]) -> list[float]:
+    """A line of 0.1 mm targets at 125 Hz, ``per_step[k]`` of them arriving before step k
+    (0, 1 or 2: the sender's and the controller's clocks drifting); the TCP's z per step."""
+    start = arm.tool_pose()
+    sent, z = 0, []
+    for n in per_step:
+        sent += n
+        arm.servo(Pose(start.position + [0, 0, -1e-4 * sent], start.rotation))
+        world.step()
+        z.append(float(arm.tool_pose().position[2]))
+    return z
+
+
+def test_servoj_smooths_an_uneven_stream_and_trails_by_its_lookahead(
+    world: SimWorld, robot: SimRobot
+) -> None:
+    """Two targets in one controller cycle and none in the next: reached within the step
+    the TCP jumps 0.2 mm then stands or even backs off; by servoj's law it moves evenly, lookahead x speed
+    behind the stream."""
+    uneven = [1] * 60 + [2, 0] * 30 + [1] * 60
+    arm = robot.arm
+    exact = -np.diff(_stream(world, arm, uneven))[62:118]
+    assert np.max(exact) > 2e-4 and np.min(exact) < 0.2e-4  # jumps, then stands or backs
+    arm.stop()
+    arm.set_servo_tracking(0.1, 300.0)
+    start = float(arm.tool_pose().position[2])
+    z = _stream(world, arm, uneven)
+    steps = -np.diff(z)[62:118]  # 0.1 mm a step on average
+    assert np.all(steps > 0.7e-4) and np.all(steps < 1.3e-4)
+    trail = start - 1e-4 * sum(uneven[:60]) - z[59]
+    assert trail == pytest.approx(-0.1 * 1e-4 / 0.008, rel=0.15)  # 0.1 s at 12.5 mm/s, behind
+
+
+def test_servoj_tracking_rejects_a_law_outside_its_range(robot: SimRobot) -> None:
+    with pytest.raises(ValueError, match="servoj"):
+        robot.arm.set_servo_tracking(0.0, 300.0)
+
+
 def test_move_path_requires_positive_speed(robot: SimRobot) -> None:
     with pytest.raises(ValueError, match="speed"):
         robot.arm.move_to(robot.arm.tool_pose(), 0.0, 1.0)

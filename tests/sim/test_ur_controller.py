@@ -68,8 +68,8 @@ class Backend:
         self.calls.append(("move_linear", ([list(p) for p in poses], speed, acceleration)))
         self.state = "moving"
 
-    def servo(self, pose: Sequence[float]) -> None:
-        self.calls.append(("servo", (list(pose),)))
+    def servo(self, pose: Sequence[float], lookahead: float, gain: float) -> None:
+        self.calls.append(("servo", (list(pose), lookahead, gain)))
 
     def force_mode(self, selection, wrench, limits) -> None:  # type: ignore[no-untyped-def]
         self.calls.append(("force_mode", (list(selection), list(wrench), list(limits))))
@@ -162,6 +162,18 @@ def test_every_async_stop_runs_stopl_and_marks_the_current_operation_finished(ct
         c.cycle()
     assert word(c) == (False, 3)  # "finished" written over the move's operation
     assert backend.state == "moving"  # while the arm still moves
+
+
+def test_servol_runs_servoj_with_the_commands_lookahead_and_gain(ctl) -> None:
+    """ur_rtde's script reads servoL's time, lookahead_time and gain from float registers
+    8-10; the backend gets the last two, which decide how the arm follows the stream."""
+    c, backend = ctl
+    pose = [0.4, 0.0, 0.2, 0.0, 3.14, 0.0]
+    regs = {f"input_double_register_{i}": v
+            for i, v in enumerate([*pose, 0.0, 0.0, 0.008, 0.05, 500.0])}
+    c.write_inputs({"input_int_register_0": 24, **regs})  # streamed: no done handshake
+    c.cycle()
+    assert backend.calls[-1] == ("servo", (pose, 0.05, 500.0))
 
 
 def test_a_sync_stop_uses_the_last_stop_type(ctl) -> None:
