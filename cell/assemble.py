@@ -225,6 +225,7 @@ def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> A
         mu_ground=sim.mu_ground,
         machining_time=config.workflow.machining_time_s,
         gripper=prep.gripper,
+        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain),
     )
     try:
         return SimCellBackend(prep.layout, prep.part, options, resume=resume)

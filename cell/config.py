@@ -27,6 +27,7 @@ from pydantic import (
 )
 
 from drivers.gripper_spec import DEFAULT_GRIPPER, GripperSpec, GripperSpecError, load_gripper
+from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from skills.motion import (
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_TORQUE,
@@ -108,6 +109,15 @@ class ArmDevice(_Section):
         "control script (and the arm) when the cell has not polled it for 1/hz s -- a dead "
         "process, a lost link, a stalled loop. null turns it off. At 10 Hz the emulated "
         "cell's longest tick in three cycles was 36.2 ms (docs/emulator.md)",
+    )
+    servo_lookahead_s: float = Field(
+        SERVO_LOOKAHEAD, ge=0.03, le=0.2,
+        description="servoj's lookahead time for each streamed target (UR's range): the arm "
+        "trails the stream by about this much; the twin's arm follows the same law",
+    )
+    servo_gain: float = Field(
+        SERVO_GAIN, ge=100.0, le=2000.0,
+        description="servoj's proportional gain, 1/s^2 (UR's range); the twin's arm uses it too",
     )
     home_joints_deg: list[float] = Field(
         default_factory=lambda: [167.39, -89.5, 82.82, -83.32, -90.0, -102.61],

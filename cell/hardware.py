@@ -46,7 +46,12 @@ def _open_arm(cfg: Any, layout: Any, clock: Any) -> Any:
     return UR5Arm.connect(
         d.host,
         clock=clock,
-        settings=UR5Settings(frequency=d.rtde_frequency_hz, watchdog_hz=d.watchdog_hz),
+        settings=UR5Settings(
+            frequency=d.rtde_frequency_hz,
+            watchdog_hz=d.watchdog_hz,
+            servo_lookahead=d.servo_lookahead_s,
+            servo_gain=d.servo_gain,
+        ),
         dashboard_timeout=d.connect_timeout_s,
     )
 

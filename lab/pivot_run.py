@@ -36,6 +36,7 @@ from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
 from drivers.parts import Part
 from drivers.pose import Pose
+from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from lab.stats import wilson_interval
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
@@ -93,6 +94,8 @@ class TrialSetup:
     #: part fits, up against the walls, any yaw, either end towards the robot.
     pose: str = "nominal"
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
+    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (devices.arm)
+    servo: tuple[float, float] = (SERVO_LOOKAHEAD, SERVO_GAIN)
     #: what the real cell does not know exactly, drawn per trial (:mod:`sim.uncertainty`);
     #: ``Uncertainty.ideal()`` turns it off (``--ideal``)
     uncertainty: Uncertainty = field(default_factory=Uncertainty)
@@ -281,7 +284,7 @@ def open_trial_world(setup: TrialSetup, seed: int) -> TrialWorld:
     world = SimWorld(seed=seed, settings=setup.physics)
     try:
         cell = build_cell(world, setup.layout, floor_friction=mu_g, z_offset=draws.floor_dz_m)
-        robot = SimRobot(world, gripper=setup.gripper)
+        robot = SimRobot(world, gripper=setup.gripper, servo=setup.servo)
         robot.arm.set_command_lag(draws.lag_steps)
         robot.ft.configure(
             draws.ft_rate_hz, draws.ft_force_noise_n, draws.ft_torque_noise_nm,

@@ -661,11 +661,12 @@ class SimArm:
         self._track(self._servo_target, servo=True)
         if self._state is MotionState.FAULT:
             return
-        goal = self._q_to
+        goal, goal_clipped = self._q_to, self._clipped
         k = self._dt * gain
         speed = (self._ref_speed + k * (goal - here)) / (1.0 + k * lookahead)
         self._goal, self._ref_speed, self._q_to = goal, speed, here
         self._advance_to(here + speed * self._dt)
+        self._clipped = goal_clipped  # the next step's reach check is the goal's
 
     def _actuate(self) -> None:
         """Before each physics substep: joint targets interpolated through the step, or torques.

@@ -23,6 +23,7 @@ from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
 from drivers.parts import Frictions, Part
+from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.judge import judge
@@ -51,6 +52,8 @@ class TwinOptions:
     fill: str = "rows"
     #: the gripper's description (None: the shipped 2F-85)
     gripper: GripperSpec | None = None
+    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (devices.arm)
+    servo: tuple[float, float] = (SERVO_LOOKAHEAD, SERVO_GAIN)
 
 
 def spawn_spots(
@@ -118,7 +121,7 @@ class SimCellBackend:
         self.world = world = SimWorld(seed=options.seed, settings=options.physics)
         try:
             self.cell = build_cell(world, layout, floor_friction=options.mu_ground)
-            self.robot = robot = SimRobot(world, gripper=options.gripper)
+            self.robot = robot = SimRobot(world, gripper=options.gripper, servo=options.servo)
             robot.gripper.set_finger_friction(options.frictions.mu_s, options.frictions.mu_h)
             self.bodies: list[PartBody] = []
             self._fill(options.parts_in_bin, rng, resume)

@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.pose import Pose
 from drivers.tool import FINGER_LENGTH
+from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_JOINTS, forward_kinematics
 from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
@@ -33,12 +34,15 @@ class SimRobot:
         home_joints: ArrayLike | None = None,
         gripper_self_locking: bool = True,
         gripper: GripperSpec | None = None,
+        servo: tuple[float, float] | None = (SERVO_LOOKAHEAD, SERVO_GAIN),
     ) -> None:
         """Load the robot with its base frame at ``base_pose`` (world frame; default: origin),
         arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open.
         ``gripper_self_locking``: see :mod:`sim.gripper` (the 2F-85's fingers are not pushed
         back open by the part); ``gripper``: the gripper's description (the shipped 2F-85 by
-        default): the fingers' sizes, force and speed ranges, position counts and linkage."""
+        default): the fingers' sizes, force and speed ranges, position counts and linkage.
+        ``servo``: servoj's (lookahead s, gain) by which the arm follows a streamed target, as
+        the UR driver sets it (``devices.arm``); None reaches each target within the step."""
         self.gripper_spec = gripper = gripper or default_gripper()
         self.world = world
         self.base_pose = base_pose or Pose()
@@ -65,6 +69,8 @@ class SimRobot:
         home = HOME_JOINTS if home_joints is None else np.asarray(home_joints, float)
         arm_joints = [self.joint_index[name] for name in ARM_JOINTS]
         self.arm = SimArm(world, self.body_id, arm_joints, self.ft, home_joints=home)
+        if servo is not None:
+            self.arm.set_servo_tracking(*servo)
         self.ft.limits.connect_stop(self.arm.stop)  # a sample over a motion's limit stops it
         self.arm.reset_joints(home)
         self.gripper.reset_width(self.gripper.stroke)

@@ -116,13 +116,22 @@ DONE_ANGLE = np.radians(1.0)  #: rad: ... and this close in rotation
 DONE_JOINT = 0.005  #: rad: a finished joint move, per joint
 
 
+#: s: servoj's lookahead time for each ``servoL`` (UR's range 0.03-0.2). servoj follows the stream
+#: as ``q'' = gain (q_goal - q - lookahead q')`` (UR's description; :mod:`sim.arm`): it trails a
+#: steady stream by the lookahead. At UR's example values (0.1 s, 300) the twin's pivot lost the
+#: hole in 2 of 10 bushing trials; at 0.05 s and 1000, 10 of 10 (damping 0.79, 5 Hz).
+SERVO_LOOKAHEAD = 0.05
+#: 1/s^2: servoj's proportional gain (UR's range 100-2000); see :data:`SERVO_LOOKAHEAD`.
+SERVO_GAIN = 1000.0
+
+
 @dataclass(frozen=True)
 class UR5Settings:
     """Tuning of the UR5 driver; the defaults suit a CB3 UR5 at 125 Hz."""
 
     frequency: float = 125.0  #: Hz: RTDE and control rate (500 on an e-Series)
-    servo_lookahead: float = 0.1  #: s, UR range [0.03, 0.2]: smooths the servoL targets
-    servo_gain: float = 300.0  #: UR range [100, 2000]: servoL position gain
+    servo_lookahead: float = SERVO_LOOKAHEAD  #: s, UR range [0.03, 0.2]: smooths the stream
+    servo_gain: float = SERVO_GAIN  #: UR range [100, 2000]: servoL position gain
     path_blend: float = 0.01  #: m: blend radius at intermediate path waypoints (upper bound)
     #: m/s^2: every stop of a move, a joint move or servoing (the control script runs each
     #: asynchronous stop as ``stopl``, so there is no joint deceleration to set)
@@ -203,6 +212,10 @@ LINK_SETTLE = 0.25
 #: command: the tick loop polls every period, so a poll up to (1 - share) of the watchdog's
 #: period late still keeps it fed
 KICK_SHARE = 0.25
+#: controller cycles that must have run (by the controller's own timestamp) since a command was
+#: written before a kick may write the command register: the timestamp last seen may be a cycle
+#: old, and the script reads a command at the cycle after it arrives
+KICK_QUIET_CYCLES = 3
 #: the speed slider the cell's moves run at: their speeds and accelerations as programmed
 RUN_SPEED_FRACTION = 1.0
 
@@ -284,6 +297,8 @@ class UR5Arm:
         #: and the gripper's calibration poll the arm less often than a 10 Hz watchdog needs
         self._watchdog_on = False
         self._last_command = -float("inf")  #: clock time of the newest command written
+        #: the controller's timestamp last seen when the newest command was written
+        self._command_stamp: float | None = None
         self._last_kick = -float("inf")  #: clock time of the newest watchdog kick
 
     @classmethod
@@ -432,12 +447,21 @@ class UR5Arm:
             # A kick writes the command register (with 0): sent within a controller cycle of
             # a command, it overwrote the command before the script read it (a force mode that
             # never began, on the UR emulator). A command written since refreshes the watchdog
-            # itself, so the kick waits two cycles after one.
+            # itself, so the kick waits until the controller has run KICK_QUIET_CYCLES since
+            # (its own timestamp: a controller that runs late -- the emulator on a loaded
+            # machine -- read a force mode late, and a kick two wall-clock cycles after it
+            # overwrote it: the push never began), and two of the cell's cycles.
             # A kick is sent as often as the watchdog needs, not on every poll: a command the
             # tick sends right after a kick waits longer for the control script (measured
             # against the UR emulator: commands' median 2.9 -> 6.0 ms with a kick every poll).
             now = self._clock.now()
-            quiet = now - self._last_command >= 2.0 / self.settings.frequency
+            period = 1.0 / self.settings.frequency
+            stamp = getattr(self, "_stamp", None)
+            quiet = now - self._last_command >= 2.0 * period and (
+                self._command_stamp is None
+                or stamp is None
+                or stamp - self._command_stamp >= KICK_QUIET_CYCLES * period
+            )
             due = (now - max(self._last_command, self._last_kick)
                    >= KICK_SHARE / (self.settings.watchdog_hz or 1.0))
             if self._watchdog_on and not uploading and quiet and due:
@@ -605,9 +629,15 @@ class UR5Arm:
             return False
         return True
 
+    def _mark_command(self) -> None:
+        """A command is being written: the time, on the cell's clock and on the controller's
+        (the timestamp last seen), that the watchdog's kick waits out (see :meth:`_health`)."""
+        self._last_command = self._clock.now()
+        self._command_stamp = getattr(self, "_stamp", None)
+
     def _send(self, what: str, call: Callable[[], bool]) -> bool:
         """Run one controller call; a refusal or an exception is a FAULT naming the call."""
-        self._last_command = self._clock.now()
+        self._mark_command()
         try:
             ok = call()
         except Exception as e:
@@ -634,7 +664,7 @@ class UR5Arm:
         self._deferred = None
         self._op_before, self._op_ours = op, None
         # The handshake off the tick (see _CommandJob); status() polls the job, then the move.
-        self._last_command = self._clock.now()
+        self._mark_command()
         job = _CommandJob(self._clock.now(), what=what, fresh_script=False)
         self._job = job
         self._latch(MotionState.MOVING)
@@ -762,7 +792,7 @@ class UR5Arm:
     def _stop_motion(self) -> None:
         """Send the stop that matches the running mode (no-op when holding)."""
         s = self.settings
-        self._last_command = self._clock.now()
+        self._mark_command()
         if self._job is not None:
             self._job.cancelled = True  # the worker stops the arm once its upload returns
         elif self._deferred is not None:

@@ -8,6 +8,7 @@ import pytest
 import drivers
 from drivers.arm import MotionState
 from drivers.pose import Pose, rot_y
+from drivers.ur5.arm import SERVO_LOOKAHEAD
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_TCP
 from sim.arm import SimArm
 from sim.robot import SimRobot
@@ -160,6 +161,7 @@ def test_the_speed_slider_holds_a_move_where_it_is_and_resumes_it(
 
 def test_servo_follows_a_streamed_line(world: SimWorld, robot: SimRobot) -> None:
     arm = robot.arm
+    arm.set_servo_tracking(None)  # each target within the step
     start = arm.tool_pose()
     lag = 0.0
     for s in np.linspace(0.0, 0.05, 250):  # 5 cm in 2 s
@@ -193,11 +195,12 @@ def _stream(world: SimWorld, arm: SimArm, per_step: list[int]) -> list[float]:
 def test_servoj_smooths_an_uneven_stream_and_trails_by_its_lookahead(
     world: SimWorld, robot: SimRobot
 ) -> None:
-    """Two targets in one controller cycle and none in the next: reached within the step
-    the TCP jumps 0.2 mm then stands or even backs off; by servoj's law it moves evenly, lookahead x speed
-    behind the stream."""
+    """Two targets in one controller cycle and none in the next: reached within the step,
+    the TCP jumps 0.2 mm, then stands or even backs off; by servoj's law it moves evenly,
+    lookahead x speed behind the stream."""
     uneven = [1] * 60 + [2, 0] * 30 + [1] * 60
     arm = robot.arm
+    arm.set_servo_tracking(None)
     exact = -np.diff(_stream(world, arm, uneven))[62:118]
     assert np.max(exact) > 2e-4 and np.min(exact) < 0.2e-4  # jumps, then stands or backs
     arm.stop()
@@ -207,7 +210,20 @@ def test_servoj_smooths_an_uneven_stream_and_trails_by_its_lookahead(
     steps = -np.diff(z)[62:118]  # 0.1 mm a step on average
     assert np.all(steps > 0.7e-4) and np.all(steps < 1.3e-4)
     trail = start - 1e-4 * sum(uneven[:60]) - z[59]
-    assert trail == pytest.approx(-0.1 * 1e-4 / 0.008, rel=0.15)  # 0.1 s at 12.5 mm/s, behind
+    assert trail == pytest.approx(-(0.1 - 0.008) * 1e-4 / 0.008, rel=0.15)  # at 12.5 mm/s
+
+
+def test_the_twins_arm_follows_a_stream_by_the_drivers_servoj_law(
+    world: SimWorld, robot: SimRobot
+) -> None:
+    """By default the twin's UR follows a stream as the driver's servoL makes a UR follow it:
+    about ``SERVO_LOOKAHEAD`` seconds behind, not within the step."""
+    arm = robot.arm
+    start = float(arm.tool_pose().position[2])
+    z = _stream(world, arm, [1] * 100)  # 12.5 mm/s
+    trail = start - 1e-4 * 100 - z[-1]
+    # a step's target is followed from the step before: lookahead less one step behind
+    assert trail == pytest.approx(-(SERVO_LOOKAHEAD - 0.008) * 1e-4 / 0.008, rel=0.15)
 
 
 def test_servoj_tracking_rejects_a_law_outside_its_range(robot: SimRobot) -> None:

@@ -484,22 +484,47 @@ def test_watchdog_is_armed_when_started_and_kicked_as_often_as_it_needs() -> Non
     clock.t += 0.2 * share
     arm.status()
     assert rtde.names().count("kick_watchdog") == 2
-    # No kick within two controller cycles of a command: it would overwrite the command's
+    # No kick until the controller has run three cycles since a command (its timestamp; the
+    # recording controller's advances a cycle a read): it would overwrite the command's
     # register before the script read it (the command refreshes the watchdog itself), and the
     # next one a share of the period after the command.
     arm.force_mode([False, False, True, False, False, False], [0, 0, -5.0, 0, 0, 0],
                    [0, 0, 0.02, 0, 0, 0])
     kicks = rtde.names().count("kick_watchdog")
     clock.t += 2.0 / arm.settings.frequency
-    arm.status()
+    arm.status()  # one controller cycle on
     assert rtde.names().count("kick_watchdog") == kicks
     clock.t += share
-    arm.status()
+    arm.status()  # two
+    assert rtde.names().count("kick_watchdog") == kicks
+    arm.status()  # three
     assert rtde.names().count("kick_watchdog") == kicks + 1
     arm2, rtde2, _ = make()
     arm2.start_watchdog()
     arm2.status()
     assert "kick_watchdog" not in rtde2.names() and "set_watchdog" not in rtde2.names()
+
+
+def test_no_kick_while_a_late_controller_has_not_read_the_command() -> None:
+    """A controller running late (its timestamp not moving: the emulator on a loaded machine)
+    has not read a force mode yet; a kick then would overwrite it however much wall-clock time
+    passed. Once its cycles run on, the kick comes."""
+    arm, rtde, clock = make(UR5Settings(watchdog_hz=10.0))
+    arm.start_watchdog()
+    arm.status()
+    arm.force_mode([False, False, True, False, False, False], [0, 0, -5.0, 0, 0, 0],
+                   [0, 0, 0.02, 0, 0, 0])
+    kicks = rtde.names().count("kick_watchdog")
+    rtde.data_frozen = True
+    for _ in range(8):  # 80 ms of ticks, under the 0.5 s the data may stay stale
+        clock.t += 0.01
+        arm.status()
+    assert rtde.names().count("kick_watchdog") == kicks
+    rtde.data_frozen = False
+    for _ in range(3):
+        clock.t += 0.008
+        arm.status()
+    assert rtde.names().count("kick_watchdog") == kicks + 1
 
 
 # --- conversions, settings, check ----------------------------------------------------------
