@@ -65,6 +65,12 @@ class Arm(Protocol):
         """Set the TCP target for the next control step (streaming; the caller interpolates)."""
         ...
 
+    def servo_lag(self) -> float:
+        """Seconds the arm trails a steady stream of :meth:`servo` targets (a UR's servoj:
+        its lookahead time; 0 where each target is reached within the step). A skill whose
+        stream must keep pace with something else (the jaws closing) leads it by this."""
+        ...
+
     def force_mode(
         self,
         selection: Sequence[bool],

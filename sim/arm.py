@@ -410,6 +410,10 @@ class SimArm:
         """What drives the joints now: hold, path, joints, servo or force (diagnostics)."""
         return self._mode
 
+    def servo_lag(self) -> float:
+        """servoj's lookahead (s) when the arm follows by that law, else 0."""
+        return 0.0 if self._servoj is None else self._servoj[0]
+
     def servo(self, target: Pose) -> None:
         """Set the TCP target (base frame) for the next control step.
 
@@ -660,6 +664,7 @@ class SimArm:
         self._q_to = self._goal
         self._track(self._servo_target, servo=True)
         if self._state is MotionState.FAULT:
+            self._hold(here)  # where the arm is, not the goal it trails
             return
         goal, goal_clipped = self._q_to, self._clipped
         k = self._dt * gain

@@ -380,6 +380,9 @@ class FaultyArm:
         self._command()
         self.inner.force_mode(selection, wrench, speed_limits)
 
+    def servo_lag(self) -> float:
+        return self.inner.servo_lag()
+
     def servo(self, target: Pose) -> None:
         """A protectively stopped arm ignores servo targets (the controller refuses them)."""
         if self.protective is None:

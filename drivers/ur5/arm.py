@@ -756,6 +756,10 @@ class UR5Arm:
         self._start_async("moveJ", lambda: self._rtde.move_j(target, speed, acceleration))
 
     @_serialized
+    def servo_lag(self) -> float:
+        """servoj's lookahead time: the controller trails a steady stream by it."""
+        return self.settings.servo_lookahead
+
     def servo(self, target: Pose) -> None:
         """Stream the TCP target for the next control step: one ``servoL`` per call with
         ``time`` = one control period (the caller calls once per tick)."""

@@ -13,7 +13,8 @@ The Grasp is steered by what a real cell senses, not by the heights a twin knows
    the pivot frame's floor is corrected from it (:attr:`Grasp.frame`), so the Tilt turns about
    the real corner G.
 3. The jaws close onto H while the arm keeps the outer finger on S: the TCP follows half the
-   closing along the closing line (the 2F-85's jaws are symmetric), backs off along the fingers
+   closing along the closing line (the 2F-85's jaws are symmetric; led by the arm's servo lag,
+   :meth:`Grasp._width_ahead`), backs off along the fingers
    by the tips' advance (its linkage), and presses S down with the force the pinch needs to hold
    there by friction. A 2F-85 pinches with 20 N at least; at S that pinch pulls the pad along the
    surface with ``F cos(alpha)`` against a grip of ``mu (F sin(alpha) + P)``, so S holds only
@@ -93,6 +94,7 @@ class Grasp:
         self._advance_from = 0.0  #: m, the tips' advance then
         self._press_offset = 0.0  #: m the press regulation has moved the TCP down since
         self._moved_at = 0.0  #: s (clock), the last tick the fingers moved
+        self._close_began = 0.0  #: s (clock), when the jaws were told to close
         self._t = 0.0
         #: N, the press at S read each tick since the fingers last moved: the confirmation
         #: averages these (one sample after the arm stops caught the contact mid-bounce)
@@ -158,7 +160,7 @@ class Grasp:
         self._closed_from = gripper.width()
         self._advance_from = gripper.tip_advance(self._closed_from)
         self._press_offset = 0.0
-        self._moved_at = self._t = self.dev.clock.now()
+        self._moved_at = self._t = self._close_began = self.dev.clock.now()
         gripper.close(p.grip_force, p.close_speed)
 
     def _closed(self) -> bool:
@@ -169,7 +171,7 @@ class Grasp:
             return False
         now = clock.now()
         dt, self._t = max(0.0, now - self._t), now
-        width = gripper.width()
+        width = self._width_ahead(now)
         closing = self._closed_from - width
         advance = gripper.tip_advance(width) - self._advance_from
         pressing = float(world_force(self.dev) @ UP)
@@ -189,6 +191,21 @@ class Grasp:
             return False
         self._settled_press.append(pressing)
         return now - self._moved_at >= p.close_settle
+
+    def _width_ahead(self, now: float) -> float:
+        """The opening the jaws will have when the arm gets where it is sent now: the arm
+        trails its stream by :meth:`drivers.arm.Arm.servo_lag` (a UR's servoj lookahead), and a
+        palm that lags the closing jaws leaves the outer pad held on S by friction, which
+        stalls the jaws short of H (the twin: 6 mm short, the inner finger out of the hole).
+        The closing rate is the one measured since the close began (the reported width
+        comes in counts, too coarse for a rate from one tick to the next)."""
+        gripper = self.dev.gripper
+        width = gripper.width()
+        lag = self.dev.arm.servo_lag()
+        if lag <= 0.0 or not gripper.moving():
+            return width
+        rate = max(0.0, self._closed_from - width) / max(now - self._close_began, lag)
+        return max(0.0, width - rate * lag)
 
     def _close_failed(self) -> str | None:
         """No top surface where the part should lie, or the jaws ran past where the plan puts H

@@ -111,6 +111,22 @@ def test_servo_to_an_unreachable_target_faults(world: SimWorld, robot: SimRobot)
     assert arm.status() == drivers.ArmStatus(MotionState.FAULT, "target unreachable")
 
 
+def test_a_stream_out_of_reach_faults_where_the_arm_is(world: SimWorld, robot: SimRobot) -> None:
+    """servoj trails the stream: the fault holds the arm where it is, not at the goal ahead."""
+    arm = robot.arm
+    start = arm.tool_pose()
+    for k in range(1, 1000):  # up at 0.25 m/s until out of reach
+        arm.servo(Pose(start.position + [0, 0, 0.002 * k], start.rotation))
+        world.step()
+        if arm.status().state is MotionState.FAULT:
+            break
+    assert arm.status().message == "target unreachable"
+    at_fault = arm.tool_pose()
+    for _ in range(30):
+        world.step()
+    assert arm.tool_pose().distance(at_fault)[0] < 1e-3
+
+
 def test_stop_holds_where_it_is(world: SimWorld, robot: SimRobot) -> None:
     arm = robot.arm
     start = arm.tool_pose()

@@ -59,6 +59,9 @@ class FakeArm:
     def servo(self, target: Pose) -> None:
         self.pose = target
 
+    def servo_lag(self) -> float:
+        return 0.0
+
     def force_mode(self, selection, wrench, speed_limits) -> None:
         self.commands.append(("force", tuple(wrench)))
         self.force = (np.asarray(selection, bool), np.asarray(wrench, float),
