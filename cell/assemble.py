@@ -225,7 +225,9 @@ def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> A
         mu_ground=sim.mu_ground,
         machining_time=config.workflow.machining_time_s,
         gripper=prep.gripper,
-        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain),
+        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain)
+        if sim.servoj
+        else None,
     )
     try:
         return SimCellBackend(prep.layout, prep.part, options, resume=resume)

@@ -208,7 +208,8 @@ class TrialConfig:
     layout: Any = None  #: :class:`drivers.layout.CellLayout` of cell.layout, where given
     catalogue: Path | None = None  #: cell.catalogue (relative to the file), where given
     gripper: Any = None  #: :class:`drivers.gripper_spec.GripperSpec` of ``gripper``, where given
-    servo: tuple[float, float] | None = None  #: devices.arm's servoj (lookahead s, gain)
+    #: devices.arm's servoj (lookahead s, gain) where sim.servoj is on, else None
+    servo: tuple[float, float] | None = None
 
 
 def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialConfig:
@@ -265,7 +266,9 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
         layout=layout,
         catalogue=catalogue,
         gripper=gripper,
-        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain),
+        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain)
+        if config.sim.servoj
+        else None,
     )
 
 
@@ -379,7 +382,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         setup = dataclasses.replace(setup, mu_ground=mu_ground)
     if mu_pad is not None:
         setup = dataclasses.replace(setup, mu_pad=mu_pad)
-    if given.servo is not None:
+    if given.servo is not None:  # sim.servoj: the arm follows the stream as a UR does
         setup = dataclasses.replace(setup, servo=given.servo)
     if given.control_hz is not None:
         setup = dataclasses.replace(

@@ -36,7 +36,6 @@ from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
 from drivers.parts import Part
 from drivers.pose import Pose
-from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from lab.stats import wilson_interval
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
@@ -94,8 +93,9 @@ class TrialSetup:
     #: part fits, up against the walls, any yaw, either end towards the robot.
     pose: str = "nominal"
     physics: PhysicsSettings = field(default_factory=PhysicsSettings)
-    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (devices.arm)
-    servo: tuple[float, float] = (SERVO_LOOKAHEAD, SERVO_GAIN)
+    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (sim.servoj
+    #: with devices.arm); None: each target within the control step
+    servo: tuple[float, float] | None = None
     #: what the real cell does not know exactly, drawn per trial (:mod:`sim.uncertainty`);
     #: ``Uncertainty.ideal()`` turns it off (``--ideal``)
     uncertainty: Uncertainty = field(default_factory=Uncertainty)

@@ -23,7 +23,6 @@ from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
 from drivers.machine import TimedMachine
 from drivers.parts import Frictions, Part
-from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from sim.camera import SimCamera
 from sim.cell_layout import build_cell
 from sim.judge import judge
@@ -52,8 +51,9 @@ class TwinOptions:
     fill: str = "rows"
     #: the gripper's description (None: the shipped 2F-85)
     gripper: GripperSpec | None = None
-    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (devices.arm)
-    servo: tuple[float, float] = (SERVO_LOOKAHEAD, SERVO_GAIN)
+    #: servoj's (lookahead s, gain) by which the arm follows the streamed targets (sim.servoj
+    #: with devices.arm); None: each target within the control step
+    servo: tuple[float, float] | None = None
 
 
 def spawn_spots(

@@ -15,7 +15,6 @@ from numpy.typing import ArrayLike, NDArray
 from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.pose import Pose
 from drivers.tool import FINGER_LENGTH
-from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_JOINTS, forward_kinematics
 from sim.arm import SimArm
 from sim.ft_sensor import SimForceTorqueSensor
@@ -34,7 +33,7 @@ class SimRobot:
         home_joints: ArrayLike | None = None,
         gripper_self_locking: bool = True,
         gripper: GripperSpec | None = None,
-        servo: tuple[float, float] | None = (SERVO_LOOKAHEAD, SERVO_GAIN),
+        servo: tuple[float, float] | None = None,
     ) -> None:
         """Load the robot with its base frame at ``base_pose`` (world frame; default: origin),
         arm at ``home_joints`` (rad; default :data:`HOME_JOINTS`), gripper fully open.
@@ -42,7 +41,8 @@ class SimRobot:
         back open by the part); ``gripper``: the gripper's description (the shipped 2F-85 by
         default): the fingers' sizes, force and speed ranges, position counts and linkage.
         ``servo``: servoj's (lookahead s, gain) by which the arm follows a streamed target, as
-        the UR driver sets it (``devices.arm``); None reaches each target within the step."""
+        a UR follows the driver's ``servoL`` (``sim.servoj``); None reaches each target within
+        the step."""
         self.gripper_spec = gripper = gripper or default_gripper()
         self.world = world
         self.base_pose = base_pose or Pose()

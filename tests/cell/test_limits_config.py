@@ -178,3 +178,14 @@ def test_the_experiments_take_the_skills_from_a_configuration(tmp_path, capsys) 
     code = main(["pivot", "--part", "bushing", "--config", str(path), "--json", "x.json"])
     err = capsys.readouterr().err
     assert code == 2 and "skills.pivot.tilt_speed_m_s" in err and "Traceback" not in err
+
+
+def test_sim_servoj_hands_the_drivers_servo_law_to_the_twins_trials() -> None:
+    """``sim.servoj`` makes the twin's arm follow the stream by devices.arm's servoj values,
+    as the UR follows the driver's servoL; off, the trials keep their own arm (None)."""
+    from lab.pivot_cmd import trial_config
+
+    assert trial_config(None, ["sim.seed=1"]).servo is None
+    sets = ["sim.servoj=true", "devices.arm.servo_lookahead_s=0.08", "devices.arm.servo_gain=500"]
+    on = trial_config(None, sets)
+    assert on.servo == (0.08, 500.0)

@@ -8,7 +8,7 @@ import pytest
 import drivers
 from drivers.arm import MotionState
 from drivers.pose import Pose, rot_y
-from drivers.ur5.arm import SERVO_LOOKAHEAD
+from drivers.ur5.arm import SERVO_GAIN, SERVO_LOOKAHEAD
 from drivers.ur5.kinematics import ARM_JOINTS, HOME_TCP
 from sim.arm import SimArm
 from sim.robot import SimRobot
@@ -114,6 +114,7 @@ def test_servo_to_an_unreachable_target_faults(world: SimWorld, robot: SimRobot)
 def test_a_stream_out_of_reach_faults_where_the_arm_is(world: SimWorld, robot: SimRobot) -> None:
     """servoj trails the stream: the fault holds the arm where it is, not at the goal ahead."""
     arm = robot.arm
+    arm.set_servo_tracking(SERVO_LOOKAHEAD, SERVO_GAIN)
     start = arm.tool_pose()
     for k in range(1, 1000):  # up at 0.25 m/s until out of reach
         arm.servo(Pose(start.position + [0, 0, 0.002 * k], start.rotation))
@@ -229,12 +230,15 @@ def test_servoj_smooths_an_uneven_stream_and_trails_by_its_lookahead(
     assert trail == pytest.approx(-(0.1 - 0.008) * 1e-4 / 0.008, rel=0.15)  # at 12.5 mm/s
 
 
-def test_the_twins_arm_follows_a_stream_by_the_drivers_servoj_law(
+def test_with_servoj_the_twins_arm_trails_a_stream_by_the_drivers_lookahead(
     world: SimWorld, robot: SimRobot
 ) -> None:
-    """By default the twin's UR follows a stream as the driver's servoL makes a UR follow it:
-    about ``SERVO_LOOKAHEAD`` seconds behind, not within the step."""
+    """With ``sim.servoj`` the twin's UR follows a stream as the driver's servoL makes a UR
+    follow it: about ``SERVO_LOOKAHEAD`` seconds behind, not within the step (the default)."""
     arm = robot.arm
+    assert arm.servo_lag() == 0.0
+    arm.set_servo_tracking(SERVO_LOOKAHEAD, SERVO_GAIN)
+    assert arm.servo_lag() == SERVO_LOOKAHEAD
     start = float(arm.tool_pose().position[2])
     z = _stream(world, arm, [1] * 100)  # 12.5 mm/s
     trail = start - 1e-4 * 100 - z[-1]
