@@ -212,7 +212,8 @@ class CameraDevice(_Section):
 
 
 class DevicesSection(_Section):
-    """The real devices (read only when ``cell.backend`` is ``hw``)."""
+    """The real devices (read only when ``cell.backend`` is ``hw``; the twin reads
+    ``devices.arm``'s servo law where ``sim.servoj`` asks it to move as the UR does)."""
 
     arm: ArmDevice = Field(default_factory=ArmDevice)
     gripper: GripperDevice = Field(default_factory=GripperDevice)
