@@ -18,7 +18,13 @@ import numpy as np
 from py_trees.behaviour import Behaviour
 
 from cell.catalogue import CatalogueError, load_catalogue
-from cell.config import CellConfig, check_tree_actuators, gripper_of, skill_settings
+from cell.config import (
+    CellConfig,
+    check_tree_actuators,
+    gripper_of,
+    skill_settings,
+    twin_servo,
+)
 from cell.reach import ur5_reach
 from cell.runner import Backend, CellState
 from drivers.gripper_spec import GripperSpec
@@ -225,9 +231,7 @@ def build_twin(prep: Prepared, seed: int | None = None, resume: Any = None) -> A
         mu_ground=sim.mu_ground,
         machining_time=config.workflow.machining_time_s,
         gripper=prep.gripper,
-        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain)
-        if sim.servoj
-        else None,
+        servo=twin_servo(config),
     )
     try:
         return SimCellBackend(prep.layout, prep.part, options, resume=resume)

@@ -555,6 +555,16 @@ def _base_dir(doc: LinedDocument) -> Path:
     return source.resolve().parent if source.is_file() else Path.cwd()
 
 
+def twin_servo(config: CellConfig) -> tuple[float, float] | None:
+    """servoj's (lookahead s, gain) the twin's arm follows its stream by: devices.arm's, where
+    ``sim.servoj`` asks the twin to move as the UR does; None (each target within the step)
+    otherwise."""
+    if not config.sim.servoj:
+        return None
+    arm = config.devices.arm
+    return (arm.servo_lookahead_s, arm.servo_gain)
+
+
 def gripper_of(config: CellConfig, doc: LinedDocument) -> GripperSpec:
     """The configured gripper's description; :class:`ConfigError` at ``gripper`` if it cannot
     be read."""

@@ -224,7 +224,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
     if config_path is None and not sets:
         return TrialConfig()
     from cell.assemble import _layout
-    from cell.config import gripper_of, skill_settings, validate_document
+    from cell.config import gripper_of, skill_settings, twin_servo, validate_document
     from cell.overrides import apply_sets
     from skills.params import apply_config, with_limits
     from trees.yaml_lines import ConfigError, LinedDocument, load_yaml
@@ -266,9 +266,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
         layout=layout,
         catalogue=catalogue,
         gripper=gripper,
-        servo=(config.devices.arm.servo_lookahead_s, config.devices.arm.servo_gain)
-        if config.sim.servoj
-        else None,
+        servo=twin_servo(config),
     )
 
 

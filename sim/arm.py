@@ -45,8 +45,9 @@ How it moves, and why:
 * **servoj** (:meth:`SimArm.set_servo_tracking`, off by default): a UR follows each
   ``servoL`` target by ``servoj``, which UR describes as a P-controller (``gain``) on the error
   from the current position projected ``lookahead_time`` ahead with the current velocity:
-  ``q'' = gain (q_goal - q - lookahead q')``. At the driver's 0.1 s and 300 that is a filter of
-  about 2.8 Hz, damping 0.87, trailing a steady stream by ``lookahead`` seconds; a stream whose
+  ``q'' = gain (q_goal - q - lookahead q')``. At the driver's 0.05 s and 1000 that is a filter
+  of about 5 Hz, damping 0.79, trailing a steady stream by about ``lookahead`` seconds (less one
+  control step: a target is followed from the step after it is sent); a stream whose
   targets arrive unevenly (two in one controller cycle, none in the next) moves the arm
   smoothly. Off, a target is reached within the step, as the twin's own ticks land one per
   step. The emulated controller turns it on with each ``servoL``'s values.

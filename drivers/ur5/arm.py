@@ -297,6 +297,9 @@ class UR5Arm:
         #: and the gripper's calibration poll the arm less often than a 10 Hz watchdog needs
         self._watchdog_on = False
         self._last_command = -float("inf")  #: clock time of the newest command written
+        #: the controller's timestamp last read (its data packages), and when it last moved
+        self._stamp: float | None = None
+        self._stamp_seen = 0.0
         #: the controller's timestamp last seen when the newest command was written
         self._command_stamp: float | None = None
         self._last_kick = -float("inf")  #: clock time of the newest watchdog kick
@@ -414,7 +417,7 @@ class UR5Arm:
     def _data_stale(self) -> bool:
         """True when the controller's timestamp has not moved for ``data_timeout`` s."""
         stamp, now = float(self._rtde.timestamp()), self._clock.now()
-        if stamp != getattr(self, "_stamp", None):
+        if stamp != self._stamp:
             self._stamp, self._stamp_seen = stamp, now
             return False
         return now - self._stamp_seen > self.settings.data_timeout
@@ -456,11 +459,10 @@ class UR5Arm:
             # against the UR emulator: commands' median 2.9 -> 6.0 ms with a kick every poll).
             now = self._clock.now()
             period = 1.0 / self.settings.frequency
-            stamp = getattr(self, "_stamp", None)
             quiet = now - self._last_command >= 2.0 * period and (
                 self._command_stamp is None
-                or stamp is None
-                or stamp - self._command_stamp >= KICK_QUIET_CYCLES * period
+                or self._stamp is None
+                or self._stamp - self._command_stamp >= KICK_QUIET_CYCLES * period
             )
             due = (now - max(self._last_command, self._last_kick)
                    >= KICK_SHARE / (self.settings.watchdog_hz or 1.0))
@@ -633,7 +635,7 @@ class UR5Arm:
         """A command is being written: the time, on the cell's clock and on the controller's
         (the timestamp last seen), that the watchdog's kick waits out (see :meth:`_health`)."""
         self._last_command = self._clock.now()
-        self._command_stamp = getattr(self, "_stamp", None)
+        self._command_stamp = self._stamp
 
     def _send(self, what: str, call: Callable[[], bool]) -> bool:
         """Run one controller call; a refusal or an exception is a FAULT naming the call."""
@@ -755,11 +757,11 @@ class UR5Arm:
         self._mode, self._goal, self._goal_q = "joints", None, goal
         self._start_async("moveJ", lambda: self._rtde.move_j(target, speed, acceleration))
 
-    @_serialized
     def servo_lag(self) -> float:
         """servoj's lookahead time: the controller trails a steady stream by it."""
         return self.settings.servo_lookahead
 
+    @_serialized
     def servo(self, target: Pose) -> None:
         """Stream the TCP target for the next control step: one ``servoL`` per call with
         ``time`` = one control period (the caller calls once per tick)."""

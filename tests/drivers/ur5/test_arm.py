@@ -817,3 +817,15 @@ def test_the_watchdog_is_armed_after_the_move_in_flight_not_beside_it() -> None:
     m.arm.start_watchdog()
     names = m.rtde.names()
     assert "set_watchdog" in names and names.index("move_l") < names.index("set_watchdog")
+
+
+@pytest.mark.parametrize(
+    "name", ["move_to", "move_path", "move_joints", "servo", "force_mode", "recover"]
+)
+def test_every_command_holds_the_drivers_lock(name: str) -> None:
+    """The force-torque guard stops the arm from the sensor's thread while the tick may be
+    inside a command: each command runs under the driver's lock (``__wrapped__`` is what
+    :func:`functools.wraps` leaves on the locking wrapper)."""
+    from drivers.ur5.arm import UR5Arm
+
+    assert hasattr(getattr(UR5Arm, name), "__wrapped__")
