@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from py_trees.behaviour import Behaviour
 
 from cell.catalogue import CatalogueError, load_catalogue
@@ -25,7 +26,7 @@ from cell.config import (
     skill_settings,
     twin_servo,
 )
-from cell.reach import ur5_reach
+from cell.reach import reach_from, ur5_reach
 from cell.runner import Backend, CellState
 from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
@@ -177,6 +178,11 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
     _check_reach(config, doc, geometry)
     state = CellState(name=config.cell.name)
     s = config.safety
+
+    def arm_joints() -> NDArray[np.float64]:
+        # the plans are checked from where the arm stands when they are made (set below)
+        return ctx.devices.arm.joint_positions()
+
     ctx = CellContext(
         devices=None,  # type: ignore[arg-type]  -- set by open_backend, after validation
         machine=None,  # type: ignore[arg-type]
@@ -185,7 +191,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         plan=plan,
         params=params,
         events=state,
-        reach=ur5_reach,
+        reach=reach_from(arm_joints),
         limits=WorkflowLimits(
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cell.reach import ur5_reach
+from cell.reach import reach_from, ur5_reach
 from drivers.devices import Devices
 from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
@@ -418,8 +418,10 @@ def run_trial(
         walls = bin_obstacles(setup.layout)
         width = dev.gripper.finger_width
 
+        reach = reach_from(dev.arm.joint_positions)  #: from where the arm stands when asked
+
         def choose(f: PivotFrame) -> EndChoice:
-            return choose_end(f, params, walls, width, setup.part.open_ends, reach=ur5_reach)
+            return choose_end(f, params, walls, width, setup.part.open_ends, reach=reach)
 
         def grasp_rotation(f: PivotFrame) -> NDArray[np.float64]:
             """The Grasp's rotation at the end the plan will choose, sweeps and all: a view
@@ -440,7 +442,7 @@ def run_trial(
             # No end clears where the part lies: drag it to where one does, look again.
             move = plan_reposition(
                 frame, setup.part, params, setup.reposition or RepositionParams(), walls, [],
-                setup.layout.bin_interior(), width, reach=ur5_reach,
+                setup.layout.bin_interior(), width, reach=reach,
             )
             if move is not None:
                 early, repositioned = "reposition", True
