@@ -69,9 +69,14 @@ class ForcePush:
         contact_ratio: float = CONTACT_RATIO,
         free: tuple[int, ...] = (),
         lean: ArrayLike = (0.0, 0.0, 0.0),
+        reference: Callable[[], ArrayLike | None] | None = None,
     ) -> None:
         """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``;
-        ``lean``: the force (N) pressed along them."""
+        ``lean``: the force (N) pressed along them. ``reference``: the force on the tool (N,
+        base frame) that counts as nothing pressed, read when the push begins (default, or when
+        it gives None: the reading then). A push that begins in a contact it must let go of
+        needs one read before it: measured from its own start, the free axes would keep
+        pressing what they pressed then."""
         d = np.asarray(direction, float)
         axis = int(np.argmax(np.abs(d)))
         if np.count_nonzero(d) != 1:
@@ -88,6 +93,7 @@ class ForcePush:
         self.force, self.speed, self.settle = force, speed, settle
         self.still_speed, self.contact_ratio = still_speed, contact_ratio
         self._reach = reach if callable(reach) else (lambda r=float(reach): r)
+        self._reference = reference
         self.contact = False
         self.contact_pose: Pose | None = None
         self.resisting = 0.0  #: N, the newest force against the push (above the reference)
@@ -103,7 +109,8 @@ class ForcePush:
 
     def _start(self) -> None:
         arm = self.dev.arm
-        self._ref = world_force(self.dev)
+        given = None if self._reference is None else self._reference()
+        self._ref = world_force(self.dev) if given is None else np.asarray(given, float)
         self._start_pos = arm.tool_pose().position.copy()
         self._limit = float(self._reach())
         self.contact, self.contact_pose, self.travelled = False, None, 0.0

@@ -75,8 +75,13 @@ class PackParams:
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
     settle: float = si(0.2, "s", 0.0, 5.0, "held still before a reference wrench is read")
     floor_gap: float = si(0.005, "m", 0.0, 0.05, "above the floor where the fast descent ends")
+    #: 3 N, not 6: the held part hangs 0.5 mm above the floor (``lift_off``), so a push needs
+    #: no force to move it, only one the wrist feels far above its noise (the FT300's is about
+    #: 0.1 N); every newton more is pressed into packed parts that the floor holds by their
+    #: weight's friction alone (the bushing's: under 1 N) and a contact off their centre line
+    #: turns sideways. At 6 N the twin moved packed bushings up to 1.8 mm a push.
     contact_force: float = si(
-        6.0, "N", 0.5, 50.0,
+        3.0, "N", 0.5, 50.0,
         "each push presses with in force mode; the guarded descent stops at it",
     )
     contact_settle: float = si(
@@ -101,7 +106,7 @@ class PackParams:
         0.002, "m", 0.0, 0.01, "the last +x push may go beyond the back_off it closes"
     )
     lean_force: float = si(
-        2.0, "N", 0.0, 20.0,
+        1.0, "N", 0.0, 20.0,
         "pressed +y during the +x pushes: the part slides along the wall or the row before it",
     )
     release: float = si(0.006, "m", 0.0, 0.03, "the jaws open to let go")
@@ -220,6 +225,17 @@ class PackInBox(SequenceSkill):
         self.push_x_again = push(
             "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,), lean_y
         )
+        # The open hand comes up in force mode, giving way in the plane to anything it touches,
+        # with nothing pressed beyond the hanging part's reading (its weight is along z only).
+        # A position move up dragged the part sideways by the finger still touching the hole's
+        # wall: a flat pad in a round (or 12-sided) hole touches it with a corner once the part
+        # has turned a little in the grasp, and the twin measured 22-25 N on that corner and a
+        # whole packed row dragged 6 mm off its wall. Giving way, the corner slides off the wall.
+        self.withdraw = ForcePush(
+            "withdraw up", dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
+            p.grip_depth + p.clear_height, settle=p.contact_settle, still_speed=p.still_speed,
+            free=(0, 1), reference=lambda: self.reference.force,
+        )
 
     # --- the phases --------------------------------------------------------------------------
     def _over_place_steps(self) -> list[GuardedMotion]:
@@ -277,7 +293,8 @@ class PackInBox(SequenceSkill):
             GuardedMotion("let go", self._release, self._follow_opening, dev.arm, dev.ft,
                           dev.clock, g),
             dev.move("off the wall", g, self._off_the_wall),
-            dev.move("withdraw up", g, self._withdraw),
+            self.withdraw.motion,
+            check("withdrawn", dev, g, self._withdrawn),
             wait("settle", dev, g, p.settle),
             check("part left in the box", dev, g, self._let_go),
         ]
@@ -368,9 +385,13 @@ class PackInBox(SequenceSkill):
         dx, dy = -p.release_clearance * self._x[XY]
         self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
-    def _withdraw(self) -> None:
-        p = self.params
-        self._move_by(0.0, 0.0, p.grip_depth + p.clear_height)
+    def _withdrawn(self) -> str | None:
+        if self.withdraw.contact:
+            return (
+                f"the open hand was held down on its way up ({self.withdraw.resisting:.1f} N) "
+                f"{1e3 * self.withdraw.travelled:.0f} mm above where it let go"
+            )
+        return None
 
     def _let_go(self) -> str | None:
         p, part = self.params, self.part

@@ -68,3 +68,32 @@ def test_packing_x_pushes_lean_towards_the_y_wall_and_the_others_do_not() -> Non
     assert pack.push_x.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
     assert pack.push_x_again.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
     assert not pack.push_y.lean.any() and not pack.floor.lean.any()
+
+
+def test_a_given_reference_is_what_the_free_axes_hold_not_the_reading_at_the_start() -> None:
+    """A push that begins pressing something (a finger caught on a hole's wall) and is given
+    the reading from before that contact commands nothing sideways: the contact moves it."""
+    d = devices()
+    push_back(d, (5.0, -3.0, -1.5))  # a finger pressed sideways as the push begins
+    before = np.array([0.1, -0.2, -1.5])  # read with the part hanging, nothing touching
+    push = ForcePush(
+        "withdraw up", dev(d), Guard(), (0, 0, 1), 6.0, 0.05, 0.04, free=(0, 1),
+        reference=lambda: before,
+    )
+    push.motion.tick()
+    _, wrench, _ = d["arm"].force
+    assert wrench[0] == pytest.approx(-0.1) and wrench[1] == pytest.approx(0.2)
+    assert wrench[2] == pytest.approx(1.5 + 6.0)
+    unread = ForcePush(
+        "withdraw up", dev(d), Guard(), (0, 0, 1), 6.0, 0.05, 0.04, free=(0, 1),
+        reference=lambda: None,
+    )
+    unread.motion.tick()
+    _, wrench, _ = d["arm"].force
+    assert wrench[0] == pytest.approx(-5.0) and wrench[1] == pytest.approx(3.0)
+
+
+def test_packing_withdraws_the_open_hand_giving_way_in_the_plane() -> None:
+    pack = PackInBox(PLACE, PART, dev(devices()))
+    assert pack.withdraw.axis == 2 and pack.withdraw.sign == 1.0
+    assert pack.withdraw.free == (0, 1) and not pack.withdraw.lean.any()
