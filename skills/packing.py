@@ -242,7 +242,7 @@ class PackInBox(SequenceSkill):
         dev, p, g = self.dev, self.params, self.params.guard
         return [
             dev.move("over the place", g, self._over_place),
-            wait("hold still", dev, g, p.settle),
+            self.reference.hold("hold still", g, p.settle),
             check("read the hanging part", dev, g, self.reference.read),
         ]
 
@@ -295,7 +295,7 @@ class PackInBox(SequenceSkill):
             dev.move("off the wall", g, self._off_the_wall),
             self.withdraw.motion,
             check("withdrawn", dev, g, self._withdrawn),
-            wait("settle", dev, g, p.settle),
+            self.reference.hold("settle", g, p.settle),
             check("part left in the box", dev, g, self._let_go),
         ]
 

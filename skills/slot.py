@@ -47,7 +47,7 @@ from drivers.pose import Pose
 from skills.axes import FZ, XY, Z
 from skills.force import world_force
 from skills.frames import frame_step
-from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure, wait
+from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure
 from skills.params import guard_field, si
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import hole_grasp_rotation, pinched_span
@@ -201,28 +201,61 @@ def travel_path(start: Pose, target: Pose, min_radius: float) -> list[Pose]:
 
 
 class WrenchReference:
-    """The force on the tool read once, holding still, before a part is let go or taken (the
-    part hanging, or the empty gripper): the weight check afterwards compares with it, so the
-    sensor's offset and the tool's own weight cancel out."""
+    """The force on the tool read holding still, before a part is let go or taken (the part
+    hanging, or the empty gripper): the weight check afterwards compares with it, so the
+    sensor's offset and the tool's own weight cancel out.
+
+    Both sides of the comparison are means over a hold (:meth:`hold`), not single readings: a
+    part that rocks on a pad's corner after a lift swings the wrist's reading by a newton and
+    more from one sample to the next (the twin read 1.44-1.67 N for a held 1.53 N bushing and
+    then, one sample, 0.57 N: a held part called left behind). A reading with no hold before it
+    is the sample then."""
 
     def __init__(self, dev: Devices) -> None:
         self.dev = dev
         self.force: NDArray[np.float64] | None = None  #: N, base frame; None until read
+        self._sum = np.zeros(3)
+        self._count = 0
+
+    def hold(self, name: str, guard: Guard, seconds: float) -> GuardedMotion:
+        """Hold still for ``seconds`` under ``guard``, averaging the wrist's force: the reading
+        the next :meth:`read`, :meth:`lost` or :meth:`gained` uses."""
+        clock = self.dev.clock
+        began = [0.0]
+
+        def start() -> None:
+            self._sum, self._count = np.zeros(3), 0
+            began[0] = clock.now()
+
+        def done() -> bool:
+            self._sum = self._sum + world_force(self.dev)
+            self._count += 1
+            return clock.now() - began[0] >= seconds
+
+        return GuardedMotion(name, start, done, self.dev.arm, self.dev.ft, clock, guard)
+
+    def _now(self) -> NDArray[np.float64]:
+        """The mean over the last hold, or the reading now when there was none since the
+        reference was read."""
+        if self._count:
+            return self._sum / self._count
+        return world_force(self.dev)
 
     def read(self) -> str | None:
         """Take the reference now (a :func:`check`'s test: it never fails)."""
-        self.force = world_force(self.dev)
+        self.force = self._now()
+        self._sum, self._count = np.zeros(3), 0
         return None
 
     def lost(self) -> float:
         """N of downward pull the tool lost since the reference (a part let go: its weight)."""
         assert self.force is not None
-        return float(world_force(self.dev)[FZ] - self.force[FZ])
+        return float(self._now()[FZ] - self.force[FZ])
 
     def gained(self) -> float:
         """N of downward pull the tool gained since the reference (a part taken: its weight)."""
         assert self.force is not None
-        return float(self.force[FZ] - world_force(self.dev)[FZ])
+        return float(self.force[FZ] - self._now()[FZ])
 
 
 class ContactMove:
@@ -328,7 +361,7 @@ class _SlotSkill(SequenceSkill):
         """Hold still ``settle`` s, then read the reference wrench with ``what`` on the tool."""
         dev, p = self.dev, self.params
         return [
-            wait("hold still", dev, p.guard, p.settle),
+            self.reference.hold("hold still", p.guard, p.settle),
             check(f"read the {what}", dev, p.guard, self.reference.read),
         ]
 
@@ -337,7 +370,10 @@ class _SlotSkill(SequenceSkill):
     ) -> list[GuardedMotion]:
         """Let the part settle ``settle`` s, then check ``test`` (the weight check)."""
         dev, p = self.dev, self.params
-        return [wait("settle", dev, p.guard, p.settle), check(name, dev, p.guard, test, failure)]
+        return [
+            self.reference.hold("settle", p.guard, p.settle),
+            check(name, dev, p.guard, test, failure),
+        ]
 
     def _weight_checked(self) -> bool:
         return self.params.weight_check > 0 and self.reference.force is not None

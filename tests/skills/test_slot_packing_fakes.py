@@ -305,3 +305,36 @@ def test_travel_path_goes_around_the_base() -> None:
         s = np.linspace(0, 1, 50)[:, None]
         seg = a[:2] + s * (b[:2] - a[:2])
         assert np.min(np.linalg.norm(seg, axis=1)) > 0.25
+
+
+# ---------------------------------------------------------------------------- the weight checks
+def test_the_weight_check_reads_the_mean_over_its_hold_not_one_swinging_sample() -> None:
+    """A held part rocking on a pad's corner swings the wrist's reading: the reference and the
+    check are means over their holds, so the one low sample at the end does not call a held
+    part left behind, while a part really lost is still seen as lost."""
+    from skills.motion import Guard
+    from skills.slot import WrenchReference
+
+    d = devices()
+    ref = WrenchReference(dev(d))
+    weight = 1.5
+
+    def hold_reading(readings: list[float]) -> None:
+        hold = ref.hold("hold", Guard(), 0.1)
+        hold.start()
+        for i in range(100):
+            push_back(d, (0.0, 0.0, readings[i % len(readings)]))
+            d["clock"].t += d["clock"].dt
+            if hold.tick().status is not Status.RUNNING:
+                return
+        raise AssertionError("the hold never ended")
+
+    hold_reading([0.0, 0.2, -0.2])  # the empty gripper
+    ref.read()
+    assert ref.force is not None and abs(ref.force[2]) < 0.1
+    # held: -1.5 N on average, the last sample swung to -0.5 N
+    hold_reading([-1.5, -1.4, -1.6, -1.5, -1.5, -1.5, -1.6, -1.4, -1.5, -1.5, -1.5, -1.5, -0.5])
+    push_back(d, (0.0, 0.0, -0.5))
+    assert ref.gained() > 0.5 * weight
+    hold_reading([-0.1, 0.1])  # lost: nothing hangs from the fingers
+    assert ref.gained() < 0.5 * weight
