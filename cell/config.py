@@ -77,10 +77,10 @@ class SimSection(_Section):
     mu_ground: float = Field(0.4, gt=0.0, le=2.0, description="part-floor friction")
     realtime: bool = Field(False, description="pace the twin to wall time (for watching)")
     servoj: bool = Field(
-        False,
+        True,
         description="the twin's arm follows streamed targets by UR's servoj law with "
         "devices.arm.servo_lookahead_s and servo_gain, as a UR does (false: each target within "
-        "the control step). Off by default: the packing's let-go does not yet hold up under it",
+        "the control step, for debugging)",
     )
 
 

@@ -181,11 +181,13 @@ def test_the_experiments_take_the_skills_from_a_configuration(tmp_path, capsys) 
 
 
 def test_sim_servoj_hands_the_drivers_servo_law_to_the_twins_trials() -> None:
-    """``sim.servoj`` makes the twin's arm follow the stream by devices.arm's servoj values,
-    as the UR follows the driver's servoL; off, the trials keep their own arm (None)."""
+    """``sim.servoj`` (on by default) makes the twin's arm follow the stream by devices.arm's
+    servoj values, as the UR follows the driver's servoL; off, the trials keep their own arm
+    (None)."""
     from lab.pivot_cmd import trial_config
 
-    assert trial_config(None, ["sim.seed=1"]).servo is None
-    sets = ["sim.servoj=true", "devices.arm.servo_lookahead_s=0.08", "devices.arm.servo_gain=500"]
+    assert trial_config(None, ["sim.seed=1"]).servo == (0.05, 1000.0)
+    assert trial_config(None, ["sim.servoj=false"]).servo is None
+    sets = ["devices.arm.servo_lookahead_s=0.08", "devices.arm.servo_gain=500"]
     on = trial_config(None, sets)
     assert on.servo == (0.08, 500.0)
