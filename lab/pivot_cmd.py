@@ -222,7 +222,11 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
     friction). Any problem is a :class:`UserError` in one line naming the file and line or the
     ``--set``, and the key."""
     if config_path is None and not sets:
-        return TrialConfig()
+        from cell.config import CellConfig, twin_servo
+
+        # nothing given: the trials keep their own defaults, and the arm moves as the shipped
+        # configuration's does (sim.servoj)
+        return TrialConfig(servo=twin_servo(CellConfig()))
     from cell.assemble import _layout
     from cell.config import gripper_of, skill_settings, twin_servo, validate_document
     from cell.overrides import apply_sets

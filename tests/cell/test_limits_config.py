@@ -186,6 +186,7 @@ def test_sim_servoj_hands_the_drivers_servo_law_to_the_twins_trials() -> None:
     (None)."""
     from lab.pivot_cmd import trial_config
 
+    assert trial_config(None).servo == (0.05, 1000.0)  # nothing given: the shipped default
     assert trial_config(None, ["sim.seed=1"]).servo == (0.05, 1000.0)
     assert trial_config(None, ["sim.servoj=false"]).servo is None
     sets = ["devices.arm.servo_lookahead_s=0.08", "devices.arm.servo_gain=500"]
