@@ -9,9 +9,9 @@ Why from the joints the arm is at, and along the way: a UR5 has up to eight join
 for one TCP pose, and a linear move or a servo stream keeps the branch it starts on. A pose
 solved from home may land on a branch the arm, coming from where it stands, never reaches --
 or reach a pose the arm's own branch runs into a joint limit on the way to. So the check
-starts at the joints the arm reports and follows the TCP along straight lines between the
-poses in steps of :data:`REACH_STEP` (and :data:`REACH_TURN`), each solved from the last, as a
-moveL or a servo stream does.
+starts at the joints the arm reports and follows the TCP along a straight line to the first
+pose in steps of :data:`REACH_STEP` (and :data:`REACH_TURN`), each solved from the last, as
+a moveL does.
 """
 
 from __future__ import annotations
@@ -25,13 +25,15 @@ from numpy.typing import ArrayLike
 from drivers.pose import Pose
 from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, forward_kinematics, solve_ik
 
-#: m of TCP travel between two poses the check solves on the way (a step the DLS solve follows
-#: on the branch it starts on; the twin's arm and a UR track far finer)
-REACH_STEP = 0.03
-#: rad of tool rotation between two poses the check solves on the way
-REACH_TURN = math.radians(10.0)
-#: DLS iterations per solve; a step of REACH_STEP from the last solution converges in a few
-REACH_ITERATIONS = 60
+#: m of TCP travel between two poses the check solves on the way to the first pose (a step the
+#: DLS solve follows on the branch it starts on; the twin's arm and a UR track far finer)
+REACH_STEP = 0.05
+#: rad of tool rotation between two poses the check solves on the way to the first pose
+REACH_TURN = math.radians(15.0)
+#: DLS iterations per solve on the way; a step from the last solution converges in a few
+REACH_ITERATIONS = 30
+#: DLS iterations for a pose itself (as :func:`ur5_reach` solves)
+DIRECT_ITERATIONS = 200
 
 
 def ur5_reach(poses: Sequence[Pose]) -> int | None:
@@ -49,18 +51,22 @@ def ur5_reach(poses: Sequence[Pose]) -> int | None:
 
 def ur5_reach_along(poses: Sequence[Pose], start: ArrayLike) -> int | None:
     """The index of the first of ``poses`` the UR5 cannot reach from the joints ``start``
-    (rad), or None. The TCP is followed from there through each pose in turn along straight
-    lines (position) and slerps (rotation), so the check keeps the branch the arm keeps."""
+    (rad), or None. The TCP is followed from there to the first pose along a straight line
+    (position) and a slerp (rotation), so the check takes the branch the arm keeps; the poses
+    after it, each near the one before (a plan's approach, grasp and arc), are solved each from
+    the last, as :func:`ur5_reach` does. Following every leg cost ten times as much, and the
+    planner checks dozens of plans in one tick."""
     q = np.asarray(start, float)
     here = forward_kinematics(q)
     for i, pose in enumerate(poses):
-        distance, angle = here.distance(pose)
-        steps = max(1, math.ceil(max(distance / REACH_STEP, angle / REACH_TURN)))
-        for k in range(1, steps + 1):
-            q, miss = solve_ik(here.interpolate(pose, k / steps), q, iterations=REACH_ITERATIONS)
-            if miss > REACH_TOLERANCE:
-                return i
-        here = pose
+        if i == 0:
+            distance, angle = here.distance(pose)
+            steps = max(1, math.ceil(max(distance / REACH_STEP, angle / REACH_TURN)))
+            for k in range(1, steps):
+                q, _ = solve_ik(here.interpolate(pose, k / steps), q, iterations=REACH_ITERATIONS)
+        q, miss = solve_ik(pose, q, iterations=DIRECT_ITERATIONS)
+        if miss > REACH_TOLERANCE:
+            return i
     return None
 
 

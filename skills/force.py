@@ -70,13 +70,15 @@ class ForcePush:
         free: tuple[int, ...] = (),
         lean: ArrayLike = (0.0, 0.0, 0.0),
         reference: Callable[[], ArrayLike | None] | None = None,
+        free_speed: float | None = None,
     ) -> None:
-        """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way, at ``speed``;
+        """``free``: base axes (0 x, 1 y, 2 z) besides the push's that give way (at ``free_speed``);
         ``lean``: the force (N) pressed along them. ``reference``: the force on the tool (N,
         base frame) that counts as nothing pressed, read when the push begins (default, or when
         it gives None: the reading then). A push that begins in a contact it must let go of
         needs one read before it: measured from its own start, the free axes would keep
-        pressing what they pressed then."""
+        pressing what they pressed then. ``free_speed``: the free axes' speed limit (m/s;
+        default ``speed``): what they may drift at under an offset the reference misses."""
         d = np.asarray(direction, float)
         axis = int(np.argmax(np.abs(d)))
         if np.count_nonzero(d) != 1:
@@ -94,6 +96,7 @@ class ForcePush:
         self.still_speed, self.contact_ratio = still_speed, contact_ratio
         self._reach = reach if callable(reach) else (lambda r=float(reach): r)
         self._reference = reference
+        self.free_speed = speed if free_speed is None else free_speed
         self.contact = False
         self.contact_pose: Pose | None = None
         self.resisting = 0.0  #: N, the newest force against the push (above the reference)
@@ -127,7 +130,7 @@ class ForcePush:
             # lean until one, moves it.
             selection[axis] = True
             wrench[axis] = float(-self._ref[axis] + self.lean[axis])
-            limits[axis] = self.speed
+            limits[axis] = self.free_speed
         arm.force_mode(selection, wrench, limits)
 
     def _finished(self) -> bool:

@@ -234,7 +234,7 @@ class PackInBox(SequenceSkill):
         self.withdraw = ForcePush(
             "withdraw up", dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
             p.grip_depth + p.clear_height, settle=p.contact_settle, still_speed=p.still_speed,
-            free=(0, 1), reference=lambda: self.reference.force,
+            free=(0, 1), reference=self._empty_hand, free_speed=p.release_speed,
         )
 
     # --- the phases --------------------------------------------------------------------------
@@ -384,6 +384,14 @@ class PackInBox(SequenceSkill):
         p = self.params
         dx, dy = -p.release_clearance * self._x[XY]
         self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
+
+    def _empty_hand(self) -> NDArray[np.float64] | None:
+        """The force on the empty hand (N, base frame): the hanging part's reading less its
+        weight, so the way up presses ``contact_force`` whatever the part weighs. None before
+        the reading (the withdrawal then measures from where it begins)."""
+        if self.reference.force is None:
+            return None
+        return self.reference.force + np.array([0.0, 0.0, self.part.mass * GRAVITY])
 
     def _withdrawn(self) -> str | None:
         if self.withdraw.contact:

@@ -218,8 +218,10 @@ class WrenchReference:
         self._count = 0
 
     def hold(self, name: str, guard: Guard, seconds: float) -> GuardedMotion:
-        """Hold still for ``seconds`` under ``guard``, averaging the wrist's force: the reading
-        the next :meth:`read`, :meth:`lost` or :meth:`gained` uses."""
+        """Hold still for ``seconds`` under ``guard``, averaging the wrist's force over the
+        hold's second half (the first still carries the stop of the motion before it: a force
+        mode's stop, an arm trailing its stream): the reading the next :meth:`read`,
+        :meth:`lost` or :meth:`gained` uses. At least the last sample counts."""
         clock = self.dev.clock
         began = [0.0]
 
@@ -228,9 +230,12 @@ class WrenchReference:
             began[0] = clock.now()
 
         def done() -> bool:
-            self._sum = self._sum + world_force(self.dev)
-            self._count += 1
-            return clock.now() - began[0] >= seconds
+            held = clock.now() - began[0]
+            finished = held >= seconds
+            if held >= 0.5 * seconds or finished:
+                self._sum = self._sum + world_force(self.dev)
+                self._count += 1
+            return finished
 
         return GuardedMotion(name, start, done, self.dev.arm, self.dev.ft, clock, guard)
 
