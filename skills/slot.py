@@ -200,6 +200,11 @@ def travel_path(start: Pose, target: Pose, min_radius: float) -> list[Pose]:
     return points
 
 
+#: Share of a weight check's hold not averaged: the motion before it is still stopping there
+#: (a force mode's stop, an arm trailing its stream), its braking read as weight.
+HOLD_UNSETTLED = 0.5
+
+
 class WrenchReference:
     """The force on the tool read holding still, before a part is let go or taken (the part
     hanging, or the empty gripper): the weight check afterwards compares with it, so the
@@ -232,7 +237,7 @@ class WrenchReference:
         def done() -> bool:
             held = clock.now() - began[0]
             finished = held >= seconds
-            if held >= 0.5 * seconds or finished:
+            if held >= HOLD_UNSETTLED * seconds or finished:
                 self._sum = self._sum + world_force(self.dev)
                 self._count += 1
             return finished

@@ -75,21 +75,20 @@ def test_a_given_reference_is_what_the_free_axes_hold_not_the_reading_at_the_sta
     the reading from before that contact commands nothing sideways: the contact moves it."""
     d = devices()
     push_back(d, (5.0, -3.0, -1.5))  # a finger pressed sideways as the push begins
+
+    def commanded(reference: np.ndarray | None) -> np.ndarray:
+        push = ForcePush(
+            "withdraw up", dev(d), Guard(), (0, 0, 1), 6.0, 0.05, 0.04, free=(0, 1),
+            reference=lambda: reference,
+        )
+        push.motion.tick()
+        return d["arm"].force[1]
+
     before = np.array([0.1, -0.2, -1.5])  # read with the part hanging, nothing touching
-    push = ForcePush(
-        "withdraw up", dev(d), Guard(), (0, 0, 1), 6.0, 0.05, 0.04, free=(0, 1),
-        reference=lambda: before,
-    )
-    push.motion.tick()
-    _, wrench, _ = d["arm"].force
+    wrench = commanded(before)
     assert wrench[0] == pytest.approx(-0.1) and wrench[1] == pytest.approx(0.2)
     assert wrench[2] == pytest.approx(1.5 + 6.0)
-    unread = ForcePush(
-        "withdraw up", dev(d), Guard(), (0, 0, 1), 6.0, 0.05, 0.04, free=(0, 1),
-        reference=lambda: None,
-    )
-    unread.motion.tick()
-    _, wrench, _ = d["arm"].force
+    wrench = commanded(None)  # no reading given: the one at the start
     assert wrench[0] == pytest.approx(-5.0) and wrench[1] == pytest.approx(3.0)
 
 
