@@ -20,7 +20,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from drivers.pose import Pose
 from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, forward_kinematics, solve_ik
@@ -32,8 +32,18 @@ REACH_STEP = 0.05
 REACH_TURN = math.radians(15.0)
 #: DLS iterations per solve on the way; a step from the last solution converges in a few
 REACH_ITERATIONS = 30
-#: DLS iterations for a pose itself (as :func:`ur5_reach` solves)
+#: DLS iterations for a pose itself
 DIRECT_ITERATIONS = 200
+
+
+def _first_unreached(poses: Sequence[Pose], q: NDArray[np.float64]) -> int | None:
+    """The index of the first of ``poses`` not reached solving each from the joints of the one
+    before, starting at ``q``, or None."""
+    for i, pose in enumerate(poses):
+        q, miss = solve_ik(pose, q, iterations=DIRECT_ITERATIONS)
+        if miss > REACH_TOLERANCE:
+            return i
+    return None
 
 
 def ur5_reach(poses: Sequence[Pose]) -> int | None:
@@ -41,12 +51,7 @@ def ur5_reach(poses: Sequence[Pose]) -> int | None:
     solved from the joints of the one before, starting at home. For fixtures and places,
     whichever branch reaches them; a plan the arm is to carry out from where it stands is
     checked by :func:`ur5_reach_along`."""
-    q = HOME_JOINTS
-    for i, pose in enumerate(poses):
-        q, miss = solve_ik(pose, q, iterations=200)
-        if miss > REACH_TOLERANCE:
-            return i
-    return None
+    return _first_unreached(poses, HOME_JOINTS)
 
 
 def ur5_reach_along(poses: Sequence[Pose], start: ArrayLike) -> int | None:
@@ -57,17 +62,13 @@ def ur5_reach_along(poses: Sequence[Pose], start: ArrayLike) -> int | None:
     the last, as :func:`ur5_reach` does. Following every leg cost ten times as much, and the
     planner checks dozens of plans in one tick."""
     q = np.asarray(start, float)
-    here = forward_kinematics(q)
-    for i, pose in enumerate(poses):
-        if i == 0:
-            distance, angle = here.distance(pose)
-            steps = max(1, math.ceil(max(distance / REACH_STEP, angle / REACH_TURN)))
-            for k in range(1, steps):
-                q, _ = solve_ik(here.interpolate(pose, k / steps), q, iterations=REACH_ITERATIONS)
-        q, miss = solve_ik(pose, q, iterations=DIRECT_ITERATIONS)
-        if miss > REACH_TOLERANCE:
-            return i
-    return None
+    if poses:
+        here, first = forward_kinematics(q), poses[0]
+        distance, angle = here.distance(first)
+        steps = max(1, math.ceil(max(distance / REACH_STEP, angle / REACH_TURN)))
+        for k in range(1, steps):
+            q, _ = solve_ik(here.interpolate(first, k / steps), q, iterations=REACH_ITERATIONS)
+    return _first_unreached(poses, q)
 
 
 def reach_from(joints: Callable[[], ArrayLike]) -> Callable[[Sequence[Pose]], int | None]:

@@ -384,8 +384,8 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         setup = dataclasses.replace(setup, mu_ground=mu_ground)
     if mu_pad is not None:
         setup = dataclasses.replace(setup, mu_pad=mu_pad)
-    if given.servo is not None:  # sim.servoj: the arm follows the stream as a UR does
-        setup = dataclasses.replace(setup, servo=given.servo)
+    # sim.servoj (on unless the configuration turns it off): the arm follows as a UR does
+    setup = dataclasses.replace(setup, servo=given.servo)
     if given.control_hz is not None:
         setup = dataclasses.replace(
             setup, physics=with_control_rate(setup.physics, given.control_hz)

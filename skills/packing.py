@@ -232,7 +232,7 @@ class PackInBox(SequenceSkill):
             "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,), lean_y
         )
         # The open hand comes up in force mode, giving way in the plane to anything it touches,
-        # with nothing pressed beyond the hanging part's reading (its weight is along z only).
+        # with nothing pressed beyond the empty hand's reading (:meth:`_empty_hand`).
         # A position move up dragged the part sideways by the finger still touching the hole's
         # wall: a flat pad in a round (or 12-sided) hole touches it with a corner once the part
         # has turned a little in the grasp, and the twin measured 22-25 N on that corner and a
