@@ -5,7 +5,7 @@ put the palm into that wall, and the Tilt from the other end would carry the fin
 (see :mod:`skills.pivot.clearance`). :func:`plan_reposition` finds the shortest drag --
 along the part's axis or across it, never into a wall or a neighbour -- after which the pivot's
 sweep clears; :class:`Reposition` does it: the jaws come straight down on either side of the
-part's middle, pinch it across its diameter, lift it a few millimetres, carry it over, set it
+part (its middle, or wherever the jaws can come down), pinch it across its diameter, lift it a few millimetres, carry it over, set it
 down and let go. The part is then looked at again and pivoted where it now lies.
 
 This is not the pivot: it is a preparatory move, counted apart (``repositioned``), and it ends
@@ -51,6 +51,14 @@ class RepositionParams:
     grip_height: float = si(
         0.006, "m", 0.0, 0.05, "above the floor the fingertips pinch the lying part at"
     )
+    #: where the jaws cannot come down at the middle (the 2F-85's body over a wall's top), the
+    #: pinch is tried further along the axis (its pads kept on the part) and higher (the pads'
+    #: tips kept ``grip_below_axis`` below the part's axis, so they still close across its
+    #: diameter): what a person does, taking a part by whatever of it is free
+    grip_step: float = si(0.01, "m", 0.002, 0.05, "between the pinch places tried along the axis")
+    grip_below_axis: float = si(
+        0.006, "m", 0.0, 0.05, "the fingertips reach below the part's axis, at the highest pinch"
+    )
     approach_height: float = si(0.08, "m", 0.0, 0.3, "above the part the jaws come down from")
     lift: float = si(0.003, "m", 0.0, 0.02, "the part is lifted off the floor to be carried")
     grip_force: float = si(
@@ -79,25 +87,55 @@ class RepositionParams:
 
 
 @dataclass(frozen=True)
+class Grip:
+    """Where the pinch takes the lying part: along its axis from its middle (m, + towards
+    ``frame.u``) and its fingertips' height above the floor (m; None: ``grip_height``)."""
+
+    along: float = 0.0
+    height: float | None = None
+
+
+@dataclass(frozen=True)
 class RepositionPlan:
     """Where the part goes: its frame now and after the drag, the drag (m, world xy)."""
 
     frame: PivotFrame
     target: PivotFrame
     shift: NDArray[np.float64]
+    grip: Grip = field(default_factory=lambda: Grip())  #: where the jaws take the part
 
     @property
     def distance(self) -> float:
         return float(np.linalg.norm(self.shift))
 
 
-def pinch_pose(frame: PivotFrame, part: Part, params: RepositionParams) -> Pose:
-    """The TCP pinching the lying part across its middle: fingers down, jaws across the axis."""
+def pinch_pose(
+    frame: PivotFrame, part: Part, params: RepositionParams, grip: Grip | None = None
+) -> Pose:
+    """The TCP pinching the lying part across its diameter at ``grip`` (its middle by
+    default): fingers down, jaws across the axis."""
+    g = grip or Grip()
     z = np.array([0.0, 0.0, -1.0])
     x = frame.normal
     rot = np.column_stack([x, np.cross(z, x), z])
-    tips = np.array([frame.center[0], frame.center[1], frame.floor_z + params.grip_height])
+    height = params.grip_height if g.height is None else g.height
+    tips = np.asarray(frame.center, float) + g.along * np.asarray(frame.u, float)
+    tips[Z] = frame.floor_z + height
     return Pose(tips - params.tip_offset * z, rot)
+
+
+def grips(part: Part, params: RepositionParams, finger_width: float) -> list[Grip]:
+    """The pinches a drag may use, the middle first, then further out along the axis (the
+    pads kept wholly on the part), each low first, then as high as still closes across the
+    diameter."""
+    reach = max(0.0, 0.5 * (part.length - finger_width))  # exact: the pads' centre's travel
+    steps = np.arange(0.0, reach + SHIFT_ROUNDING, params.grip_step)
+    along = [0.0] + [float(s * k) for s in steps[1:] for k in (1.0, -1.0)]
+    high = 0.5 * part.outer - params.grip_below_axis  # exact: the part's axis height
+    heights: list[float | None] = [None]
+    if high > params.grip_height:
+        heights.append(high)
+    return [Grip(a, h) for a in along for h in heights]
 
 
 def _footprint_inside(frame: PivotFrame, part: Part, interior: Seq[float], margin: float) -> bool:
@@ -115,10 +153,11 @@ def _footprint_inside(frame: PivotFrame, part: Part, interior: Seq[float], margi
 
 def _pinch_clear(
     frame: PivotFrame, part: Part, params: RepositionParams, obstacles: Seq[Obstacle],
-    finger_width: float,
+    finger_width: float, grip: Grip | None = None,
 ) -> bool:
-    """The open jaws come down beside the part, here, without touching a wall or a neighbour."""
-    pose = pinch_pose(frame, part, params)
+    """The open jaws come down beside the part at ``grip`` without touching a wall or a
+    neighbour."""
+    pose = pinch_pose(frame, part, params, grip)
     width = part.outer + 2.0 * params.side_gap  # exact: a side gap each side of the part
     model = tool_points(width, params.tip_offset, params.finger_thickness, finger_width)
     for lift in (0.0, params.approach_height):
@@ -147,7 +186,9 @@ def plan_reposition(
     the arm's ``reach``), the pinch clears both here and there, and the part lies inside the
     bin clear of its neighbours; None when no drag up to ``max_shift`` does."""
     obstacles = [*walls, *neighbours]
-    if not _pinch_clear(frame, part, params, obstacles, finger_width):
+    free = [g for g in grips(part, params, finger_width)
+            if _pinch_clear(frame, part, params, obstacles, finger_width, g)]
+    if not free:
         return None
     steps = np.arange(params.shift_step, params.max_shift + SHIFT_ROUNDING, params.shift_step)
     directions = [frame.u[XY], -frame.u[XY], frame.normal[XY], -frame.normal[XY]]
@@ -168,12 +209,15 @@ def plan_reposition(
             )
             if any(float(np.min(nb.distance(corners))) < params.wall_margin for nb in neighbours):
                 continue
-            if not _pinch_clear(moved, part, params, obstacles, finger_width):
+            # the same pinch must clear where the part is set down
+            grip = next((g for g in free if _pinch_clear(moved, part, params, obstacles,
+                                                          finger_width, g)), None)
+            if grip is None:
                 continue
             choice = choose_end(moved, pivot, obstacles, finger_width, part.open_ends,
                                 margin=params.plan_margin, base_xy=base_xy, reach=reach)
             if choice.clearance.clear:
-                return RepositionPlan(frame, moved, shift)
+                return RepositionPlan(frame, moved, shift, grip)
     return None
 
 
@@ -192,7 +236,7 @@ class Reposition(SequenceSkill):
     ) -> None:
         p = replace(params or RepositionParams(), **overrides)
         self.plan, self.part, self.dev, self.params = plan, part, dev, p
-        self._pinch = pinch_pose(plan.frame, part, p)
+        self._pinch = pinch_pose(plan.frame, part, p, plan.grip)
         up = np.array([0.0, 0.0, 1.0])
         self._above = Pose(self._pinch.position + (part.outer + p.approach_height) * up,
                            self._pinch.rotation)

@@ -178,6 +178,7 @@ class Perceive(SkillBehaviour):
             (float(near[0]), float(near[1])),
             self.settings(),
             grip_yaw=self._grip_yaw,
+            reach=self.ctx.reach,
         )
         return _TolerantLook(self.look)
 

@@ -145,13 +145,17 @@ class Look:
         near_xy: tuple[float, float],
         params: LookParams | None = None,
         grip_yaw: Callable[[Detection], float] | None = None,
+        reach: Callable[[list[Pose]], int | None] | None = None,
     ) -> None:
         """``grip_yaw``: the yaw (rad, as :func:`tool_yaw` gives it) the next skill holds the tool
         at over the chosen part. The close view is taken turned to it, so the wrist turns during
         the look's fast move between views rather than in the next skill's slower approach (a
-        tube's pivot from its outer end turns the wrist by half a turn)."""
+        tube's pivot from its outer end turns the wrist by half a turn). ``reach``: the arm's
+        reach from where it stands (index of the first pose it cannot reach, or None); a close
+        view turned out of reach (near the robot's base, after a drag) is taken unturned."""
         self.params = params if params is not None else LookParams()
         self._grip_yaw = grip_yaw
+        self._reach = reach
         self.dev, self.catalogue, self.roi = dev, catalogue, roi
         self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
@@ -220,9 +224,10 @@ class Look:
         yaw, speed = 0.0, p.speed
         if self._grip_yaw is not None and p.turn_view_to_grasp >= TURN_VIEW:
             yaw, speed = self._grip_yaw(r), min(p.speed, p.turn_speed)
-        target = camera_over(
-            (float(r.center[0]), float(r.center[1])), p.close_height, self.dev, yaw
-        )
+        xy = (float(r.center[0]), float(r.center[1]))
+        target = camera_over(xy, p.close_height, self.dev, yaw)
+        if yaw != 0.0 and self._reach is not None and self._reach([target]) is not None:
+            target, speed = camera_over(xy, p.close_height, self.dev), p.speed
         self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _refine(self, dets: list[Detection]) -> None:

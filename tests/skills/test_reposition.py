@@ -18,7 +18,7 @@ from skills.mechanics.planner import plan_pivot
 from skills.pivot.clearance import bin_walls, choose_end, lying_part
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
-from skills.reposition import RepositionParams, plan_reposition
+from skills.reposition import Grip, RepositionParams, _pinch_clear, grips, plan_reposition
 
 ROI = (0.22, 0.72, -0.16, 0.16)
 WALLS = bin_walls(ROI, 0.0, 0.08, 0.005)
@@ -76,3 +76,22 @@ def test_cell_pivot_drags_a_part_against_the_wall_then_pivots_it(tmp_path) -> No
     moved = np.hypot(trial["perceived_pose"]["x"] - trial["true_pose"]["x"],
                      trial["perceived_pose"]["y"] - trial["true_pose"]["y"])
     assert moved > 0.01  # the look after the drag saw it somewhere else
+
+
+def test_a_part_whose_middle_the_jaws_cannot_reach_is_taken_further_along(bushing) -> None:
+    """Its middle 39 mm from the -x wall, its axis at 70 deg: the 2F-85's body would come
+    down on the wall's top there, so the pinch is taken where it clears, and the drag plans it."""
+    part, pivot = bushing
+    f = PivotFrame(part.section(W), np.array([0.2594, 0.1139, 0.017]), math.radians(69.7), 0.0)
+    params = RepositionParams()
+    assert not _pinch_clear(f, part, params, WALLS, W)  # not at its middle
+    move = plan_reposition(f, part, pivot, params, WALLS, [], ROI, W, reach=ur5_reach)
+    assert move is not None
+    assert move.grip != Grip()
+    assert abs(move.grip.along) <= 0.5 * (part.length - W)  # the pads stay on the part
+    assert _pinch_clear(f, part, params, WALLS, W, move.grip)
+    assert _pinch_clear(move.target, part, params, WALLS, W, move.grip)
+    # a search kept to the middle finds nothing
+    middle_only = RepositionParams(grip_step=0.05, grip_below_axis=0.05)
+    assert all(g == Grip() for g in grips(part, middle_only, W))
+    assert plan_reposition(f, part, pivot, middle_only, WALLS, [], ROI, W, reach=ur5_reach) is None
