@@ -163,6 +163,7 @@ class Look:
         self._undecided: Detection | None = None  #: the part the end views are for
         self._judged: list[Detection] = []  #: what each end view said of it
         self._looked_again = False  #: the closer look from above taken (a part decided)
+        self._out_of_reach = False  #: the last end view asked for was out of the arm's reach
         g = self.params.guard
         self.sequence = Sequence(
             "look",
@@ -193,6 +194,8 @@ class Look:
     def _end_view_wanted(self) -> bool:
         """An end to judge, or the closer look from above not taken yet."""
         d = self._undecided
+        if self._out_of_reach:
+            return False  # the camera never went there: nothing seen of that end
         if d is None:
             return not self._judged and self._looked_again is False
         return any(p.name == d.part for p in self.catalogue)
@@ -206,6 +209,7 @@ class Look:
     def _beyond_end(self, which: int) -> None:
         """The camera beyond the chosen part's ``which`` end (0: the better place); where the
         open end is decided, the part leans or nothing is chosen: one closer look from above."""
+        self._out_of_reach = False
         r = self.result
         if self._undecided is None and r is not None and not r.open_end_seen and not r.tilted:
             self._undecided = r  # a leaning part's end is never judged: no view of its ends
@@ -216,7 +220,12 @@ class Look:
                 self.dev.arm.move_to(target, p.speed, p.acceleration)
             return
         xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
-        self.dev.arm.move_to(camera_over(xy, p.second_height, self.dev), p.speed, p.acceleration)
+        target = camera_over(xy, p.second_height, self.dev)
+        # beyond an end at the edge of the arm's reach (a far corner): that end is not seen,
+        # as one against a wall is not; the other end's view may still decide it
+        self._out_of_reach = self._reach is not None and self._reach([target]) is not None
+        if not self._out_of_reach:
+            self.dev.arm.move_to(target, p.speed, p.acceleration)
 
     def _over_part(self) -> None:
         r, p = self.result, self.params
