@@ -82,4 +82,24 @@ def reach_from(joints: Callable[[], ArrayLike]) -> Callable[[Sequence[Pose]], in
     return reach
 
 
-__all__ = ["REACH_STEP", "REACH_TURN", "reach_from", "ur5_reach", "ur5_reach_along"]
+def reach_from_or_home(
+    joints: Callable[[], ArrayLike], home: ArrayLike
+) -> Callable[[Sequence[Pose]], int | None]:
+    """:func:`reach_from`, or else from ``home`` (rad): what a planner may choose when the
+    arm can go home first by a joint move (a UR's moveJ follows no straight line, so it gets
+    there from any configuration). The skill that carries the plan out checks
+    :func:`reach_from` again and goes home first where only home reaches it."""
+    here = reach_from(joints)
+    q_home = np.asarray(home, float)
+
+    def reach(poses: Sequence[Pose]) -> int | None:
+        out = here(poses)
+        return out if out is None else ur5_reach_along(poses, q_home)
+
+    return reach
+
+
+__all__ = [
+    "REACH_STEP", "REACH_TURN", "reach_from", "reach_from_or_home", "ur5_reach",
+    "ur5_reach_along",
+]

@@ -203,6 +203,7 @@ class TrialConfig:
     params: dict[str, Any] = field(default_factory=dict)  #: :class:`PivotParams` overrides
     look: Any = None  #: :class:`skills.perception.look.LookParams`
     reposition: Any = None  #: :class:`skills.reposition.RepositionParams`
+    home: Any = None  #: :class:`skills.home.HomeParams`
     mu_ground: float | None = None  #: sim.mu_ground, where given
     control_hz: float | None = None  #: cell.control_hz, where given
     layout: Any = None  #: :class:`drivers.layout.CellLayout` of cell.layout, where given
@@ -265,6 +266,7 @@ def trial_config(config_path: Path | None, sets: Sequence[str] = ()) -> TrialCon
         },
         look=limited(settings["perceive"]),
         reposition=limited(settings["reposition"]),
+        home=limited(settings["go_home"]),
         mu_ground=config.sim.mu_ground if "mu_ground" in config.sim.model_fields_set else None,
         control_hz=config.cell.control_hz if "control_hz" in config.cell.model_fields_set else None,
         layout=layout,
@@ -377,6 +379,7 @@ def build_setup(args: argparse.Namespace) -> tuple[TrialSetup, PivotPlan, bool]:
         params=given.params,
         look=given.look,
         reposition=given.reposition,
+        home=given.home,
         gripper=spec,
     )
     mu_ground = args.mu_ground if args.mu_ground is not None else given.mu_ground

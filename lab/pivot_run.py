@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cell.reach import reach_from, ur5_reach
+from cell.reach import reach_from, reach_from_or_home, ur5_reach
 from drivers.devices import Devices
 from drivers.gripper_spec import GripperSpec, default_gripper
 from drivers.layout import CellLayout
@@ -46,12 +46,13 @@ from sim.robot_model import FINGER_WIDTH
 from sim.scenes import random_floor_pose
 from sim.uncertainty import Draws, Uncertainty
 from sim.world import PhysicsSettings, SimWorld
+from skills.home import HomeParams, go_home
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import PivotPlan
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look, LookParams, tool_yaw
 from skills.pivot import Align, Grasp, PickFromAbove, PivotFrame, PivotParams, Tilt
-from skills.pivot.clearance import EndChoice, bin_walls, choose_end
+from skills.pivot.clearance import EndChoice, bin_walls, choose_end, reach_problem
 from skills.reposition import Reposition, RepositionParams, plan_reposition
 from skills.status import Failure, Status, StepResult
 
@@ -103,6 +104,9 @@ class TrialSetup:
     #: safety limits of a configuration; None: the skills' defaults)
     look: LookParams | None = None
     reposition: RepositionParams | None = None
+    #: the joint move home a plan out of reach from the look's pose goes through first
+    #: (``skills.go_home``; None: the skill's defaults)
+    home: HomeParams | None = None
     #: the gripper's description the twin's gripper is built from (``gripper`` of a
     #: configuration; the shipped 2F-85 by default)
     gripper: GripperSpec = field(default_factory=default_gripper)
@@ -418,7 +422,11 @@ def run_trial(
         walls = bin_obstacles(setup.layout)
         width = dev.gripper.finger_width
 
-        reach = reach_from(dev.arm.joint_positions)  #: from where the arm stands when asked
+        here = reach_from(dev.arm.joint_positions)  #: from where the arm stands when asked
+        home = robot.arm.home_joints
+        assert home is not None  # the trial's robot is built at home
+        # a plan out of reach from where the look left the arm goes home first, as the cell's
+        reach = reach_from_or_home(dev.arm.joint_positions, home)
 
         def choose(f: PivotFrame) -> EndChoice:
             return choose_end(f, params, walls, width, setup.part.open_ends, reach=reach)
@@ -459,6 +467,11 @@ def run_trial(
                     )
                     frame = looked or frame
                 choice = choose(frame)
+        if (failure is None and choice.clearance.clear
+                and reach_problem(choice.frame, params, width, here) is not None):
+            early = "plan"
+            failure = run_skill("home", go_home(dev, home, setup.home or HomeParams()),
+                                world, robot, t_end, on_frame, frame_every)
         other_end = choice.frame is not frame
         frame = choice.frame
         if failure is None and not choice.clearance.clear:

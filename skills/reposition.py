@@ -5,8 +5,9 @@ put the palm into that wall, and the Tilt from the other end would carry the fin
 (see :mod:`skills.pivot.clearance`). :func:`plan_reposition` finds the shortest drag --
 along the part's axis or across it, never into a wall or a neighbour -- after which the pivot's
 sweep clears; :class:`Reposition` does it: the jaws come straight down on either side of the
-part (its middle, or wherever the jaws can come down), pinch it across its diameter, lift it a few millimetres, carry it over, set it
-down and let go. The part is then looked at again and pivoted where it now lies.
+part (at its middle, or further along where a wall leaves no room there), pinch it across its
+diameter, lift it a few millimetres, carry it over, set it down and let go. The part is then
+looked at again and pivoted where it now lies.
 
 This is not the pivot: it is a preparatory move, counted apart (``repositioned``), and it ends
 with the jaws open and the part lying on the floor -- the hole grasp is still reached by the

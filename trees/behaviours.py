@@ -38,7 +38,13 @@ from skills.pivot import Grasp as GraspSkill
 from skills.pivot import PickFromAbove as PickFromAboveSkill
 from skills.pivot import PivotFrame
 from skills.pivot import Tilt as TiltSkill
-from skills.pivot.clearance import bin_walls, choose_end, likely_grasp_rotation, lying_part
+from skills.pivot.clearance import (
+    bin_walls,
+    choose_end,
+    likely_grasp_rotation,
+    lying_part,
+    reach_problem,
+)
 from skills.reposition import Reposition as RepositionSkill
 from skills.reposition import RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
@@ -486,7 +492,34 @@ class Grasp(SkillBehaviour):
         return {"/part/target": common.Access.READ}
 
     def make_skill(self) -> Skill:
-        return GraspSkill(_target_frame(self.bb), self.settings(), self.ctx.devices)
+        ctx, frame, params = self.ctx, _target_frame(self.bb), self.settings()
+        grasp = GraspSkill(frame, params, ctx.devices)
+        here = ctx.reach_here
+        width = ctx.devices.gripper.finger_width
+        if here is None or reach_problem(frame, params, width, here) is None:
+            return grasp
+        # planned from home (out of reach along straight moves from where the look left the
+        # arm): go there first by a joint move
+        home = go_home(ctx.devices, ctx.geometry.home_joints, self.settings("go_home"))
+        return _Then(home, grasp)
+
+
+class _Then:
+    """One skill, then another: a failure of the first ends it."""
+
+    def __init__(self, first: Skill, then: Skill) -> None:
+        self.first, self.then, self._first_done = first, then, False
+
+    def tick(self) -> StepResult:
+        if not self._first_done:
+            result = self.first.tick()
+            if result.status is not SkillStatus.SUCCESS:
+                return result
+            self._first_done = True
+        return self.then.tick()
+
+    def halt(self) -> None:
+        (self.then if self._first_done else self.first).halt()
 
 
 @declare("tilt", "the pivot's Tilt about P_c", "Action", MOTION)

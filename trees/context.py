@@ -113,8 +113,12 @@ class CellContext:
     params: PivotParams
     events: Events
     #: The arm's reach, for the plans that must stay inside it (the cell builds it from its
-    #: arm's kinematics: the tree knows no particular arm).
+    #: arm's kinematics: the tree knows no particular arm): from where the arm stands, or
+    #: else from home, where the arm can go first by a joint move.
     reach: Reach
+    #: The reach from where the arm stands, along straight moves (None: ``reach``): a plan
+    #: that only ``reach`` clears is carried out from home.
+    reach_here: Reach | None = None
     limits: WorkflowLimits = field(default_factory=WorkflowLimits)
     #: The safety section's abort force and torque, for leaves whose node gives none.
     default_guard: Guard = field(default_factory=Guard)

@@ -66,6 +66,13 @@ APPROACH_POSES = 5
 ARC_POSES = 16
 #: The phase of the sweep's approach at alpha, whose last pose is the grasp
 AT_ALPHA = "on the approach at alpha"
+#: The phase of the part's own sweep: turning about G, it stands on its base end, which swings
+#: back beyond G by up to its height (a cookie can's 90 mm)
+STANDING_UP = "standing up"
+#: Angles of the part's turn about G, 0 to upright (10 deg apart)
+STAND_POSES = 10
+#: Points along the part's axis (from G) and across it (each way) of its box in the sweep
+STAND_ALONG, STAND_ACROSS = 5, 3
 #: m, the thinnest a bin wall is modelled: one configured thinner (or 0) still has an inside
 #: that a point of the sweep can be found in
 MIN_WALL_THICKNESS = 0.002
@@ -258,6 +265,31 @@ def nearest(points: NDArray[np.float64], obstacles: Sequence[Obstacle]) -> tuple
     return best, where[0], where[1]
 
 
+def standing_sweep(frame: PivotFrame) -> NDArray[np.float64]:
+    """The part's own box (its length along ``u``, its height and width ``2b``) as it turns
+    about G to upright, the points that leave its lying footprint: the base end swings back
+    beyond G by up to its height, where a wall or a neighbour there stops it standing (the
+    Tilt's guard then stops the arm)."""
+    a, b = frame.section.a, frame.section.b
+    g = frame.pivot
+    u, n, up = frame.u, frame.normal, frame.up
+    box = np.array(
+        [(ds, h, w)
+         for ds in np.linspace(0.0, 2.0 * a, STAND_ALONG)  # exact: the length is 2a
+         for h in np.linspace(0.0, 2.0 * b, STAND_ACROSS)  # exact: the height is 2b
+         for w in np.linspace(-b, b, STAND_ACROSS)]
+    )
+    points = []
+    for beta in np.linspace(0.0, HALF_PI, STAND_POSES)[1:]:
+        c, s = math.cos(beta), math.sin(beta)
+        ds = box[:, 0] * c - box[:, 1] * s
+        h = box[:, 0] * s + box[:, 1] * c
+        behind = ds < 0.0  # beyond the end the part lies at: where it was not already
+        points.append(g + np.outer(ds[behind], u) + np.outer(box[behind, 2], n)
+                      + np.outer(h[behind], up))
+    return np.vstack(points)
+
+
 def pivot_clearance(
     frame: PivotFrame,
     params: PivotParams,
@@ -282,6 +314,8 @@ def pivot_clearance(
         for name, pts in model.items():
             chunks.append(pts @ pose.rotation.T + pose.position)
             labels.append((phase, name))
+    chunks.append(standing_sweep(frame))
+    labels.append((STANDING_UP, "the part"))
     points = np.vstack(chunks)
     d, o, n = nearest(points, obstacles)
     if o < 0:

@@ -16,7 +16,15 @@ from cell.reach import ur5_reach
 from drivers.parts import Gripper
 from skills.mechanics.contact import Frictions
 from skills.mechanics.planner import plan_pivot
-from skills.pivot.clearance import Obstacle, bin_walls, choose_end, lying_part, pivot_clearance
+from skills.pivot.clearance import (
+    STANDING_UP,
+    Obstacle,
+    bin_walls,
+    choose_end,
+    lying_part,
+    pivot_clearance,
+    standing_sweep,
+)
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -83,7 +91,28 @@ def test_a_neighbour_where_the_tilt_goes_blocks_the_pivot(bushing) -> None:
     # lying crosswise just behind the pivot end, where the Tilt carries the gripper
     behind = lying_part("a neighbour", (0.47 - 0.034 - 0.03, 0.0), math.pi / 2, 0.068, 0.034, 0.0)
     c = pivot_clearance(f, params, [*WALLS, behind], W)
-    assert not c.clear and c.obstacle == "a neighbour" and c.phase == "on the Tilt's arc"
+    assert not c.clear and c.obstacle == "a neighbour", c.reason()
+    # the gripper on the arc and the part's own base swinging back both meet it
+    assert standing_sweep(f)[:, 0].min() < 0.47 - 0.034 - 0.03 + 0.017
+
+
+def test_a_part_whose_base_would_stand_up_in_a_wall_does_not_clear() -> None:
+    """A cookie can (one open end, 90 mm across) whose closed end lies 40 mm from the -y
+    wall: the gripper's sweep over the open end clears, but standing up about G its base
+    swings back 90 mm beyond G, into the wall (the twin's Tilt met it at 23 deg, 80 N)."""
+    part = load_catalogue(None).get("cookie_can")
+    plan = plan_pivot(part, Gripper(), Frictions())
+    params = PivotParams(l_a=plan.l_a, alpha=plan.alpha)
+    g_y = -0.16 + 0.04
+    f = frame(part, 0.47, g_y + 0.5 * part.length, math.pi / 2)  # open end towards +y
+    assert f.pivot[1] == pytest.approx(g_y)
+    c = pivot_clearance(f, params, WALLS, W)
+    assert not c.clear and c.tool_part == "the part" and c.phase == STANDING_UP, c.reason()
+    assert c.obstacle == "the bin's -y wall"
+    assert "the part would hit the bin's -y wall standing up" in c.reason()
+    # twice as far from the wall it stands up clear of it
+    far = frame(part, 0.47, g_y + 0.06 + 0.5 * part.length, math.pi / 2)
+    assert pivot_clearance(far, params, WALLS, W).clear
 
 
 def test_the_margin_is_the_configured_one(bushing) -> None:
