@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from cell.reach import reach_from, ur5_reach, ur5_reach_along
+from cell.reach import reach_from, reach_from_or_home, ur5_reach, ur5_reach_along
 from drivers.pose import Pose, rot_z
 from drivers.ur5.kinematics import ARM_LIMIT, HOME_JOINTS, forward_kinematics
 
@@ -57,3 +57,19 @@ def test_reach_from_reads_the_joints_when_asked() -> None:
     assert all(reach([pose]) is None for pose in turned)  # from home: either way
     joints["q"] = wound
     assert any(reach([pose]) == 0 for pose in turned)  # from the wound-up wrist: one is not
+
+
+def test_reach_from_or_home_takes_what_a_joint_move_home_makes_reachable() -> None:
+    """The wound-up wrist's blocked turn is reachable after a moveJ home: the planner's reach
+    says so, the straight reach from here does not (the grasp then goes home first)."""
+    wound = HOME_JOINTS.copy()
+    wound[5] = ARM_LIMIT - math.radians(3.0)
+    turned = [_turned(wound, math.radians(30.0)), _turned(wound, -math.radians(30.0))]
+    here = reach_from(lambda: wound)
+    either = reach_from_or_home(lambda: wound, HOME_JOINTS)
+    blocked = [pose for pose in turned if here([pose]) is not None]
+    assert blocked
+    assert all(either([pose]) is None for pose in blocked)
+    # beyond the arm's reach from anywhere stays out of reach
+    far = Pose(np.array([1.3, 0.0, 0.1]), turned[0].rotation)
+    assert either([far]) == 0
