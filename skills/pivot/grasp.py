@@ -128,9 +128,11 @@ class Grasp:
         return p.transfer_speed_factor * p.approach_speed
 
     def _over_open_end(self) -> None:
-        """To ``approach_height`` straight above the pre-approach pose (or level with the tool,
-        if that is higher), turned as the approach needs; the next step goes straight down from
-        there, so only that vertical leg comes near the bin.
+        """To ``approach_height`` straight above the pre-approach pose, turned as the approach
+        needs; the next step goes straight down from there, so only that vertical leg comes
+        near the bin. The pose is the one the plan's reach check follows the TCP to from where
+        the arm stands (a pose kept level with a higher tool, at the bin's far corner, was out
+        of the UR5's reach where the checked one was not).
 
         Two moves, each stopping at its end, not one path through both: a path runs its corner
         at full speed, and where the first leg is mostly the tilt to alpha (the tool already
@@ -140,8 +142,6 @@ class Grasp:
         p, arm = self.params, self.dev.arm
         pre = self._pre
         above = pre.position + p.approach_height * self.frame.up
-        tool = arm.tool_pose()
-        above[Z] = max(above[Z], float(tool.position[Z]))
         arm.move_to(Pose(above, pre.rotation), self._transfer_speed, p.acceleration)
 
     # --- the close ---------------------------------------------------------------------------
