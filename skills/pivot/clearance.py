@@ -273,19 +273,18 @@ def standing_sweep(frame: PivotFrame) -> NDArray[np.float64]:
     a, b = frame.section.a, frame.section.b
     g = frame.pivot
     u, n, up = frame.u, frame.normal, frame.up
-    box = np.array(
-        [(ds, h, w)
-         for ds in np.linspace(0.0, 2.0 * a, STAND_ALONG)  # exact: the length is 2a
-         for h in np.linspace(0.0, 2.0 * b, STAND_ACROSS)  # exact: the height is 2b
-         for w in np.linspace(-b, b, STAND_ACROSS)]
-    )
+    grid = [(ds, h, w)
+            for ds in np.linspace(0.0, 2.0 * a, STAND_ALONG)  # exact: the length is 2a
+            for h in np.linspace(0.0, 2.0 * b, STAND_ACROSS)  # exact: the height is 2b
+            for w in np.linspace(-b, b, STAND_ACROSS)]
+    along, height, across = (np.array(col) for col in zip(*grid, strict=True))
     points = []
     for beta in np.linspace(0.0, HALF_PI, STAND_POSES)[1:]:
         c, s = math.cos(beta), math.sin(beta)
-        ds = box[:, 0] * c - box[:, 1] * s
-        h = box[:, 0] * s + box[:, 1] * c
+        ds = along * c - height * s
+        h = along * s + height * c
         behind = ds < 0.0  # beyond the end the part lies at: where it was not already
-        points.append(g + np.outer(ds[behind], u) + np.outer(box[behind, 2], n)
+        points.append(g + np.outer(ds[behind], u) + np.outer(across[behind], n)
                       + np.outer(h[behind], up))
     return np.vstack(points)
 

@@ -9,10 +9,10 @@ that is not the planned P_c; with rigid fingers the arc would then squeeze the p
 the floor (the twin measured 80 N for a 2.7 mm offset), which the real 2F-85's compliant
 linkage would have absorbed.
 
-Past the tip-over angle the part's weight turns it towards upright by itself (Sec. III-B). The
-jaws then ease by ``tilt_ease``: the part is free to land on its base a degree or two ahead of
-the arc instead of being pressed into the floor by a rigid grasp, while the finger in the hole
-still keeps it from going further. The arc ends at theta = 90 deg, the part standing with the
+Past the tip-over angle the part's weight turns it towards upright by itself (Sec. III-B), the
+pads still pinching the wall (the jaws may ease by ``tilt_ease`` there, off by default: a part
+let fall free from the arc's end left the inner finger on its rim), and the finger in the hole
+keeps it from going further. The arc ends at theta = 90 deg, the part standing with the
 inner finger over its rim -- never let go.
 """
 
@@ -153,7 +153,8 @@ class Tilt:
         p = self.params
         if not self.eased and self.measured_theta >= self.tip - p.ease_before_tip:
             self.eased = True
-            self.dev.gripper.open(self.dev.gripper.width() + p.tilt_ease, p.close_speed)
+            if p.tilt_ease > 0.0:
+                self.dev.gripper.open(self.dev.gripper.width() + p.tilt_ease, p.close_speed)
         return False
 
     @property

@@ -239,7 +239,7 @@ def test_tilt_eases_the_jaws_once_just_before_the_tip_over_angle() -> None:
     d = devices()
     d["arm"].pose = FRAME.grasp_pose(0.9, PARAMS.alpha, 0.005)
     d["gripper"]._width = 0.055
-    params = dataclasses.replace(PARAMS, locate_pivot=False)
+    params = dataclasses.replace(PARAMS, locate_pivot=False, tilt_ease=0.003)
     tilt = Tilt(FRAME, params, dev(d))
     widths: list[tuple[float, float]] = []
     run(tilt, d, on_tick=lambda i: widths.append((tilt.theta, d["gripper"].width())))
