@@ -38,6 +38,8 @@ SAME_PART_DISTANCE = 0.02
 VERTICAL_X = 0.01
 #: ``turn_view_to_grasp`` at or above this turns the last view (the key is 0 or 1)
 TURN_VIEW = 0.5
+#: m: the shortest path a turning move is timed over (a turn in place still gets a speed)
+MIN_PATH = 0.01
 
 
 def camera_over(
@@ -83,6 +85,13 @@ class LookParams:
         "skill's yaw: a straight move turns the tool along with its path (0.1 m of path a "
         "radian on the UR5 and its twin), so this bounds the wrist's turn (2.5 rad/s, under "
         "the UR5's 3.1 rad/s joint speed)",
+    )
+    #: the path per radian of turn differs with the move (0.09 m/rad over a part at the bin's
+    #: near edge, where the base joint turned too: the wrist's last joint then ran past its
+    #: pi rad/s and the arm stopped), so the turn's own rate is bounded as well
+    turn_rate: float = si(
+        1.5, "rad/s", 0.1, 3.0,
+        "of the tool's turn, at most, in the move to the close view when it turns the tool",
     )
     acceleration: float = si(1.0, "m/s^2", 0.05, 3.0, "of the TCP between views")
     #: 1 by default: the pivot's own trials take the view turned (`cell pivot`, `cell compare`:
@@ -237,6 +246,9 @@ class Look:
         target = camera_over(xy, p.close_height, self.dev, yaw)
         if yaw != 0.0 and self._reach is not None and self._reach([target]) is not None:
             target, speed = camera_over(xy, p.close_height, self.dev), p.speed
+        distance, angle = self.dev.arm.tool_pose().distance(target)
+        if angle > 0.0:  # the path's length over the time the turn needs at turn_rate
+            speed = min(speed, max(distance, MIN_PATH) * p.turn_rate / angle)
         self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _refine(self, dets: list[Detection]) -> None:

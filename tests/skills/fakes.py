@@ -31,6 +31,7 @@ class FakeArm:
         self.remaining = 0
         self.state = MotionState.IDLE
         self.commands: list[tuple[str, object]] = []
+        self.speeds: list[float] = []  #: each move's speed, as asked
         self.stops = 0
         #: force mode: (selection, wrench, speed limits) while it runs, else None
         self.force: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -43,6 +44,7 @@ class FakeArm:
 
     def move_path(self, waypoints: Sequence[Pose], speed: float, acceleration: float) -> None:
         self.commands.append(("path", list(waypoints)))
+        self.speeds.append(speed)
         self.queue = list(waypoints)
         self.remaining = self.ticks_per_move
         self.state = MotionState.MOVING

@@ -95,3 +95,19 @@ def test_the_close_view_is_turned_to_the_next_skills_yaw() -> None:
 def test_without_a_grip_yaw_the_close_view_keeps_the_look_s_own_yaw() -> None:
     plain = _close_view(None)
     assert tool_yaw(plain.rotation) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_turned_close_view_is_slowed_to_the_turn_rate() -> None:
+    """Half a turn over 0.25 m of path at the look's 0.25 m/s would turn the wrist's last joint
+    past its pi rad/s (the twin's arm stopped there): the move is timed by its turn."""
+    dev = _devices()
+    look = Look(dev, [], (0.3, 0.7, -0.2, 0.2), (0.5, 0.0), (0.3, 0.0),  # type: ignore[arg-type]
+                grip_yaw=lambda d: d.yaw + math.pi)
+    look.result = _detection(0.3)
+    look.sequence.steps[6].start()
+    target = dev.arm.commands[-1][1][-1]  # type: ignore[attr-defined, index]
+    distance, angle = Pose(np.array([0.4, 0.0, 0.3])).distance(target)
+    p = look.params
+    assert angle > math.radians(150.0)
+    assert dev.arm.speeds[-1] == pytest.approx(min(p.turn_speed, distance * p.turn_rate / angle))
+    assert angle / p.turn_rate <= distance / dev.arm.speeds[-1] + 1e-9
