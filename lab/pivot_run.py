@@ -205,6 +205,8 @@ class TrialResult:
     other_end: bool = False
     #: no end cleared where the part lay: it was dragged first (counted apart, not the pivot)
     repositioned: bool = False
+    #: how it was moved: "drag" or "roll" (:class:`skills.reposition.MoveKind`; None: not)
+    moved_by: str | None = None
     #: N per finger the gripper's motors applied during the Tilt, the median over its control
     #: steps (PyBullet's applied joint motor force; None: no Tilt) -- :class:`ForceWatch`
     grip_force_n: float | None = None
@@ -445,15 +447,15 @@ def run_trial(
             frame = looked or frame
 
         choice = choose(frame)
-        repositioned = False
+        repositioned, moved_by = False, None
         if failure is None and not choice.clearance.clear:
-            # No end clears where the part lies: drag it to where one does, look again.
+            # No end clears where the part lies: drag (or roll) it to where one does, look again.
             move = plan_reposition(
                 frame, setup.part, params, setup.reposition or RepositionParams(), walls, [],
                 setup.layout.bin_interior(), width, reach=reach,
             )
             if move is not None:
-                early, repositioned = "reposition", True
+                early, repositioned, moved_by = "reposition", True, move.kind.value
                 t_end += setup.max_time
                 skill = Reposition(move, setup.part, dev, setup.reposition)
                 failure = run_skill("reposition", skill, world, robot, t_end, on_frame, frame_every)
@@ -566,6 +568,7 @@ def run_trial(
             clearance_mm=round(1e3 * choice.clearance.distance, 1),
             other_end=other_end,
             repositioned=repositioned,
+            moved_by=moved_by,
             grip_force_n=forces.grip_force(),
             peak_force_n=forces.peaks(),
             shove_mm=forces.moved_mm("close", "grasp end"),

@@ -9,6 +9,10 @@ part (at its middle, or further along where a wall leaves no room there), pinch 
 diameter, lift it a few millimetres, carry it over, set it down and let go. The part is then
 looked at again and pivoted where it now lies.
 
+A round part the jaws cannot come down beside (along a wall, between neighbours) is rolled
+instead (:func:`plan_roll`): the closed fingertips press on its top and push across its axis in
+the arm's force mode, a stroke at a time, as a person rolls it under a flat hand.
+
 This is not the pivot: it is a preparatory move, counted apart (``repositioned``), and it ends
 with the jaws open and the part lying on the floor -- the hole grasp is still reached by the
 paper's maneuver, without letting go.
@@ -17,18 +21,21 @@ paper's maneuver, without letting go.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
-from skills.axes import XY, Z
-from skills.motion import Guard, Sequence, wait
+from skills.axes import DIM, WRENCH_DIM, XY, X, Y, Z
+from skills.force import STILL_SPEED, world_force
+from skills.motion import Guard, GuardedMotion, Sequence, arm_failure, wait
 from skills.params import guard_field, si
 from skills.pivot.clearance import Obstacle, Reach, choose_end, tool_points
 from skills.pivot.frame import PivotFrame
@@ -36,6 +43,15 @@ from skills.pivot.params import PivotParams
 from skills.slot import ContactMove, SequenceSkill, check
 from skills.status import Failure
 
+#: m from the fingertips' edge the part's top is kept at, rolling: the pads' rounded edge
+ROLL_EDGE = 0.002
+#: m: the fast move ends this far above the part's top, and the slow descent onto it (at
+#: ``roll_speed``) aims as far below it (it ends on the touch, well before)
+ROLL_DEPTH = 0.01
+#: s a roll stroke may stand still before it ends (the part met something, or slid)
+ROLL_STALL = 0.3
+#: m: a shift shorter than this has no direction (a roll planned as none)
+NO_SHIFT = 1e-9
 #: m added to ``max_shift`` as the end of the range of drags tried: floating-point room, far
 #: below a step, so a ``max_shift`` that is a whole number of steps is itself tried
 SHIFT_ROUNDING = 1e-9
@@ -83,8 +99,28 @@ class RepositionParams:
     #: the jaws open, held still this long before they rise, so the part let go comes to rest
     #: before the fingers leave it
     release_settle: float = si(0.1, "s", 0.0, 2.0, "held still after letting go, before rising")
+    #: A round part the jaws cannot come down beside (along a wall, between neighbours) is
+    #: rolled instead, as a person rolls it under a flat hand: the closed fingertips press on
+    #: its top and move across its axis; rolling, the part's centre goes half as far as the
+    #: fingertips, and the contact runs back across the tips' width, so the roll is a few
+    #: strokes, each as long as that width allows, lifting and coming back between them.
+    roll_press: float = si(
+        4.0, "N", 0.5, 30.0, "the closed fingertips press down on the part's top while rolling"
+    )
+    roll_push: float = si(
+        8.0, "N", 0.5, 50.0, "the fingertips push across the part at most (force mode)"
+    )
+    roll_speed: float = si(0.02, "m/s", 0.002, 0.1, "of the fingertips rolling the part")
+    roll_max: float = si(0.05, "m", 0.005, 0.2, "the farthest a part is rolled")
     guard: Guard = field(default_factory=Guard)
     descent_guard: Guard = guard_field(25.0, 10.0, "the jaws down beside the part")
+
+
+class MoveKind(StrEnum):
+    """How a part is moved to where a pivot clears."""
+
+    DRAG = "drag"  #: pinched across its diameter, lifted, carried, set down
+    ROLL = "roll"  #: rolled across its axis under the closed fingertips
 
 
 @dataclass(frozen=True)
@@ -104,6 +140,7 @@ class RepositionPlan:
     target: PivotFrame
     shift: NDArray[np.float64]
     grip: Grip = field(default_factory=lambda: Grip())  #: where the jaws take the part
+    kind: MoveKind = MoveKind.DRAG
 
     @property
     def distance(self) -> float:
@@ -189,8 +226,36 @@ def plan_reposition(
     obstacles = [*walls, *neighbours]
     free = [g for g in grips(part, params, finger_width)
             if _pinch_clear(frame, part, params, obstacles, finger_width, g)]
-    if not free:
-        return None
+    drag = None if not free else _plan_drag(
+        frame, part, pivot, params, obstacles, neighbours, interior, finger_width, base_xy,
+        free, reach,
+    )
+    if drag is not None:
+        return drag
+    return plan_roll(frame, part, pivot, params, walls, neighbours, interior, finger_width,
+                     base_xy, reach=reach)
+
+
+def _fits(moved: PivotFrame, part: Part, params: RepositionParams, interior: Seq[float],
+          neighbours: Seq[Obstacle]) -> bool:
+    """The part's footprint at ``moved`` lies inside the bin and clear of the neighbours."""
+    if not _footprint_inside(moved, part, interior, params.wall_margin):
+        return False
+    half = 0.5 * np.array([part.length, part.outer, part.outer])  # exact: half sizes
+    c, s = math.cos(moved.yaw), math.sin(moved.yaw)
+    corners = np.asarray(moved.center, float) + np.array(
+        [[a * half[0] * c - b * half[1] * s, a * half[0] * s + b * half[1] * c, 0.0]
+         for a in (-1, 0, 1) for b in (-1, 0, 1)]
+    )
+    return not any(float(np.min(nb.distance(corners))) < params.wall_margin for nb in neighbours)
+
+
+def _plan_drag(
+    frame: PivotFrame, part: Part, pivot: PivotParams, params: RepositionParams,
+    obstacles: Seq[Obstacle], neighbours: Seq[Obstacle], interior: Seq[float],
+    finger_width: float, base_xy: Seq[float], free: list[Grip], reach: Reach,
+) -> RepositionPlan | None:
+    """The shortest drag with one of the ``free`` pinches (:func:`plan_reposition`)."""
     steps = np.arange(params.shift_step, params.max_shift + SHIFT_ROUNDING, params.shift_step)
     directions = [frame.u[XY], -frame.u[XY], frame.normal[XY], -frame.normal[XY]]
     for s in steps:
@@ -199,16 +264,7 @@ def plan_reposition(
             center = np.asarray(frame.center, float).copy()
             center[XY] += shift
             moved = replace(frame, center=center)
-            if not _footprint_inside(moved, part, interior, params.wall_margin):
-                continue
-            half = 0.5 * np.array([part.length, part.outer, part.outer])  # exact: half sizes
-            body = Obstacle("the part", center, half, moved.yaw)
-            corners = body.center + np.array(
-                [[a * body.half[0] * math.cos(moved.yaw) - b * body.half[1] * math.sin(moved.yaw),
-                  a * body.half[0] * math.sin(moved.yaw) + b * body.half[1] * math.cos(moved.yaw),
-                  0.0] for a in (-1, 0, 1) for b in (-1, 0, 1)]
-            )
-            if any(float(np.min(nb.distance(corners))) < params.wall_margin for nb in neighbours):
+            if not _fits(moved, part, params, interior, neighbours):
                 continue
             # the same pinch must clear where the part is set down
             grip = next((g for g in free if _pinch_clear(moved, part, params, obstacles,
@@ -220,6 +276,139 @@ def plan_reposition(
             if choice.clearance.clear:
                 return RepositionPlan(frame, moved, shift, grip)
     return None
+
+
+def is_round(part: Part) -> bool:
+    """Whether the part rolls: the catalogue gives a round hole's part a round outside (its
+    ``outer`` is a diameter); a rectangular hole's is a box, which does not roll."""
+    return part.hole_shape == "circle"
+
+
+def roll_pose(centre: ArrayLike, frame: PivotFrame, part: Part, params: RepositionParams,
+              direction: NDArray[np.float64], finger_width: float) -> Pose:
+    """The TCP with the closed fingertips on the part's top (lying at ``centre``), side by
+    side along its axis, the top under their leading edge (towards ``direction``): rolling,
+    the contact runs back across the tips' width."""
+    z = np.array([0.0, 0.0, -1.0])
+    x = frame.u
+    rot = np.column_stack([x, np.cross(z, x), z])
+    back = 0.5 * finger_width - ROLL_EDGE  # exact: from the tips' middle to their edge
+    tips = np.asarray(centre, float) - back * direction
+    tips[Z] = frame.floor_z + part.outer
+    return Pose(tips - params.tip_offset * z, rot)
+
+
+def roll_stroke(finger_width: float) -> float:
+    """m the part's centre goes per stroke: half the fingertips' travel, which is twice the
+    width the contact may run back across."""
+    return finger_width - 2.0 * ROLL_EDGE  # exact: the width less an edge at each side
+
+
+def _roll_clear(pose: Pose, params: RepositionParams, obstacles: Seq[Obstacle],
+                finger_width: float) -> bool:
+    model = tool_points(0.0, params.tip_offset, params.finger_thickness, finger_width)
+    for lift in (0.0, params.approach_height):
+        p = Pose(pose.position + np.array([0.0, 0.0, lift]), pose.rotation)
+        for pts in model.values():
+            world = pts @ p.rotation.T + p.position
+            if any(float(np.min(ob.distance(world))) < 0.0 for ob in obstacles):
+                return False
+    return True
+
+
+def plan_roll(
+    frame: PivotFrame,
+    part: Part,
+    pivot: PivotParams,
+    params: RepositionParams,
+    walls: Seq[Obstacle],
+    neighbours: Seq[Obstacle],
+    interior: Seq[float],
+    finger_width: float,
+    base_xy: Seq[float] = (0.0, 0.0),
+    *,
+    reach: Reach,
+) -> RepositionPlan | None:
+    """The shortest roll of a round part across its axis (up to ``roll_max``) after which a
+    pivot clears, the closed fingertips reaching its top at the start and the end of it without
+    touching a wall or a neighbour; None for a part that does not roll or when none does."""
+    if not is_round(part):
+        return None
+    obstacles = [*walls, *neighbours]
+    steps = np.arange(params.shift_step, params.roll_max + SHIFT_ROUNDING, params.shift_step)
+    for s in steps:
+        for sign in (1.0, -1.0):
+            direction = sign * frame.normal
+            centre = np.asarray(frame.center, float) + float(s) * direction
+            moved = replace(frame, center=centre)
+            if not _fits(moved, part, params, interior, neighbours):
+                continue
+            start = roll_pose(frame.center, frame, part, params, direction, finger_width)
+            end = roll_pose(centre, frame, part, params, direction, finger_width)
+            if not (_roll_clear(start, params, obstacles, finger_width)
+                    and _roll_clear(end, params, obstacles, finger_width)):
+                continue
+            choice = choose_end(moved, pivot, obstacles, finger_width, part.open_ends,
+                                margin=params.plan_margin, base_xy=base_xy, reach=reach)
+            if choice.clearance.clear:
+                return RepositionPlan(frame, moved, float(s) * direction[XY], kind=MoveKind.ROLL)
+    return None
+
+
+class RollStroke:
+    """One stroke: in the arm's force mode the closed fingertips press ``roll_press`` down on
+    the part's top and push ``roll_push`` along ``direction`` at ``roll_speed``, until they
+    have gone ``travel`` -- or stand still (the part met something), which ends the stroke
+    too; ``travelled`` says how far they went."""
+
+    def __init__(self, name: str, dev: Devices, guard: Guard, params: RepositionParams,
+                 direction: NDArray[np.float64], travel: Callable[[], float]) -> None:
+        self.dev, self.params, self.direction, self._travel = dev, params, direction, travel
+        self.travelled = 0.0
+        self._start_pos = np.zeros(3)
+        self._limit = 0.0
+        self._last: tuple[float, float] | None = None
+        self._still_since: float | None = None
+        self.motion = GuardedMotion(
+            name, self._start, self._finished, dev.arm, dev.ft, dev.clock, guard,
+            lambda: arm_failure(dev.arm),
+        )
+
+    def _start(self) -> None:
+        p, arm = self.params, self.dev.arm
+        ref = world_force(self.dev)
+        self._start_pos = arm.tool_pose().position.copy()
+        self._limit, self.travelled = float(self._travel()), 0.0
+        self._last, self._still_since = None, None
+        d = self.direction
+        selection = [True, True, True] + [False] * (WRENCH_DIM - DIM)
+        wrench = [0.0] * WRENCH_DIM
+        limits = [0.0] * WRENCH_DIM
+        for axis in (X, Y):
+            wrench[axis] = float(-ref[axis] + p.roll_push * d[axis])
+            limits[axis] = p.roll_speed * abs(float(d[axis]))
+        wrench[Z] = float(-ref[Z] - p.roll_press)  # the tool presses down on the top
+        limits[Z] = p.roll_speed
+        arm.force_mode(selection, wrench, limits)
+
+    def _finished(self) -> bool:
+        arm, now = self.dev.arm, self.dev.clock.now()
+        self.travelled = float((arm.tool_pose().position - self._start_pos) @ self.direction)
+        if self.travelled >= self._limit:
+            arm.stop()
+            return True
+        if self._last is not None and now > self._last[0]:
+            speed = (self.travelled - self._last[1]) / (now - self._last[0])
+            if speed < STILL_SPEED:
+                if self._still_since is None:
+                    self._still_since = now
+                if now - self._still_since >= ROLL_STALL:
+                    arm.stop()
+                    return True
+            else:
+                self._still_since = None
+        self._last = (now, self.travelled)
+        return False
 
 
 class Reposition(SequenceSkill):
@@ -237,6 +426,9 @@ class Reposition(SequenceSkill):
     ) -> None:
         p = replace(params or RepositionParams(), **overrides)
         self.plan, self.part, self.dev, self.params = plan, part, dev, p
+        if plan.kind is MoveKind.ROLL:
+            self.sequence = self._roll()
+            return
         self._pinch = pinch_pose(plan.frame, part, p, plan.grip)
         up = np.array([0.0, 0.0, 1.0])
         self._above = Pose(self._pinch.position + (part.outer + p.approach_height) * up,
@@ -267,6 +459,65 @@ class Reposition(SequenceSkill):
                                                         p.speed)),
             ],
         )
+
+    def _roll(self) -> Sequence:
+        """The roll as strokes (:class:`RollStroke`), each from where the last left the part:
+        its centre went half as far as the fingertips did."""
+        p, dev, plan = self.params, self.dev, self.plan
+        g, width = p.guard, dev.gripper.finger_width
+        shift = np.array([plan.shift[0], plan.shift[1], 0.0])
+        total = float(np.linalg.norm(shift))
+        direction = shift / max(total, NO_SHIFT)
+        per = roll_stroke(width)
+        strokes = max(1, math.ceil(total / per - SHIFT_ROUNDING))
+        centre = np.asarray(plan.frame.center, float).copy()
+        rolled = [0.0]
+        up = np.array([0.0, 0.0, p.approach_height])
+
+        def top() -> Pose:
+            return roll_pose(centre, plan.frame, self.part, p, direction, width)
+
+        def over() -> None:
+            pose = top()
+            above = Pose(pose.position + up, pose.rotation)
+            near = Pose(pose.position + np.array([0.0, 0.0, ROLL_DEPTH]), pose.rotation)
+            dev.arm.move_path([above, near], p.speed, p.acceleration)
+
+        def into_top() -> Pose:
+            pose = top()
+            return Pose(pose.position - np.array([0.0, 0.0, ROLL_DEPTH]), pose.rotation)
+
+        steps = [dev.grip("close the jaws", g,
+                          lambda: dev.gripper.close(p.grip_force, p.close_speed))]
+        for k in range(strokes):
+            descend = ContactMove(f"down onto its top ({k + 1} of {strokes})", dev,
+                                  p.descent_guard, into_top, p.roll_speed, p.acceleration,
+                                  p.contact_force)
+            def travel() -> float:
+                left = max(0.0, min(per, total - rolled[0]))
+                return 2.0 * left  # exact: rolling, the tips go twice as far as the centre
+
+            stroke = RollStroke(f"roll it ({k + 1} of {strokes})", dev, g, p, direction, travel)
+
+            def found(d: ContactMove = descend) -> str | None:
+                return None if d.contact else "the closed fingertips did not meet the part's top"
+
+            def rise(s: RollStroke = stroke) -> None:
+                moved = 0.5 * max(0.0, s.travelled)  # exact: rolling, the centre goes half
+                rolled[0] += moved
+                centre[:] = centre + moved * direction
+                here = dev.arm.tool_pose()
+                dev.arm.move_to(Pose(here.position + up, here.rotation), p.speed,
+                                p.acceleration)
+
+            steps += [
+                dev.move(f"over the part ({k + 1} of {strokes})", g, over),
+                descend.motion,
+                check(f"on its top ({k + 1} of {strokes})", dev, g, found, Failure.MISSED),
+                stroke.motion,
+                dev.move(f"up ({k + 1} of {strokes})", g, rise),
+            ]
+        return Sequence("roll", steps)
 
     def _over(self) -> None:
         arm, p = self.dev.arm, self.params

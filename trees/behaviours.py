@@ -453,12 +453,13 @@ class PivotClears(Behaviour):
 
 @declare(
     "reposition",
-    "drag the chosen part to where a pivot clears (counted apart as repositioned)",
+    "drag (or roll, a round part the jaws cannot come down beside) the chosen part to where a "
+    "pivot clears (counted apart as repositioned)",
     "Action",
     MOTION,
 )
 class Reposition(SkillBehaviour):
-    """Drag the chosen part by plan_pick's plan; the part is then looked at again."""
+    """Drag or roll the chosen part by plan_pick's plan; the part is then looked at again."""
 
     section = "reposition"
 
@@ -481,6 +482,7 @@ class Reposition(SkillBehaviour):
             x=round(float(c[0]), 4),
             y=round(float(c[1]), 4),
             shift_mm=round(1e3 * self.move.distance, 1),
+            how=self.move.kind.value,
         )
 
 
