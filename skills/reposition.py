@@ -34,7 +34,7 @@ from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import DIM, WRENCH_DIM, XY, X, Y, Z
-from skills.force import STILL_SPEED, world_force
+from skills.force import STILL_SPEED
 from skills.motion import Guard, GuardedMotion, Sequence, arm_failure, wait
 from skills.params import guard_field, si
 from skills.pivot.clearance import Obstacle, Reach, choose_end, tool_points
@@ -222,7 +222,8 @@ def plan_reposition(
 ) -> RepositionPlan | None:
     """The shortest drag (along the axis, then across it) after which a pivot clears (within
     the arm's ``reach``), the pinch clears both here and there, and the part lies inside the
-    bin clear of its neighbours; None when no drag up to ``max_shift`` does."""
+    bin clear of its neighbours; where no drag up to ``max_shift`` does, the shortest roll
+    (:func:`plan_roll`); None when neither does."""
     obstacles = [*walls, *neighbours]
     free = [g for g in grips(part, params, finger_width)
             if _pinch_clear(frame, part, params, obstacles, finger_width, g)]
@@ -285,15 +286,16 @@ def is_round(part: Part) -> bool:
 
 
 def roll_pose(centre: ArrayLike, frame: PivotFrame, part: Part, params: RepositionParams,
-              direction: NDArray[np.float64], finger_width: float) -> Pose:
+              direction: NDArray[np.float64], finger_width: float, ended: bool = False) -> Pose:
     """The TCP with the closed fingertips on the part's top (lying at ``centre``), side by
     side along its axis, the top under their leading edge (towards ``direction``): rolling,
-    the contact runs back across the tips' width."""
+    the contact runs back across the tips' width. ``ended``: where a full stroke leaves them,
+    the top under their trailing edge."""
     z = np.array([0.0, 0.0, -1.0])
     x = frame.u
     rot = np.column_stack([x, np.cross(z, x), z])
     back = 0.5 * finger_width - ROLL_EDGE  # exact: from the tips' middle to their edge
-    tips = np.asarray(centre, float) - back * direction
+    tips = np.asarray(centre, float) + (back if ended else -back) * direction
     tips[Z] = frame.floor_z + part.outer
     return Pose(tips - params.tip_offset * z, rot)
 
@@ -344,7 +346,8 @@ def plan_roll(
             if not _fits(moved, part, params, interior, neighbours):
                 continue
             start = roll_pose(frame.center, frame, part, params, direction, finger_width)
-            end = roll_pose(centre, frame, part, params, direction, finger_width)
+            # where the last stroke leaves the tips (ahead of the centre) and they rise from
+            end = roll_pose(centre, frame, part, params, direction, finger_width, ended=True)
             if not (_roll_clear(start, params, obstacles, finger_width)
                     and _roll_clear(end, params, obstacles, finger_width)):
                 continue
@@ -362,8 +365,13 @@ class RollStroke:
     too; ``travelled`` says how far they went."""
 
     def __init__(self, name: str, dev: Devices, guard: Guard, params: RepositionParams,
-                 direction: NDArray[np.float64], travel: Callable[[], float]) -> None:
+                 direction: NDArray[np.float64], travel: Callable[[], float],
+                 reference: Callable[[], NDArray[np.float64]]) -> None:
+        """``reference``: the force on the tool (N, base frame) with nothing touched, read
+        before the fingertips came down on the part: the stroke begins pressing on it, and
+        measured from there it would press ``roll_press`` on top of that touch."""
         self.dev, self.params, self.direction, self._travel = dev, params, direction, travel
+        self._reference = reference
         self.travelled = 0.0
         self._start_pos = np.zeros(3)
         self._limit = 0.0
@@ -376,7 +384,7 @@ class RollStroke:
 
     def _start(self) -> None:
         p, arm = self.params, self.dev.arm
-        ref = world_force(self.dev)
+        ref = np.asarray(self._reference(), float)
         self._start_pos = arm.tool_pose().position.copy()
         self._limit, self.travelled = float(self._travel()), 0.0
         self._last, self._still_since = None, None
@@ -412,12 +420,14 @@ class RollStroke:
 
 
 class Reposition(SequenceSkill):
-    """Carry a lying part by ``plan.shift``: pinch it across its middle, lift, carry, set down.
+    """Move a lying part by ``plan.shift``: a drag (pinch it at ``plan.grip``, lift, carry,
+    set down) or, ``plan.kind`` ROLL, a roll under the closed fingertips in strokes.
 
     Before: the part lies where ``plan.frame`` says, the jaws anywhere. After SUCCESS: the part
-    lies about ``plan.shift`` further, the jaws open ``approach_height`` above it. A descent
-    that meets something before the floor fails (``blocked``); a pinch that closes on nothing
-    fails (``missed``).
+    lies about ``plan.shift`` further, the jaws ``approach_height`` above it (open after a
+    drag, closed after a roll). A descent that meets something before the floor fails
+    (``blocked``); a pinch that closes on nothing, or fingertips that find no top, fail
+    (``missed``).
     """
 
     def __init__(
@@ -497,7 +507,8 @@ class Reposition(SequenceSkill):
                 left = max(0.0, min(per, total - rolled[0]))
                 return 2.0 * left  # exact: rolling, the tips go twice as far as the centre
 
-            stroke = RollStroke(f"roll it ({k + 1} of {strokes})", dev, g, p, direction, travel)
+            stroke = RollStroke(f"roll it ({k + 1} of {strokes})", dev, g, p, direction, travel,
+                                lambda d=descend: d.reference)
 
             def found(d: ContactMove = descend) -> str | None:
                 return None if d.contact else "the closed fingertips did not meet the part's top"

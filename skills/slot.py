@@ -291,7 +291,8 @@ class ContactMove:
         self.contact = False
         self.contact_pose: Pose | None = None
         self.resisting = 0.0  #: N, the newest force against the motion (above the reference)
-        self._ref = np.zeros(3)
+        #: N, base frame: the force on the tool when the move started (nothing touched yet)
+        self.reference = np.zeros(3)
         self._dir = np.zeros(3)
         self.motion = GuardedMotion(
             name, self._start, self._finished, dev.arm, dev.ft, dev.clock, guard, self._failed
@@ -302,12 +303,12 @@ class ContactMove:
         start = self.dev.arm.tool_pose().position
         d = target.position - start
         self._dir = d / max(float(np.linalg.norm(d)), NO_DIRECTION)
-        self._ref = world_force(self.dev)
+        self.reference = world_force(self.dev)
         self.contact, self.contact_pose = False, None
         self.dev.arm.move_to(target, self._speed, self._acc)
 
     def _finished(self) -> bool:
-        self.resisting = -float((world_force(self.dev) - self._ref) @ self._dir)
+        self.resisting = -float((world_force(self.dev) - self.reference) @ self._dir)
         if self.resisting > self.threshold:
             self.dev.arm.stop()
             self.contact, self.contact_pose = True, self.dev.arm.tool_pose()

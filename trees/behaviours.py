@@ -184,7 +184,8 @@ class Perceive(SkillBehaviour):
             (float(near[0]), float(near[1])),
             self.settings(),
             grip_yaw=self._grip_yaw,
-            reach=self.ctx.reach,
+            # the look's views are straight moves from where the arm stands: not from home
+            reach=self.ctx.reach_here or self.ctx.reach,
         )
         return _TolerantLook(self.look)
 

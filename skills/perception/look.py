@@ -38,8 +38,9 @@ SAME_PART_DISTANCE = 0.02
 VERTICAL_X = 0.01
 #: ``turn_view_to_grasp`` at or above this turns the last view (the key is 0 or 1)
 TURN_VIEW = 0.5
-#: m: the shortest path a turning move is timed over (a turn in place still gets a speed)
-MIN_PATH = 0.01
+#: m of path a straight move counts per radian of its turn (the UR5's moveL and its twin's):
+#: a move that turns more than it travels is timed by its turn at this rate
+TURN_PATH = 0.1
 
 
 def camera_over(
@@ -248,7 +249,7 @@ class Look:
             target, speed = camera_over(xy, p.close_height, self.dev), p.speed
         distance, angle = self.dev.arm.tool_pose().distance(target)
         if angle > 0.0:  # the path's length over the time the turn needs at turn_rate
-            speed = min(speed, max(distance, MIN_PATH) * p.turn_rate / angle)
+            speed = min(speed, max(distance, TURN_PATH * angle) * p.turn_rate / angle)
         self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _refine(self, dets: list[Detection]) -> None:

@@ -130,9 +130,10 @@ class Grasp:
     def _over_open_end(self) -> None:
         """To ``approach_height`` straight above the pre-approach pose, turned as the approach
         needs; the next step goes straight down from there, so only that vertical leg comes
-        near the bin. The pose is the one the plan's reach check follows the TCP to from where
-        the arm stands (a pose kept level with a higher tool, at the bin's far corner, was out
-        of the UR5's reach where the checked one was not).
+        near the bin. Within millimetres it is the pose the plan's reach check follows the TCP
+        to from where the arm stands (the check's sweep leaves out the standoff and the tips'
+        travel); a pose kept level with a higher tool, as before, was out of the UR5's reach
+        at the bin's far corner where the checked one was not.
 
         Two moves, each stopping at its end, not one path through both: a path runs its corner
         at full speed, and where the first leg is mostly the tilt to alpha (the tool already

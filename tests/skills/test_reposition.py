@@ -146,3 +146,32 @@ def test_cell_pivot_rolls_a_bushing_off_the_wall_then_pivots_it(tmp_path) -> Non
     assert trial["success"] is True, trial["failure"]
     moved = trial["true_pose"]["y"] - trial["perceived_pose"]["y"]
     assert moved > 0.005  # the look after the roll saw it further from the +y wall
+
+
+def test_a_roll_stroke_presses_from_the_reading_before_the_touch_and_stops_at_its_travel() -> None:
+    """The stroke begins pressing on the part's top: its force mode is set from the reading
+    taken before the fingertips came down (else the touch's own force would be added to the
+    press), pushes across at most ``roll_push`` at ``roll_speed``, and ends at its travel."""
+    from skills.motion import Guard
+    from skills.reposition import RollStroke
+    from tests.skills.test_slot_packing_fakes import dev, devices, push_back
+
+    d = devices()
+    p = RepositionParams()
+    push_back(d, (0.0, 0.0, 6.0))  # the fingertips already pressing on the top
+    before = np.array([0.0, 0.0, -1.5])  # what the wrist read before they came down
+    direction = np.array([0.0, -1.0, 0.0])
+    stroke = RollStroke("roll", dev(d), Guard(80.0, 8.0, 10.0), p, direction, lambda: 0.032,
+                        lambda: before)
+    stroke.motion.start()
+    selection, wrench, limits = d["arm"].force
+    assert selection[:3].all() and not selection[3:].any()
+    assert wrench[:3] == pytest.approx([0.0, -p.roll_push, 1.5 - p.roll_press])
+    assert limits[:3] == pytest.approx([0.0, p.roll_speed, p.roll_speed])
+    for _ in range(1000):
+        d["arm"].tick()
+        d["clock"].t += d["clock"].dt
+        if stroke.motion.tick().done:
+            break
+    assert stroke.travelled == pytest.approx(0.032, abs=p.roll_speed * d["arm"].dt)
+    assert d["arm"].force is None  # stopped at its travel

@@ -12,7 +12,7 @@ from drivers.devices import Devices
 from drivers.parts import Section
 from drivers.pose import Pose
 from skills.perception.bin_parts import Detection
-from skills.perception.look import Look, camera_over, tool_yaw
+from skills.perception.look import TURN_PATH, Look, camera_over, tool_yaw
 from skills.pivot.clearance import likely_grasp_rotation
 from skills.pivot.frame import PivotFrame
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
@@ -109,5 +109,6 @@ def test_a_turned_close_view_is_slowed_to_the_turn_rate() -> None:
     distance, angle = Pose(np.array([0.4, 0.0, 0.3])).distance(target)
     p = look.params
     assert angle > math.radians(150.0)
-    assert dev.arm.speeds[-1] == pytest.approx(min(p.turn_speed, distance * p.turn_rate / angle))
-    assert angle / p.turn_rate <= distance / dev.arm.speeds[-1] + 1e-9
+    path = max(distance, TURN_PATH * angle)  # what the arm times the move by
+    assert dev.arm.speeds[-1] == pytest.approx(min(p.turn_speed, path * p.turn_rate / angle))
+    assert angle / p.turn_rate <= path / dev.arm.speeds[-1] + 1e-9
