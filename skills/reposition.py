@@ -197,9 +197,16 @@ def _pinch_clear(
     neighbour."""
     pose = pinch_pose(frame, part, params, grip)
     width = part.outer + 2.0 * params.side_gap  # exact: a side gap each side of the part
+    return _tool_clear(pose, width, params, obstacles, finger_width, params.lift)
+
+
+def _tool_clear(pose: Pose, width: float, params: RepositionParams, obstacles: Seq[Obstacle],
+                finger_width: float, raised: float) -> bool:
+    """The tool at jaw opening ``width`` touches no obstacle at ``pose`` raised by ``raised``
+    (m), nor ``approach_height`` above that, where it comes down from and rises to."""
     model = tool_points(width, params.tip_offset, params.finger_thickness, finger_width)
     for lift in (0.0, params.approach_height):
-        p = Pose(pose.position + np.array([0.0, 0.0, lift + params.lift]), pose.rotation)
+        p = Pose(pose.position + np.array([0.0, 0.0, lift + raised]), pose.rotation)
         for pts in model.values():
             world = pts @ p.rotation.T + p.position
             if any(float(np.min(ob.distance(world))) < 0.0 for ob in obstacles):
@@ -308,14 +315,8 @@ def roll_stroke(finger_width: float) -> float:
 
 def _roll_clear(pose: Pose, params: RepositionParams, obstacles: Seq[Obstacle],
                 finger_width: float) -> bool:
-    model = tool_points(0.0, params.tip_offset, params.finger_thickness, finger_width)
-    for lift in (0.0, params.approach_height):
-        p = Pose(pose.position + np.array([0.0, 0.0, lift]), pose.rotation)
-        for pts in model.values():
-            world = pts @ p.rotation.T + p.position
-            if any(float(np.min(ob.distance(world))) < 0.0 for ob in obstacles):
-                return False
-    return True
+    """The closed jaws on the part's top at ``pose``, and above it, touch nothing."""
+    return _tool_clear(pose, 0.0, params, obstacles, finger_width, 0.0)
 
 
 def plan_roll(

@@ -713,6 +713,16 @@ def test_plan_pick_sweeps_off_the_tick_where_time_runs_on_and_inline_in_the_twin
     assert swept_on == [expected, expected]
 
 
+def _grasp_commands(ctx, node, ticks: int = 40) -> list[str]:  # type: ignore[no-untyped-def]
+    """Tick the Grasp leaf with the fakes stepping; the kinds of the arm's commands so far."""
+    for _ in range(ticks):
+        node.tick_once()
+        ctx.devices.arm.tick()
+        ctx.devices.gripper.tick()
+        ctx.devices.clock.t += ctx.devices.clock.dt
+    return [c[0] for c in ctx.devices.arm.commands]
+
+
 def test_grasp_out_of_straight_reach_goes_home_by_a_joint_move_first(ctx) -> None:
     """A plan made from home (``reach``) that the arm cannot follow in straight moves from where
     it stands (``reach_here``) starts with the joint move home, then the Grasp's own moves."""
@@ -720,12 +730,7 @@ def test_grasp_out_of_straight_reach_goes_home_by_a_joint_move_first(ctx) -> Non
     bb.set("/part/target", target(ctx))
     ctx.reach_here = lambda poses: 0  # nothing straight from here
     node = lv.Grasp("grasp", ctx)
-    for _ in range(40):
-        node.tick_once()
-        ctx.devices.arm.tick()
-        ctx.devices.gripper.tick()
-        ctx.devices.clock.t += ctx.devices.clock.dt
-    kinds = [c[0] for c in ctx.devices.arm.commands]
+    kinds = _grasp_commands(ctx, node)
     assert kinds[0] == "joints"
     assert np.allclose(ctx.devices.arm.commands[0][1], ctx.geometry.home_joints)
     assert len(kinds) > 1 and kinds[1] != "joints"  # then the Grasp moves
@@ -736,10 +741,5 @@ def test_grasp_in_straight_reach_moves_straight_away(ctx) -> None:
     bb.set("/part/target", target(ctx))
     ctx.reach_here = lambda poses: None
     node = lv.Grasp("grasp", ctx)
-    for _ in range(40):
-        node.tick_once()
-        ctx.devices.arm.tick()
-        ctx.devices.gripper.tick()
-        ctx.devices.clock.t += ctx.devices.clock.dt
-    kinds = [c[0] for c in ctx.devices.arm.commands]
+    kinds = _grasp_commands(ctx, node)
     assert kinds and "joints" not in kinds
