@@ -37,6 +37,7 @@ from skills.axes import DIM, WRENCH_DIM, XY, X, Y, Z
 from skills.force import STILL_SPEED
 from skills.motion import Guard, GuardedMotion, Sequence, arm_failure, wait
 from skills.params import guard_field, si
+from skills.pivot.align import hole_grasp_rotation
 from skills.pivot.clearance import Obstacle, Reach, choose_end, tool_points
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
@@ -153,13 +154,11 @@ def pinch_pose(
     """The TCP pinching the lying part across its diameter at ``grip`` (its middle by
     default): fingers down, jaws across the axis."""
     g = grip or Grip()
-    z = np.array([0.0, 0.0, -1.0])
-    x = frame.normal
-    rot = np.column_stack([x, np.cross(z, x), z])
+    rot = hole_grasp_rotation(frame.normal)  # fingers down, the jaws across the axis
     height = params.grip_height if g.height is None else g.height
     tips = np.asarray(frame.center, float) + g.along * np.asarray(frame.u, float)
     tips[Z] = frame.floor_z + height
-    return Pose(tips - params.tip_offset * z, rot)
+    return Pose(tips - params.tip_offset * rot[:, Z], rot)
 
 
 def grips(part: Part, params: RepositionParams, finger_width: float) -> list[Grip]:
@@ -298,13 +297,11 @@ def roll_pose(centre: ArrayLike, frame: PivotFrame, part: Part, params: Repositi
     side along its axis, the top under their leading edge (towards ``direction``): rolling,
     the contact runs back across the tips' width. ``ended``: where a full stroke leaves them,
     the top under their trailing edge."""
-    z = np.array([0.0, 0.0, -1.0])
-    x = frame.u
-    rot = np.column_stack([x, np.cross(z, x), z])
-    back = 0.5 * finger_width - ROLL_EDGE  # exact: from the tips' middle to their edge
+    rot = hole_grasp_rotation(frame.u)  # fingers down, the tips side by side along the axis
+    back = 0.5 * roll_stroke(finger_width)  # exact: the contact's run is centred on the tips
     tips = np.asarray(centre, float) + (back if ended else -back) * direction
     tips[Z] = frame.floor_z + part.outer
-    return Pose(tips - params.tip_offset * z, rot)
+    return Pose(tips - params.tip_offset * rot[:, Z], rot)
 
 
 def roll_stroke(finger_width: float) -> float:

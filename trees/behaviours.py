@@ -508,7 +508,10 @@ class Grasp(SkillBehaviour):
 
 
 class _Then:
-    """One skill, then another: a failure of the first ends it."""
+    """One skill, then another: a failure of the first ends it. Not a
+    :class:`skills.motion.Sequence` of the two: that reports only its steps' names while they
+    run, and the Grasp's own step messages ("grasp: above the open end") are the leaf's
+    feedback in the tick log."""
 
     def __init__(self, first: Skill, then: Skill) -> None:
         self.first, self.then, self._first_done = first, then, False

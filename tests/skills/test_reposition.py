@@ -27,6 +27,7 @@ from skills.reposition import (
     grips,
     plan_reposition,
     plan_roll,
+    roll_pose,
     roll_stroke,
 )
 
@@ -71,16 +72,21 @@ def test_a_part_hemmed_in_by_neighbours_is_not_dragged(bushing) -> None:
     assert move is None
 
 
-def test_cell_pivot_drags_a_part_against_the_wall_then_pivots_it(tmp_path) -> None:
-    """Trial seed 4013 (the part's end 29 mm from the bin's -x wall): judged by the twin."""
+def _bushing_trial(tmp_path, seed: int) -> dict:  # type: ignore[no-untyped-def]
+    """One ``cell pivot --pose random`` bushing trial at ``seed``, as a user runs it: its JSON."""
     out = tmp_path / "p.json"
     r = subprocess.run(
         [sys.executable, "-m", "cell.cli", "pivot", "--part", "bushing", "--pose", "random",
-         "--trials", "1", "--seed", "4013", "--json", str(out)],
+         "--trials", "1", "--seed", str(seed), "--json", str(out)],
         capture_output=True, text=True, timeout=600,
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    trial = json.loads(out.read_text())["per_trial"][0]
+    return json.loads(out.read_text())["per_trial"][0]  # type: ignore[no-any-return]
+
+
+def test_cell_pivot_drags_a_part_against_the_wall_then_pivots_it(tmp_path) -> None:
+    """Trial seed 4013 (the part's end 29 mm from the bin's -x wall): judged by the twin."""
+    trial = _bushing_trial(tmp_path, 4013)
     assert trial["repositioned"] is True
     assert trial["success"] is True, trial["failure"]
     moved = np.hypot(trial["perceived_pose"]["x"] - trial["true_pose"]["x"],
@@ -126,22 +132,28 @@ def test_a_round_part_along_a_wall_is_rolled_away_from_it(bushing) -> None:
     assert plan_roll(f, box, pivot, params, WALLS, [], ROI, W, reach=ur5_reach) is None
 
 
-def test_a_roll_goes_in_strokes_the_tips_width_allows() -> None:
-    # the contact runs back across the 20 mm tips, 2 mm kept from each edge: 16 mm a stroke
-    assert roll_stroke(0.020) == pytest.approx(0.016)
+def test_a_full_stroke_runs_the_contact_back_across_the_tips_width(bushing) -> None:
+    """Where a stroke starts (the top under the tips' leading edge) and where a full one ends
+    (under their trailing edge) lie one stroke apart for the same top: the 20 mm tips less
+    2 mm at each edge, 16 mm; the tips then travelled twice that while the part rolled one."""
+    part, _ = bushing
+    f = PivotFrame(part.section(W), np.array([0.40, 0.0, 0.017]), 0.3, 0.0)
+    params, direction = RepositionParams(), f.normal
+    start = roll_pose(f.center, f, part, params, direction, W)
+    ended = roll_pose(f.center, f, part, params, direction, W, ended=True)
+    assert roll_stroke(W) == pytest.approx(0.016)
+    assert (ended.position - start.position) @ direction == pytest.approx(roll_stroke(W))
+    for pose in (start, ended):  # fingertips on the top, fingers down, side by side along u
+        tips = pose.position + params.tip_offset * pose.rotation[:, 2]
+        assert tips[2] == pytest.approx(f.floor_z + part.outer)
+        assert pose.rotation[:, 2] == pytest.approx([0.0, 0.0, -1.0])
+        assert abs(pose.rotation[:, 0] @ f.u) == pytest.approx(1.0)
 
 
 def test_cell_pivot_rolls_a_bushing_off_the_wall_then_pivots_it(tmp_path) -> None:
     """Trial seed 21010 (the bushing along the +y wall, 16 mm from it): rolled, judged by the
     twin; the part moved by the physics of the roll, never set."""
-    out = tmp_path / "p.json"
-    r = subprocess.run(
-        [sys.executable, "-m", "cell.cli", "pivot", "--part", "bushing", "--pose", "random",
-         "--trials", "1", "--seed", "21010", "--json", str(out)],
-        capture_output=True, text=True, timeout=600,
-    )
-    assert r.returncode == 0, r.stderr[-2000:]
-    trial = json.loads(out.read_text())["per_trial"][0]
+    trial = _bushing_trial(tmp_path, 21010)
     assert trial["repositioned"] is True and trial["moved_by"] == "roll"
     assert trial["success"] is True, trial["failure"]
     moved = trial["true_pose"]["y"] - trial["perceived_pose"]["y"]

@@ -112,3 +112,11 @@ def test_a_turned_close_view_is_slowed_to_the_turn_rate() -> None:
     path = max(distance, TURN_PATH * angle)  # what the arm times the move by
     assert dev.arm.speeds[-1] == pytest.approx(min(p.turn_speed, path * p.turn_rate / angle))
     assert angle / p.turn_rate <= path / dev.arm.speeds[-1] + 1e-9
+
+
+def test_the_turn_path_is_the_arms_own() -> None:
+    """The look times a turning move as the arm does; a skill may not import the UR5's
+    driver, so the one figure is held equal here."""
+    from drivers.ur5.kinematics import ROTATION_LENGTH
+
+    assert TURN_PATH == ROTATION_LENGTH
