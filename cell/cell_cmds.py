@@ -344,6 +344,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
     max_time = args.max_sim_time if args.max_sim_time is not None else 150.0 * cycles + 60.0
     box_png = None
     parts = None
+    twin_left: list[dict[str, Any]] | None = None
     stills: list[Path] = []
     try:
         if getattr(args, "trace", None) is not None:
@@ -358,6 +359,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
             stills.append(_bin_picture(backend, prep, args.record, "end"))
         if hasattr(backend, "account"):
             parts = backend.account()
+            twin_left = backend.left_in_bin()
     finally:
         if trace is not None:
             trace.close()
@@ -372,7 +374,7 @@ def _run(prep: Any, command: str, args: argparse.Namespace, seed: int | None) ->
         summary["parts"] = parts  # where every part is at the end, judged by the twin
         summary["left_in_bin"] = parts["in_bin"]
     summary["left_reasons"] = left_reasons(
-        prep.state.events, summary.get("left_in_bin"), prep.state.stop_reason
+        prep.state.events, summary.get("left_in_bin"), prep.state.stop_reason, twin_left
     )
     summary["repositioned"] = prep.state.counts.get(EventKind.REPOSITIONED, 0)
     summary["phases"] = log.phases.table(summary["packed_claimed"] or None)
@@ -598,15 +600,31 @@ class _Progress:
 
 
 def left_reasons(
-    events: list[dict[str, Any]], left_in_bin: int | None, stop_reason: str | None = None
-) -> list[dict[str, str]]:
+    events: list[dict[str, Any]],
+    left_in_bin: int | None,
+    stop_reason: str | None = None,
+    twin: list[dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:
     """Each part the cell left in the bin, named, with why. A run that ended on an empty bin:
     the parts the cell saw and passed over, and any more the twin counts as not found by
     perception. A cell that stopped for a person: the stop's reason. A run that ended on its
-    cycles: the parts not tried."""
+    cycles: the parts not tried. ``twin`` (the twin's own list of the parts in the bin, with
+    ``at`` and ``lies``) names the parts the cell could not name: those it never saw are the
+    twin's parts farthest from any it saw."""
+    def unnamed(n: int, reason: str, seen: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        if not twin:
+            return [{"part": "a part", "reason": reason}] * n
+        spots = [e["at"] for e in seen if "at" in e]
+
+        def apart(t: dict[str, Any]) -> float:
+            return min((math.dist(t["at"], s) for s in spots), default=math.inf)
+
+        rest = sorted(twin, key=apart, reverse=True)[:n]
+        out = [{**t, "reason": reason} for t in rest]
+        return out + [{"part": "a part", "reason": reason}] * (n - len(out))
+
     if stop_reason:
-        why = f"left when the cell stopped: {stop_reason}"
-        return [{"part": "a part", "reason": why}] * (left_in_bin or 0)
+        return unnamed(left_in_bin or 0, f"left when the cell stopped: {stop_reason}", [])
     ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
     last = events[-1] if events else None
     ended_empty = bool(ends) and last is not None and last["kind"] in (
@@ -614,12 +632,10 @@ def left_reasons(
         EventKind.CYCLE_FAILED,
     ) and any(e is ends[-1] for e in events[-2:])
     if not ended_empty:
-        return [{"part": "a part", "reason": "not tried: the run ended first"}] * (left_in_bin or 0)
-    seen: list[dict[str, str]] = list(ends[-1].get("left", []))
+        return unnamed(left_in_bin or 0, "not tried: the run ended first", [])
+    seen: list[dict[str, Any]] = list(ends[-1].get("left", []))
     if left_in_bin is not None and left_in_bin > len(seen):
-        seen += [{"part": "a part", "reason": "not found by perception"}] * (
-            left_in_bin - len(seen)
-        )
+        seen += unnamed(left_in_bin - len(seen), "not found by perception", seen)
     return seen
 
 

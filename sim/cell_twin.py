@@ -28,7 +28,7 @@ from sim.cell_layout import build_cell
 from sim.judge import judge
 from sim.part_body import PartBody, lying_pose, spawn_part
 from sim.robot import SimRobot
-from sim.scenes import dropped_bin_fill
+from sim.scenes import dropped_bin_fill, situation
 from sim.world import PhysicsSettings, SimWorld
 
 #: m a part already packed may move while the next one is packed (the packing's own tolerance:
@@ -201,6 +201,24 @@ class SimCellBackend:
         out = {"in_bin": 0, "in_hand": 0, "in_slot": 0, "packed": 0, "on_floor": 0}
         for _, where in self.parts_where():
             out[where] += 1
+        return out
+
+    def left_in_bin(self) -> list[dict[str, Any]]:
+        """The parts in the bin, named by the twin: kind, place (m) and how each lies (the
+        words of :meth:`sim.scenes.Situation.label`). The cell itself cannot name a part it
+        never saw; the twin can, so a run's summary says what perception missed."""
+        bodies = [b for b, where in self.parts_where() if where == "in_bin"]
+        out = []
+        for b in bodies:
+            c = b.pose().position
+            lies = situation(self.world, b, self.bodies, self.cell.bin, self.layout).label()
+            out.append(
+                {
+                    "part": f"{b.part.name} at ({c[0]:.3f}, {c[1]:.3f}) m",
+                    "at": [round(float(c[0]), 4), round(float(c[1]), 4)],
+                    "lies": lies,
+                }
+            )
         return out
 
     def parts_where(self) -> list[tuple[PartBody, str]]:

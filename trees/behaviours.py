@@ -291,22 +291,23 @@ class PlanPick(Behaviour):
         )
         x0, x1, y0, y1 = ctx.geometry.bin_roi
         usable, skipped = [], 0
-        left: list[dict[str, str]] = []  #: the parts seen and passed over, with why
+        left: list[dict[str, Any]] = []  #: the parts seen and passed over, with why
         for d in dets:
             where = f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m"
+            at = [round(float(d.center[0]), 4), round(float(d.center[1]), 4)]
             if d.part != ctx.part.name:
-                left.append({"part": where, "reason": f"not a {ctx.part.name}"})
+                left.append({"part": where, "reason": f"not a {ctx.part.name}", "at": at})
                 continue
             if not d.open_end_seen:
-                left.append({"part": where, "reason": "its open end was not made out"})
+                left.append({"part": where, "reason": "its open end was not made out", "at": at})
                 continue
             if not (x0 <= d.center[0] <= x1 and y0 <= d.center[1] <= y1):
-                left.append({"part": where, "reason": "outside the bin's inside"})
+                left.append({"part": where, "reason": "outside the bin's inside", "at": at})
                 continue
             tries = ctx.failures.get(location_key(d.center), 0)
             if tries >= ctx.limits.max_failures_per_part:
                 skipped += 1
-                left.append({"part": where, "reason": f"{tries} picks failed"})
+                left.append({"part": where, "reason": f"{tries} picks failed", "at": at})
                 continue
             usable.append(d)
         if not usable:
@@ -330,7 +331,7 @@ class PlanPick(Behaviour):
         self,
         usable: list[Detection],
         dets: list[Detection],
-        left: list[dict[str, str]],
+        left: list[dict[str, Any]],
         skipped: int,
         clear: dict[int, PivotFrame],
         drags: dict[int, RepositionPlan],
@@ -365,7 +366,7 @@ class PlanPick(Behaviour):
         self,
         usable: list[Detection],
         dets: list[Detection],
-        left: list[dict[str, str]],
+        left: list[dict[str, Any]],
         clear: dict[int, PivotFrame],
         drags: dict[int, RepositionPlan],
     ) -> Iterator[None]:
@@ -409,6 +410,7 @@ class PlanPick(Behaviour):
                 {
                     "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
                     "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
+                    "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
                 }
             )
 

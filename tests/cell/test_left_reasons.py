@@ -30,3 +30,23 @@ def test_a_cell_that_stopped_says_so_for_each_part_left() -> None:
     out = left_reasons([_e("cycle_failed")], 1, "3 cycles in a row failed")
     why = "left when the cell stopped: 3 cycles in a row failed"
     assert out == [{"part": "a part", "reason": why}]
+
+
+def test_the_twin_names_the_parts_perception_never_saw_not_those_the_cell_passed_over() -> None:
+    passed = {"part": "bushing at (0.400, 0.100) m", "reason": "2 picks failed", "at": [0.4, 0.1]}
+    twin = [
+        {"part": "bushing at (0.401, 0.101) m", "at": [0.401, 0.101], "lies": "touching"},
+        {"part": "bushing at (0.300, -0.100) m", "at": [0.3, -0.1], "lies": "leaning"},
+    ]
+    events = [_e("bin_empty", left=[passed]), _e("cycle_failed")]
+    out = left_reasons(events, 2, twin=twin)
+    assert out[0] == passed
+    assert out[1]["part"] == "bushing at (0.300, -0.100) m"
+    assert out[1]["lies"] == "leaning"
+    assert out[1]["reason"] == "not found by perception"
+
+
+def test_a_stopped_cell_names_each_part_the_twin_holds_in_the_bin() -> None:
+    twin = [{"part": "bushing at (0.300, -0.100) m", "at": [0.3, -0.1], "lies": "free"}]
+    out = left_reasons([_e("cycle_failed")], 1, "3 cycles in a row failed", twin)
+    assert out == [{**twin[0], "reason": "left when the cell stopped: 3 cycles in a row failed"}]
