@@ -109,10 +109,22 @@ class HoleGraspSkill:
             and result.status is not Status.FAILURE
         ):
             self._checked = True
-            if not self.dev.gripper.object_detected():
+            gripper = self.dev.gripper
+            if not gripper.object_detected():
                 self.sequence.halt()
                 return StepResult(
                     Status.FAILURE, f"{self.name}: the hole grasp closed on nothing", Failure.MISSED
+                )
+            outer, inner = pinched_span(self.part, gripper.finger_width)
+            if gripper.width() > outer - inner + self.params.pinch_width_margin:
+                # Something thicker than the wall is held: the jaws closed across the part's
+                # outside (a pad never went into the hole). Feeding such a grasp jams the slot.
+                self.sequence.halt()
+                return StepResult(
+                    Status.FAILURE,
+                    f"{self.name}: the jaws hold {1e3 * gripper.width():.1f} mm, more than the "
+                    f"wall's {1e3 * (outer - inner):.1f} mm: no finger in the hole",
+                    Failure.MISSED,
                 )
         return result
 

@@ -76,6 +76,11 @@ class PivotParams:
         "Align's close on the wall may end this far inside the wall's width before it counts as "
         "no wall between the fingers",
     )
+    pinch_width_margin: float = si(
+        0.004, "m", 0.0, 0.03,
+        "the pinched jaws may stand this far wider than the wall before the hole grasp counts as "
+        "missed: wider, a pad is outside the part (the jaws closed across its outer diameter)",
+    )
     #: 0.012, not Align's 0.006: a light part starts turning about G under the unit's 20 N pinch
     #: before the close is done, and the jaws follow it -- the 15 g cup's ran 6.1-6.4 mm past the
     #: planned rim contact in the twin with the inner finger on the rim, and at 0.006 those

@@ -174,6 +174,28 @@ def test_a_pinch_on_nothing_fails_before_the_lift_and_the_arm_is_not_lifted() ->
     assert d["arm"].pose.position[2] == pytest.approx(slide.position[2])
 
 
+@pytest.mark.parametrize("held", ["outer", "wall"])
+def test_a_pinch_across_the_parts_outside_is_a_miss_a_pinch_of_the_wall_is_not(held) -> None:
+    d = devices()
+    align = Align(FRAME, PART, PARAMS, dev(d))
+    pinch = index(align, align.pinch_step)
+    outer, inner = pinched_span(PART, FakeGripper.finger_width)
+    # the jaws stall on the whole part (both pads outside it), or on the wall a little wide
+    width = PART.outer if held == "outer" else outer - inner + 0.5 * PARAMS.pinch_width_margin
+
+    def on_tick(i: int) -> None:
+        if align.sequence.index >= pinch:
+            d["gripper"].object_width = width
+
+    result, _ = run(align, d, on_tick=on_tick)
+    if held == "outer":
+        assert result.status is Status.FAILURE and result.code is Failure.MISSED
+        assert "no finger in the hole" in result.message
+        assert not [c for c in d["arm"].commands if c[0] == "path"]  # never lifted
+    else:
+        assert result.status is Status.SUCCESS, result.message
+
+
 def test_the_pinch_is_checked_by_its_name_when_steps_are_inserted_before_it() -> None:
     d = devices()
     align = Align(FRAME, PART, PARAMS, dev(d))
