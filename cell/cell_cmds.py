@@ -678,6 +678,9 @@ def _summary(prep: Any, result: Any, cycles: int) -> dict[str, Any]:
         "picked_recovered": sum(
             1 for e in state.events if e["kind"] == EventKind.PICKED and e.get("recovered")
         ),
+        "picked_standing": sum(
+            1 for e in state.events if e["kind"] == EventKind.PICKED and e.get("standing")
+        ),
         "packed_claimed": len(packed_events),
         "fed_claimed": state.counts.get(EventKind.FED, 0),
         "gaps_mm": gaps,
@@ -690,7 +693,11 @@ def _print_summary(s: dict[str, Any]) -> None:
     rows = [
         ("status", s["status"] + (f" ({s['stop_reason']})" if s["stop_reason"] else "")),
         ("cycles asked", str(s["cycles"])),
-        ("picked (hole grasp)", f"{s['picked']} ({s['picked_recovered']} by the recovery)"),
+        (
+            "picked (hole grasp)",
+            f"{s['picked']} ({s['picked_recovered']} by the recovery, "
+            f"{s['picked_standing']} found standing)",
+        ),
         ("fed (judged in slot)", f"{s['fed']} of {s['fed_claimed']}"),
         ("packed (judged)", f"{s['packed']} of {s['packed_claimed']}"),
         ("aborts", str(len(s["aborts"]))),

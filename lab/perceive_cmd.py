@@ -375,7 +375,13 @@ def _render(
             kinds = {p.name: p for p in parts}
             for k, d in enumerate(dets):
                 part = kinds.get(d.part or "")
-                if part is None or part.open_ends != 1 or d.open_end_seen or d.tilted:
+                if (
+                    part is None
+                    or part.open_ends != 1
+                    or d.open_end_seen
+                    or d.tilted
+                    or d.standing
+                ):
                     continue
                 # The Look's views beyond both ends; decided where those that decide agree.
                 judged = []

@@ -36,14 +36,15 @@ from skills.perception.pick_order import freest_first
 from skills.pivot import Align as AlignSkill
 from skills.pivot import Grasp as GraspSkill
 from skills.pivot import PickFromAbove as PickFromAboveSkill
-from skills.pivot import PivotFrame
+from skills.pivot import PickStanding as PickStandingSkill
+from skills.pivot import PivotFrame, plan_standing_pick
 from skills.pivot import Tilt as TiltSkill
 from skills.pivot.clearance import (
     bin_walls,
     choose_end,
     likely_grasp_rotation,
-    lying_part,
     reach_problem,
+    seen_part,
 )
 from skills.reposition import Reposition as RepositionSkill
 from skills.reposition import RepositionPlan, plan_reposition
@@ -298,6 +299,9 @@ class PlanPick(Behaviour):
             if d.part != ctx.part.name:
                 left.append({"part": where, "reason": f"not a {ctx.part.name}", "at": at})
                 continue
+            if d.standing and not d.open_end_seen:
+                left.append({"part": where, "reason": "standing on its open end", "at": at})
+                continue
             if not d.open_end_seen:
                 left.append({"part": where, "reason": "its open end was not made out", "at": at})
                 continue
@@ -346,7 +350,11 @@ class PlanPick(Behaviour):
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         pool = [d for d in usable if id(d) in (clear or drags)]
-        if ctx.limits.pick_order == "freest":
+        # A part standing on its open end goes first: no pivot, and it shades its neighbours.
+        pool = [d for d in pool if d.standing] or pool
+        if pool[0].standing:
+            target = min(pool, key=lambda d: math.hypot(d.center[0], d.center[1]))
+        elif ctx.limits.pick_order == "freest":
             target = freest_first(pool, dets, ctx.geometry.bin_roi)[0]
         elif seen is not None and any(d is seen for d in pool):
             target = seen  # the one the Look looked at twice
@@ -354,7 +362,10 @@ class PlanPick(Behaviour):
             target = min(pool, key=lambda d: math.hypot(d.center[0], d.center[1]))
         move = None if clear else drags[id(target)]
         frame = clear[id(target)] if clear else move.frame
-        self.bb.set("/part/target", {"detection": target, "frame": frame, "reposition": move})
+        self.bb.set(
+            "/part/target",
+            {"detection": target, "frame": frame, "reposition": move, "standing": target.standing},
+        )
         what = f"drag {1e3 * move.distance:.0f} mm first, " if move is not None else ""
         self.feedback_message = (
             f"plan pick: {ctx.part.name} at ({target.center[0]:.3f}, {target.center[1]:.3f}) m, "
@@ -384,10 +395,26 @@ class PlanPick(Behaviour):
         for d in usable:
             yield  # one part a tick
             neighbours = [
-                lying_part("a neighbour", o.center, o.yaw, o.length, o.outer, g.bin_floor_z)
+                seen_part("a neighbour", o, g.bin_floor_z)
                 for o in dets
                 if o is not d
             ]
+            if d.standing:  # on its open end already: the hole grasp from above, no pivot
+                up = plan_standing_pick(
+                    d.center, ctx.part, pivot, [*walls, *neighbours], width, g.bin_floor_z,
+                    reach=ctx.reach,
+                )
+                if up is not None:
+                    clear[id(d)] = up
+                    continue
+                left.append(
+                    {
+                        "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
+                        "reason": "standing: no side clears the grasp from above",
+                        "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
+                    }
+                )
+                continue
             frame = PivotFrame(
                 section,
                 np.array([d.center[0], d.center[1], g.bin_floor_z + 0.5 * ctx.part.outer]),
@@ -452,6 +479,75 @@ class PivotClears(Behaviour):
             return Status.FAILURE
         self.feedback_message = "the pivot clears where the part lies"
         return Status.SUCCESS
+
+
+class _TargetStands(Behaviour):
+    """Condition on plan_pick's choice: SUCCESS when it stands on an end as :attr:`wanted`
+    says (nothing chosen: FAILURE)."""
+
+    moves = False
+    wanted = True
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/target", access=common.Access.READ)
+
+    def update(self) -> Status:
+        if not self.bb.exists("/part/target"):
+            self.feedback_message = "no part chosen"
+            return Status.FAILURE
+        stands = bool(self.bb.get("/part/target").get("standing"))
+        self.feedback_message = "the part stands on an end" if stands else "the part lies"
+        return Status.SUCCESS if stands == self.wanted else Status.FAILURE
+
+
+@declare(
+    "part_standing",
+    "condition: the chosen part stands on its open end (picked from above, no pivot)",
+    "Condition",
+)
+class PartStanding(_TargetStands):
+    wanted = True
+
+
+@declare("part_lying", "condition: the chosen part lies (the pivot's case)", "Condition")
+class PartLying(_TargetStands):
+    wanted = False
+
+
+@declare(
+    "pick_standing",
+    "hole grasp from above of a part found standing on its open end (counted apart: no pivot)",
+    "Action",
+    MOTION,
+)
+class PickStanding(SkillBehaviour):
+    """The chosen part stands on its open end: look at its rim close up and take the hole
+    grasp from above. Journaled as ``picked`` with ``standing: true``, counted apart."""
+
+    section = "pivot"
+
+    def keys(self) -> dict[str, common.Access]:
+        return {"/part/target": common.Access.READ}
+
+    def make_skill(self) -> Skill:
+        if not self.bb.exists("/part/target"):
+            raise SetupError("no part chosen (/part/target is empty)")
+        target = self.bb.get("/part/target")
+        if not target.get("standing"):
+            raise SetupError("the chosen part does not stand on an end")
+        d = target["detection"]
+        return PickStandingSkill(
+            target["frame"], self.ctx.part, self.settings(), self.ctx.devices, d.center
+        )
+
+    def on_success(self) -> None:
+        c = self.bb.get("/part/target")["detection"].center
+        self.ctx.events.event(
+            EventKind.PICKED, standing=True, x=round(float(c[0]), 4), y=round(float(c[1]), 4)
+        )
 
 
 @declare(

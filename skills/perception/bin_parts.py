@@ -248,6 +248,9 @@ class Detection:
     #: not level on the floor (fitted as leaning): the end tests assume a part level on the
     #: floor, so its open end is never judged (a wrong end is worse than none)
     tilted: bool = False
+    #: standing on an end (:mod:`skills.perception.standing`): ``open_end`` is the top's
+    #: centre, ``open_end_seen`` says the top is open; the pivot cannot take it as it stands
+    standing: bool = False
 
     def pick(self) -> tuple[tuple[float, float], float]:
         """The grasp target the pivot planner needs: (open end x, y) and the axis yaw."""
@@ -527,15 +530,29 @@ def detect_parts(
     settings: DetectorSettings = DetectorSettings(),
     segmenter: object | None = None,
 ) -> list[Detection]:
-    """Every part lying in view. ``segmenter``: an object with ``segment(hm, rgb)`` (the learned
-    option) used instead of the classical segmentation."""
+    """Every part lying in view, and every part standing on an end (``standing``).
+    ``segmenter``: an object with ``segment(hm, rgb)`` (the learned option) used instead of the
+    classical segmentation."""
     hm = height_map(frame, intr, world_T_camera, roi)
     if segmenter is not None:
         labels = segmenter.segment(hm, frame.rgb)  # type: ignore[attr-defined]
     else:
         thin = tuple(p.outer for p in catalogue if p.outer < settings.thin_part)
         labels = segment(hm, settings, thin)
-    return fit_segments(hm, labels, catalogue, robot_xy, settings, world_T_camera.position)
+    lying = fit_segments(hm, labels, catalogue, robot_xy, settings, world_T_camera.position)
+    from skills.perception.standing import find_standing  # it builds on Detection
+
+    standing = find_standing(hm, catalogue)
+    # A standing part's flank can pass for a short lying part beside it: the top decides.
+    lying = [
+        d
+        for d in lying
+        if all(
+            math.dist(d.center[:2], s.center[:2]) > 0.5 * (s.outer + d.outer)  # exact: radii
+            for s in standing
+        )
+    ]
+    return lying + standing
 
 
 def fit_segments(

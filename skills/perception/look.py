@@ -221,7 +221,13 @@ class Look:
         open end is decided, the part leans or nothing is chosen: one closer look from above."""
         self._out_of_reach = False
         r = self.result
-        if self._undecided is None and r is not None and not r.open_end_seen and not r.tilted:
+        if (
+            self._undecided is None
+            and r is not None
+            and not r.open_end_seen
+            and not r.tilted
+            and not r.standing  # its top was seen: a closed end up, no end view tells more
+        ):
             self._undecided = r  # a leaning part's end is never judged: no view of its ends
         p, d = self.params, self._undecided
         if d is None:

@@ -23,6 +23,8 @@ _CLEARANCE_DECIMALS = 3
 
 
 def _axis_points(d: Detection) -> NDArray[np.float64]:
+    if d.standing:  # its axis is a point on the floor
+        return np.asarray(d.center[XY], float)[None, :]
     u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
     half = 0.5  # exact: the axis runs half the length either side of the centre
     s = np.linspace(-half, half, _SAMPLES)[:, None] * d.length

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -130,6 +131,28 @@ def lying_part(
         np.array([half_length, radius, radius]),
         yaw,
     )
+
+
+def standing_part(
+    what: str, center_xy: Sequence[float], outer: float, length: float, floor_z: float
+) -> Obstacle:
+    """A neighbour standing on an end, as the cell saw it: its outer size across, its length
+    high."""
+    half_size, half_length = 0.5 * outer, 0.5 * length  # exact: halves of the size, length
+    return Obstacle(
+        what,
+        np.array([float(center_xy[0]), float(center_xy[1]), floor_z + half_length]),
+        np.array([half_size, half_size, half_length]),
+        0.0,
+    )
+
+
+def seen_part(what: str, d: Any, floor_z: float) -> Obstacle:
+    """A detection (:class:`skills.perception.bin_parts.Detection`) as an obstacle: lying or
+    standing as it was seen."""
+    if getattr(d, "standing", False):
+        return standing_part(what, d.center, d.outer, d.length, floor_z)
+    return lying_part(what, d.center, d.yaw, d.length, d.outer, floor_z)
 
 
 def _box_points(center: Sequence[float], size: Sequence[float], step: float) -> NDArray:

@@ -16,6 +16,7 @@ the paper's cell does with its wrist camera:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -30,6 +31,7 @@ from skills.frames import frame_step
 from skills.motion import GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import HoleGraspSkill, hole_grasp_rotation, pinched_span
+from skills.pivot.clearance import Obstacle, Reach, nearest, tool_points
 from skills.pivot.frame import PivotFrame
 from skills.pivot.params import PivotParams
 
@@ -177,3 +179,75 @@ class PickFromAbove(HoleGraspSkill):
         tool = arm.tool_pose()
         up_pose = Pose(tool.position + np.array([0, 0, p.lift_height]), tool.rotation)
         arm.move_to(up_pose, p.approach_speed, p.acceleration)
+
+
+#: rad between the sides of a standing part tried for its hole grasp from above: the robot's
+#: side first, then turning away from it both ways (eight sides in all)
+STANDING_SIDE_STEP = math.pi / 4.0
+
+
+class PickStanding(PickFromAbove):
+    """A part found standing on its open end: the hole grasp from above, without the let-go
+    (nothing is held). Not the paper's maneuver -- the part needs no pivot -- so its picks are
+    counted apart (``standing``). ``center_xy``: where the wide view saw its axis (m); the
+    close look over it measures the rim before the fingers go down."""
+
+    name = "pick standing"
+
+    def __init__(
+        self,
+        frame: PivotFrame | Callable[[], PivotFrame],
+        part: Part,
+        params: PivotParams,
+        dev: Devices,
+        center_xy: NDArray[np.float64],
+    ) -> None:
+        super().__init__(frame, part, params, dev)
+        self.predicted_axis = np.asarray(center_xy, float)[XY].copy()
+        self.sequence = Sequence("pick standing", [*self._find_steps(), *self._grasp_steps()])
+
+
+def plan_standing_pick(
+    center_xy: NDArray[np.float64],
+    part: Part,
+    params: PivotParams,
+    obstacles: list[Obstacle],
+    finger_width: float,
+    floor_z: float,
+    base_xy: tuple[float, float] = (0.0, 0.0),
+    *,
+    reach: Reach | None = None,
+) -> PivotFrame | None:
+    """The frame for :class:`PickStanding` (its ``u`` points from the outer finger's side
+    across the part) whose jaws, over the wall and down in the hole, clear ``obstacles`` by
+    ``clearance_margin`` and stay in ``reach``; the robot's side first. None: no side does."""
+    c = np.asarray(center_xy, float)[XY]
+    toward = math.atan2(c[1] - base_xy[1], c[0] - base_xy[0])
+    outer, inner = pinched_span(part, finger_width)
+    middle = 0.5 * (outer + inner)  # exact: the wall's middle, between its faces
+    width = outer - inner + 2.0 * params.wall_gap  # exact: a wall gap at each pad
+    model = tool_points(width, params.tip_offset, params.finger_thickness, finger_width)
+    rim = floor_z + part.length
+    depth = min(params.wall_depth, part.length - params.floor_clearance)
+    section = part.section(finger_width)
+    sides = int(round(2.0 * math.pi / STANDING_SIDE_STEP))
+    order = [0] + [s * k for k in range(1, sides // 2 + 1) for s in (1, -1)]
+    for k in order[:sides]:
+        yaw = toward + k * STANDING_SIDE_STEP
+        u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        rotation = hole_grasp_rotation(-u)
+        wall = c - middle * u[XY]
+        poses = [
+            Pose(np.array([*wall, z + params.tip_offset]), rotation)
+            for z in (rim + params.clear_height, rim - depth)
+        ]
+        clear = all(
+            nearest(pts @ pose.rotation.T + pose.position, obstacles)[0]
+            > params.clearance_margin
+            for pose in poses
+            for pts in model.values()
+        )
+        if not clear or (reach is not None and reach(poses) is not None):
+            continue
+        return PivotFrame(section, np.array([*c, floor_z + 0.5 * part.outer]), yaw, floor_z)
+    return None

@@ -1,0 +1,116 @@
+"""Find the parts standing on an end in the wide view of the bin.
+
+A part tipped into a bin sometimes lands on an end. Lying-part fits take no notice of it (its top
+is a ring or a disc, not a crest), so it was never seen, never picked and never named. From
+above, a standing part shows its top at the height of its length, round (or square) and as wide
+as the part: the pixels within a narrow band around that height form one blob per standing
+part. A blob whose enclosing circle (or rectangle) has the part's outer size is that part; a
+lying part's crest in the same band is a strip as long as the part, far wider than its section,
+and fails the size test. The top tells the open end: through a ring the camera sees down into
+the hole (heights well below the rim), a closed end shows a disc at rim height.
+
+Heights are above the floor plane the height map fitted; nothing here reads the twin.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.parts import Part
+from skills.perception.bin_parts import Detection
+from skills.perception.heightmap import MM_PER_M, HeightMap
+
+#: m: half the height of the band around a part's length that holds its top's pixels: three
+#: sigma of the D435's depth noise at the look's distance, under the 5 mm between the
+#: catalogue's two nearest lengths (bushing 68 mm, cup 73 mm).
+BAND = 0.004
+#: pixels: a blob smaller than this is noise or a sliver of a neighbour's flank crossing the band
+MIN_PIXELS = 60
+#: m: the enclosing circle's radius may differ from half the outer size by this much (the band
+#: catches a rim's outer edge a pixel wide or short; a lying crest is tens of mm off)
+SIZE_TOLERANCE = 0.004
+#: a square top's enclosing circle is the half-diagonal: sqrt(2) times the half side
+SQUARE_DIAGONAL = math.sqrt(2.0)
+#: share of the hole's radius, around the centre, whose heights tell a ring from a disc
+INSIDE_SHARE = 0.6
+#: m: the inside reads this far below the rim (the hole's depth seen through the opening) for
+#: the end on top to count as open; a closed end's face reads at the rim within the noise
+OPEN_DEPTH = 0.010
+#: inside pixels needed to judge the end on top at all
+MIN_INSIDE = 10
+
+
+def find_standing(hm: HeightMap, catalogue: list[Part]) -> list[Detection]:
+    """Every catalogue part standing on an end in ``hm``, as a :class:`Detection` with
+    ``standing`` set: ``center`` on the axis at half height, ``open_end`` the top's centre,
+    ``open_end_seen`` when the top is open (the hole grasp from above can take it)."""
+    height = hm.height
+    valid = np.isfinite(height)
+    h = np.where(valid, height, -1.0).astype(np.float32)
+    found: list[Detection] = []
+    taken = np.zeros(height.shape, bool)
+    # Tallest first: a tall part's rim never sits in a shorter part's band.
+    for part in sorted(catalogue, key=lambda p: -p.length):
+        if part.hole <= 0.0:
+            continue
+        band = (np.abs(h - part.length) < BAND) & ~taken
+        if int(band.sum()) < MIN_PIXELS:
+            continue
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(band.astype(np.uint8), 8)
+        for k in range(1, n):
+            if stats[k, cv2.CC_STAT_AREA] < MIN_PIXELS:
+                continue
+            mask = labels == k
+            det = _standing(hm, part, mask)
+            if det is not None:
+                found.append(det)
+                taken |= mask
+    return found
+
+
+def _standing(hm: HeightMap, part: Part, mask: NDArray[np.bool_]) -> Detection | None:
+    """The blob ``mask`` as ``part`` standing, or None when its size is not the part's."""
+    xy = hm.points[mask][:, :2].astype(np.float64)
+    xy = xy[np.isfinite(xy[:, 0])]
+    if len(xy) < MIN_PIXELS:
+        return None
+    (cx, cy), r_mm = cv2.minEnclosingCircle((xy * MM_PER_M).astype(np.float32))
+    radius = r_mm / MM_PER_M
+    expected = 0.5 * part.outer * (SQUARE_DIAGONAL if part.hole_shape == "rectangle" else 1.0)
+    if abs(radius - expected) > SIZE_TOLERANCE:
+        return None
+    center = np.array([cx, cy]) / MM_PER_M
+    # The inside: pixels whose points lie within INSIDE_SHARE of the hole's radius of the axis.
+    pts = hm.points.reshape(-1, 3)
+    hgt = hm.height.reshape(-1)
+    near = np.abs(pts[:, 0] - center[0]) < 0.5 * part.hole  # exact: a cheap box before the disc
+    near &= np.abs(pts[:, 1] - center[1]) < 0.5 * part.hole  # exact: the same along y
+    idx = np.flatnonzero(near)
+    d = np.hypot(pts[idx, 0] - center[0], pts[idx, 1] - center[1])
+    inside = hgt[idx[d < INSIDE_SHARE * 0.5 * part.hole]]  # exact: the hole's radius
+    # No depth inside (the hole too deep and narrow for the sensor) reads as an opening too.
+    seen = inside[np.isfinite(inside)]
+    open_top = len(seen) < MIN_INSIDE or float(np.median(seen)) < part.length - OPEN_DEPTH
+    if part.open_ends == 2:  # exact: a tube is open at both ends
+        open_top = True
+    floor = hm.plane
+    up = floor.normal
+    base = np.array([center[0], center[1], 0.0])
+    base[2] = (floor.offset - up[0] * base[0] - up[1] * base[1]) / up[2]  # on the floor plane
+    top = base + part.length * up
+    return Detection(
+        center=base + 0.5 * part.length * up,  # exact: the axis' middle
+        yaw=0.0,
+        length=part.length,
+        outer=2.0 * radius / (SQUARE_DIAGONAL if part.hole_shape == "rectangle" else 1.0),
+        part=part.name,
+        open_end=top,
+        open_end_seen=bool(open_top),
+        confidence=float(max(0.0, 1.0 - abs(radius - expected) / SIZE_TOLERANCE)),
+        pixels=int(mask.sum()),
+        standing=True,
+    )
