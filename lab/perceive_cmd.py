@@ -229,7 +229,7 @@ def cmd_perceive(args: argparse.Namespace) -> int:
     if args.fill == "random":
         lines.append(
             f"lying flat  recall {result['recall_lying_flat']:.3f} of {len(flat)} "
-            f"(free, touching, against a wall); not lying, left out: {not_lying or 'none'}"
+            f"(free, touching, against a wall); out of the bin, left out: {not_lying or 'none'}"
         )
         if second:
             lines.append(
@@ -320,7 +320,7 @@ def _render(
         detect_parts,
         open_end_from_view,
     )
-    from skills.perception.look import LookParams, end_views
+    from skills.perception.look import LookParams, covering_height, end_views
     from skills.perception.scoring import Truth
 
     out = _Scene()
@@ -342,13 +342,20 @@ def _render(
             for b in bodies:
                 where = situation(world, b, bodies, fixtures.bin, layout)
                 label = where.label()
-                if label in ("standing", "outside"):
+                if label == "outside":
                     out.not_lying.append(label)
                     continue
                 axis = b.axis()
                 yaw = math.atan2(axis[1], axis[0])
                 out.truths.append(
-                    Truth(b.part.name, b.pose().position.copy(), yaw, b.part.open_ends)
+                    Truth(
+                        b.part.name,
+                        b.pose().position.copy(),
+                        yaw,
+                        b.part.open_ends,
+                        standing=label == "standing",
+                        open_up=bool(axis[2] > 0.0),
+                    )
                 )
                 out.labels.append(label)
         else:
@@ -358,9 +365,15 @@ def _render(
                 Truth(t.name, t.center, t.yaw, catalogue.get(t.name).open_ends) for _, t in scene
             ]
             out.labels = ["staged"] * len(out.truths)
-        tool = look_down_pose(layout.bin_center, look.view_height, mount)
-        view = [tool]  # where the camera is now (the second views move it)
+        view = [look_down_pose(layout.bin_center, look.view_height, mount)]
         camera = SimCamera(world, lambda: view[0], tool_T_camera=mount)
+        # the Look's wide view: as high as it must be to take in the whole bin
+        top = layout.bin_floor_z + max(p.outer for p in parts)
+        height = covering_height(
+            camera.intrinsics(), mount, layout.bin_center, layout.bin_interior(), top,
+            look.view_height, look.max_view_height,
+        )
+        tool = view[0] = look_down_pose(layout.bin_center, height, mount)
         out.frame = frame = camera.capture()
         out.intrinsics = intr = camera.intrinsics()
         out.world_T_camera = tool @ camera.tool_T_camera()

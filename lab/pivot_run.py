@@ -608,6 +608,7 @@ def look_near(
         setup.look,
         grip_yaw=None if grip is None else (lambda d: tool_yaw(grip(seen_frame(d)))),
         reach=reach_from(tw.dev.arm.joint_positions),
+        floor_z=setup.layout.bin_floor_z,
     )
     result = run_skill("look", look, tw.world, tw.robot, t_end, on_frame, frame_every)
     if result is not None or look.result is None:

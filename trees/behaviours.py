@@ -187,6 +187,8 @@ class Perceive(SkillBehaviour):
             grip_yaw=self._grip_yaw,
             # the look's views are straight moves from where the arm stands: not from home
             reach=self.ctx.reach_here or self.ctx.reach,
+            floor_z=g.bin_floor_z,
+            wanted_top=self.ctx.part.outer,  # the wide view takes in every part it may pick
         )
         return _TolerantLook(self.look)
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.camera import Frame
+from drivers.camera import Frame, Intrinsics
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose, rot_z
@@ -49,9 +49,48 @@ def camera_over(
     """Tool pose (pointing down, turned ``yaw`` rad about the vertical) with the optical centre
     ``height`` above ``xy`` (m)."""
     assert dev.camera is not None
+    return mounted_over(xy, height, dev.camera.tool_T_camera(), yaw)
+
+
+def mounted_over(xy: tuple[float, float], height: float, tool_T_camera: Pose, yaw: float = 0.0
+                 ) -> Pose:
+    """:func:`camera_over` for a camera mounted at ``tool_T_camera``."""
     rotation = rot_z(yaw) @ DOWN
-    offset = rotation @ dev.camera.tool_T_camera().position
+    offset = rotation @ tool_T_camera.position
     return Pose(np.array([xy[0], xy[1], height]) - offset, rotation)
+
+
+#: m, steps of the search for the wide view's height that takes in the whole bin
+COVER_STEP = 0.01
+
+
+def covering_height(
+    intr: Intrinsics,
+    tool_T_camera: Pose,
+    xy: tuple[float, float],
+    roi: tuple[float, float, float, float],
+    top_z: float,
+    lowest: float,
+    highest: float,
+) -> float:
+    """The lowest camera height (m, from ``lowest`` up to ``highest``) at which the view over
+    ``xy`` (:func:`camera_over`) sees all of the bin's inside ``roi`` at ``top_z``, the height of
+    the tallest lying part's top: a part against a wall outside the frame is half seen, not
+    fitted, and never picked. Past ``highest``, ``highest``."""
+    k = intr
+    x0, x1, y0, y1 = roi
+    corners = np.array([[x, y, top_z] for x in (x0, x1) for y in (y0, y1)])
+    height = lowest
+    while height < highest:
+        view = mounted_over(xy, height, tool_T_camera) @ tool_T_camera
+        local = (corners - view.position) @ view.rotation  # the corners in the camera frame
+        if np.all(local[:, Z] > 0.0):
+            u = k.fx * local[:, 0] / local[:, Z] + k.cx
+            v = k.fy * local[:, 1] / local[:, Z] + k.cy
+            if np.all((u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)):
+                return height
+        height += COVER_STEP
+    return highest
 
 
 def tool_yaw(rotation: np.ndarray) -> float:
@@ -68,7 +107,16 @@ def tool_yaw(rotation: np.ndarray) -> float:
 class LookParams:
     """The ``skills.perceive`` section of a cell's configuration (SI)."""
 
-    view_height: float = si(0.5, "m", 0.2, 1.0, "of the camera over the bin, the wide view")
+    view_height: float = si(
+        0.5, "m", 0.2, 1.0,
+        "of the camera over the bin, the wide view, at least: higher where the bin's inside "
+        "would not all be in view at the lying parts' top (up to max_view_height_m)",
+    )
+    max_view_height: float = si(
+        0.7, "m", 0.2, 1.5,
+        "of the camera for the wide view at most, however wide the bin (the depth noise grows "
+        "with the square of the distance)",
+    )
     second_height: float = si(0.35, "m", 0.15, 1.0, "of the camera for the look at an end")
     second_offset: float = si(
         0.10, "m", 0.0, 0.3, "beyond the part's end the second view looks from"
@@ -156,17 +204,28 @@ class Look:
         params: LookParams | None = None,
         grip_yaw: Callable[[Detection], float] | None = None,
         reach: Callable[[list[Pose]], int | None] | None = None,
+        floor_z: float = 0.0,
+        wanted_top: float | None = None,
     ) -> None:
         """``grip_yaw``: the yaw (rad, as :func:`tool_yaw` gives it) the next skill holds the tool
         at over the chosen part. The close view is taken turned to it, so the wrist turns during
         the look's fast move between views rather than in the next skill's slower approach (a
         tube's pivot from its outer end turns the wrist by half a turn). ``reach``: the arm's
         reach from where it stands (index of the first pose it cannot reach, or None); a close
-        view turned out of reach (near the robot's base, after a drag) is taken unturned."""
+        view turned out of reach (near the robot's base, after a drag) is taken unturned.
+        ``floor_z``: the bin floor's height, under the lying parts' tops the wide view must
+        take in (:func:`covering_height`); ``wanted_top``: how high (m, over the floor) the
+        parts the cell wants to find reach lying (default: the catalogue's tallest)."""
         self.params = params if params is not None else LookParams()
         self._grip_yaw = grip_yaw
         self._reach = reach
         self.dev, self.catalogue, self.roi = dev, catalogue, roi
+        self.floor_z = floor_z  #: m, the bin floor's height (the wide view's cover)
+        self.wanted_top = (
+            wanted_top
+            if wanted_top is not None
+            else max((part.outer for part in catalogue), default=0.0)
+        )
         self._view_xy, self._near_xy = view_xy, near_xy
         self.result: Detection | None = None
         self.detections: list[Detection] = []
@@ -213,7 +272,14 @@ class Look:
     # --- the steps' commands and checks ------------------------------------------------------
     def _over_bin(self) -> None:
         p = self.params
-        target = camera_over(self._view_xy, p.view_height, self.dev)
+        top = self.floor_z + self.wanted_top
+        camera, height = self.dev.camera, p.view_height
+        if camera is not None:
+            height = covering_height(
+                camera.intrinsics(), camera.tool_T_camera(), self._view_xy, self.roi, top,
+                p.view_height, p.max_view_height,
+            )
+        target = camera_over(self._view_xy, height, self.dev)
         self.dev.arm.move_to(target, p.speed, p.acceleration)
 
     def _beyond_end(self, which: int) -> None:

@@ -23,6 +23,8 @@ class Truth:
     center: np.ndarray
     yaw: float  #: towards the open end (+x of the part)
     open_ends: int
+    standing: bool = False  #: on an end: scored by its place (no yaw), matched only so
+    open_up: bool = True  #: standing: its open end (+x) is the one on top
 
 
 @dataclass(frozen=True)
@@ -41,12 +43,13 @@ def _wrap(a: float) -> float:
 def score(
     truths: list[Truth], detections: list[Detection], gate: float = MATCH_GATE
 ) -> tuple[list[Match], int, int]:
-    """Greedy nearest matching within ``gate`` (m). Returns (matches, missed, false positives)."""
+    """Greedy nearest matching within ``gate`` (m), a standing part only to a detection that
+    says it stands. Returns (matches, missed, false positives)."""
     pairs = []
     for i, t in enumerate(truths):
         for j, d in enumerate(detections):
             dist = float(np.linalg.norm(t.center[XY] - d.center[XY]))
-            if dist < gate:
+            if dist < gate and t.standing == d.standing:
                 pairs.append((dist, i, j))
     pairs.sort()
     used_t, used_d, matches = set(), set(), []
@@ -57,7 +60,9 @@ def score(
         used_d.add(j)
         t, d = truths[i], detections[j]
         direct = abs(_wrap(d.yaw - t.yaw))
-        if t.open_ends == 2:  # exact: both ends open, a tube
+        if t.standing:  # round about its axis: no yaw; its end on top is the open one or not
+            err, right = 0.0, (None if t.open_ends == 2 else t.open_up)  # exact: a tube
+        elif t.open_ends == 2:  # exact: both ends open, a tube
             err, right = min(direct, math.pi - direct), None
         else:
             axis_err = min(direct, math.pi - direct)

@@ -40,8 +40,22 @@ INSIDE_SHARE = 0.6
 #: m: the inside reads this far below the rim (the hole's depth seen through the opening) for
 #: the end on top to count as open; a closed end's face reads at the rim within the noise
 OPEN_DEPTH = 0.010
+#: m: parts thinner than this (the 7.6 mm rail) are not looked for standing: their top is a
+#: few pixels, like any edge crossing the band (DetectorSettings.thin_part)
+THIN = 0.015
 #: inside pixels needed to judge the end on top at all
 MIN_INSIDE = 10
+#: sectors around the fitted centre; a rim seen from above (the highest thing there) shows in
+#: at least MIN_SECTORS of them, out past half its radius; a leaning part's end cut by the
+#: band is a strip or a crescent and fills a few
+SECTORS, MIN_SECTORS = 12, 10
+#: m: the ring just outside the rim, from a pad's width of noise out to a finger's thickness:
+#: round a standing part the heights drop off its wall there; round a leaning part's raised
+#: end its own body goes on, sloping just under the band
+CLEAR_FROM, CLEAR_TO = 0.003, 0.010
+#: m below the rim that counts as "dropped" in that ring, and the share of the ring's pixels
+#: that may stay higher (a neighbour leaning on it, the noise on the wall's edge)
+DROP, MAX_HIGH_AROUND = 0.015, 0.35
 
 
 def find_standing(hm: HeightMap, catalogue: list[Part]) -> list[Detection]:
@@ -55,8 +69,8 @@ def find_standing(hm: HeightMap, catalogue: list[Part]) -> list[Detection]:
     taken = np.zeros(height.shape, bool)
     # Tallest first: a tall part's rim never sits in a shorter part's band.
     for part in sorted(catalogue, key=lambda p: -p.length):
-        if part.hole <= 0.0:
-            continue
+        if part.hole <= 0.0 or part.outer < THIN:
+            continue  # a rail on end is a stick: no hole to grasp from above, no ring to see
         band = (np.abs(h - part.length) < BAND) & ~taken
         if int(band.sum()) < MIN_PIXELS:
             continue
@@ -84,6 +98,11 @@ def _standing(hm: HeightMap, part: Part, mask: NDArray[np.bool_]) -> Detection |
     if abs(radius - expected) > SIZE_TOLERANCE:
         return None
     center = np.array([cx, cy]) / MM_PER_M
+    rel = xy - center
+    out = np.hypot(rel[:, 0], rel[:, 1]) > 0.5 * radius  # exact: past half the radius
+    sectors = np.floor((np.arctan2(rel[out, 1], rel[out, 0]) + math.pi) / (2 * math.pi) * SECTORS)
+    if len(np.unique(sectors)) < MIN_SECTORS:
+        return None  # not a whole rim round its centre
     # The inside: pixels whose points lie within INSIDE_SHARE of the hole's radius of the axis.
     pts = hm.points.reshape(-1, 3)
     hgt = hm.height.reshape(-1)
@@ -92,6 +111,14 @@ def _standing(hm: HeightMap, part: Part, mask: NDArray[np.bool_]) -> Detection |
     idx = np.flatnonzero(near)
     d = np.hypot(pts[idx, 0] - center[0], pts[idx, 1] - center[1])
     inside = hgt[idx[d < INSIDE_SHARE * 0.5 * part.hole]]  # exact: the hole's radius
+    far = radius + CLEAR_TO
+    box = (np.abs(pts[:, 0] - center[0]) < far) & (np.abs(pts[:, 1] - center[1]) < far)
+    ring_idx = np.flatnonzero(box)
+    r = np.hypot(pts[ring_idx, 0] - center[0], pts[ring_idx, 1] - center[1])
+    around = hgt[ring_idx[(r > radius + CLEAR_FROM) & (r < far)]]
+    around = around[np.isfinite(around)]
+    if len(around) and float(np.mean(around > part.length - DROP)) > MAX_HIGH_AROUND:
+        return None  # its own body goes on beside the blob: a raised end, not a rim
     # No depth inside (the hole too deep and narrow for the sensor) reads as an opening too.
     seen = inside[np.isfinite(inside)]
     open_top = len(seen) < MIN_INSIDE or float(np.median(seen)) < part.length - OPEN_DEPTH
