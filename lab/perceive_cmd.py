@@ -320,7 +320,13 @@ def _render(
         detect_parts,
         open_end_from_view,
     )
-    from skills.perception.look import LookParams, covering_height, end_views
+    from skills.perception.look import (
+        LookParams,
+        end_views,
+        merge_views,
+        wholly_in_view,
+        wide_views,
+    )
     from skills.perception.scoring import Truth
 
     out = _Scene()
@@ -367,13 +373,13 @@ def _render(
             out.labels = ["staged"] * len(out.truths)
         view = [look_down_pose(layout.bin_center, look.view_height, mount)]
         camera = SimCamera(world, lambda: view[0], tool_T_camera=mount)
-        # the Look's wide view: as high as it must be to take in the whole bin
+        # the Look's wide views: one, or two where one does not take in the whole bin
         top = layout.bin_floor_z + max(p.outer for p in parts)
-        height = covering_height(
+        wide = wide_views(
             camera.intrinsics(), mount, layout.bin_center, layout.bin_interior(), top,
-            look.view_height, look.max_view_height,
+            look.view_height,
         )
-        tool = view[0] = look_down_pose(layout.bin_center, height, mount)
+        tool = view[0] = look_down_pose(wide[0], look.view_height, mount)
         out.frame = frame = camera.capture()
         out.intrinsics = intr = camera.intrinsics()
         out.world_T_camera = tool @ camera.tool_T_camera()
@@ -384,6 +390,16 @@ def _render(
         t0, c0 = time.perf_counter(), time.process_time()
         dets = detect_parts(frame, intr, out.world_T_camera, parts, roi, segmenter=segmenter)
         out.wall, out.cpu = time.perf_counter() - t0, time.process_time() - c0
+        if len(wide) > 1:  # as the Look: each view's whole parts, merged
+            dets = [d for d in dets if wholly_in_view(d, intr, out.world_T_camera)]
+            tool = view[0] = look_down_pose(wide[1], look.view_height, mount)
+            pose = tool @ camera.tool_T_camera()
+            t0, c0 = time.perf_counter(), time.process_time()
+            more = detect_parts(camera.capture(), intr, pose, parts, roi, segmenter=segmenter)
+            more = [d for d in more if wholly_in_view(d, intr, pose)]
+            dets = merge_views(dets, more)
+            out.wall += time.perf_counter() - t0
+            out.cpu += time.process_time() - c0
         if second:
             kinds = {p.name: p for p in parts}
             for k, d in enumerate(dets):

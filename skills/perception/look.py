@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from drivers.camera import Frame, Intrinsics
 from drivers.devices import Devices
@@ -60,37 +61,87 @@ def mounted_over(xy: tuple[float, float], height: float, tool_T_camera: Pose, ya
     return Pose(np.array([xy[0], xy[1], height]) - offset, rotation)
 
 
-#: m, steps of the search for the wide view's height that takes in the whole bin
-COVER_STEP = 0.01
+def _in_image(intr: Intrinsics, view: Pose, points: NDArray[np.float64]) -> bool:
+    """All ``points`` (world, m) in front of the camera at ``view`` and inside its image."""
+    local = (points - view.position) @ view.rotation  # the points in the camera frame
+    if not np.all(local[:, Z] > 0.0):
+        return False
+    u = intr.fx * local[:, 0] / local[:, Z] + intr.cx
+    v = intr.fy * local[:, 1] / local[:, Z] + intr.cy
+    return bool(np.all((u >= 0) & (u <= intr.width) & (v >= 0) & (v <= intr.height)))
 
 
-def covering_height(
+def _box(roi: tuple[float, float, float, float], z: float) -> NDArray[np.float64]:
+    x0, x1, y0, y1 = roi
+    return np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1)])
+
+
+#: m, steps of the search for where the wide views stand apart
+COVER_STEP = 0.005
+
+
+def wide_views(
     intr: Intrinsics,
     tool_T_camera: Pose,
     xy: tuple[float, float],
     roi: tuple[float, float, float, float],
     top_z: float,
-    lowest: float,
-    highest: float,
-) -> float:
-    """The lowest camera height (m, from ``lowest`` up to ``highest``) at which the view over
-    ``xy`` (:func:`camera_over`) sees all of the bin's inside ``roi`` at ``top_z``, the height of
-    the tallest lying part's top: a part against a wall outside the frame is half seen, not
-    fitted, and never picked. Past ``highest``, ``highest``."""
-    k = intr
+    height: float,
+) -> list[tuple[float, float]]:
+    """Where the wide views stand (camera ``height`` m up, :func:`camera_over`) so that they take
+    in all of the bin's inside ``roi`` at ``top_z``, the height of the lying parts' tops: over
+    ``xy`` when one view does; else two, each over half the bin, as close to ``xy`` as that
+    allows (a bin wider than one view: a part along a wall outside the frame is half seen,
+    not fitted, and never picked -- and a camera raised to see it all is out of the UR5's
+    reach over the shipped cell's bin)."""
+    def sees(at: tuple[float, float], part: tuple[float, float, float, float]) -> bool:
+        view = mounted_over(at, height, tool_T_camera) @ tool_T_camera
+        return _in_image(intr, view, _box(part, top_z))
+
+    if sees(xy, roi):
+        return [xy]
     x0, x1, y0, y1 = roi
-    corners = np.array([[x, y, top_z] for x in (x0, x1) for y in (y0, y1)])
-    height = lowest
-    while height < highest:
-        view = mounted_over(xy, height, tool_T_camera) @ tool_T_camera
-        local = (corners - view.position) @ view.rotation  # the corners in the camera frame
-        if np.all(local[:, Z] > 0.0):
-            u = k.fx * local[:, 0] / local[:, Z] + k.cx
-            v = k.fy * local[:, 1] / local[:, Z] + k.cy
-            if np.all((u >= 0) & (u <= k.width) & (v >= 0) & (v <= k.height)):
-                return height
-        height += COVER_STEP
-    return highest
+    cx, cy = xy
+    halves = (  # (the two halves, the direction the views move apart in)
+        (((x0, x1, y0, cy), (x0, x1, cy, y1)), (0.0, 1.0)),
+        (((x0, cx, y0, y1), (cx, x1, y0, y1)), (1.0, 0.0)),
+    )
+    reach = max(x1 - x0, y1 - y0)
+    for (low, high), (dx, dy) in halves:
+        shift = COVER_STEP
+        while shift < reach:
+            a = (cx - shift * dx, cy - shift * dy)
+            b = (cx + shift * dx, cy + shift * dy)
+            if sees(a, low) and sees(b, high):
+                return [a, b]
+            shift += COVER_STEP
+    return [xy]  # no pair does: the one view, as before
+
+
+def merge_views(earlier: list[Detection], later: list[Detection]) -> list[Detection]:
+    """What two views found: the later view's parts, and the earlier's it did not see again
+    (a part within SAME_PART_DISTANCE of one it found)."""
+    merged = list(later)
+    for old in earlier:
+        if all(math.dist(old.center[XY], d.center[XY]) > SAME_PART_DISTANCE for d in later):
+            merged.append(old)
+    return merged
+
+
+def wholly_in_view(d: Detection, intr: Intrinsics, world_T_camera: Pose) -> bool:
+    """Whether all of ``d``'s outline (its box, up to its top) lies in the frame: a part the
+    frame's edge cuts is fitted from a piece (too short, its centre off)."""
+    r = 0.5 * d.outer  # exact: the radius
+    top = float(d.center[Z]) + (0.5 * d.length if d.standing else r)  # exact: halves
+    if d.standing:
+        along, across = np.array([r, 0.0]), np.array([0.0, r])
+    else:
+        u = np.array([math.cos(d.yaw), math.sin(d.yaw)])
+        along, across = 0.5 * d.length * u, r * np.array([-u[1], u[0]])  # exact: half length
+    c = np.asarray(d.center[XY], float)
+    corners = [c + sa * along + sb * across for sa in (1, -1) for sb in (1, -1)]
+    pts = np.array([[p[0], p[1], top] for p in corners])
+    return _in_image(intr, world_T_camera, pts)
 
 
 def tool_yaw(rotation: np.ndarray) -> float:
@@ -109,13 +160,8 @@ class LookParams:
 
     view_height: float = si(
         0.5, "m", 0.2, 1.0,
-        "of the camera over the bin, the wide view, at least: higher where the bin's inside "
-        "would not all be in view at the lying parts' top (up to max_view_height_m)",
-    )
-    max_view_height: float = si(
-        0.7, "m", 0.2, 1.5,
-        "of the camera for the wide view at most, however wide the bin (the depth noise grows "
-        "with the square of the distance)",
+        "of the camera over the bin, the wide view (two, over each half, where one does not "
+        "take in the whole bin at the lying parts' top)",
     )
     second_height: float = si(0.35, "m", 0.15, 1.0, "of the camera for the look at an end")
     second_offset: float = si(
@@ -214,7 +260,7 @@ class Look:
         reach from where it stands (index of the first pose it cannot reach, or None); a close
         view turned out of reach (near the robot's base, after a drag) is taken unturned.
         ``floor_z``: the bin floor's height, under the lying parts' tops the wide view must
-        take in (:func:`covering_height`); ``wanted_top``: how high (m, over the floor) the
+        take in (:func:`wide_views`); ``wanted_top``: how high (m, over the floor) the
         parts the cell wants to find reach lying (default: the catalogue's tallest)."""
         self.params = params if params is not None else LookParams()
         self._grip_yaw = grip_yaw
@@ -233,12 +279,20 @@ class Look:
         self._judged: list[Detection] = []  #: what each end view said of it
         self._looked_again = False  #: the closer look from above taken (a part decided)
         self._out_of_reach = False  #: the last end view asked for was out of the arm's reach
+        self._wide = [view_xy]  #: where the wide views stand
+        if dev.camera is not None:
+            self._wide = wide_views(
+                dev.camera.intrinsics(), dev.camera.tool_T_camera(), view_xy, roi,
+                floor_z + self.wanted_top, self.params.view_height,
+            )
         g = self.params.guard
         self.sequence = Sequence(
             "look",
             [
-                dev.move("camera over the bin", g, self._over_bin),
-                self._detect_step("find the parts"),
+                dev.move("camera over the bin", g, lambda: self._over_bin(0)),
+                self._wide_step("find the parts", self._none_yet, lambda: True),
+                dev.move("camera over the rest of the bin", g, lambda: self._over_bin(1)),
+                self._wide_step("find the parts there", self._none_found, self._two_views),
                 dev.move("camera beyond its end", g, lambda: self._beyond_end(0)),
                 self._detect_step("look at its end", judge_end=True),
                 dev.move("camera beyond its other end", g, lambda: self._beyond_end(1)),
@@ -247,6 +301,36 @@ class Look:
                 frame_step("refine its pose", dev, g, self._detect_work, self._refine),
             ],
         )
+
+    def _two_views(self) -> bool:
+        return len(self._wide) > 1
+
+    def _none_yet(self) -> str | None:
+        """After the first wide view: nothing found fails only when no second view follows."""
+        return None if self._two_views() else self._none_found()
+
+    def _wide_step(
+        self, name: str, failed: Callable[[], str | None], wanted: Callable[[], bool]
+    ) -> GuardedMotion:
+        """Take a wide view's frame and find the parts wholly in it (a part its edge cuts is
+        left to the other wide view, which sees it whole)."""
+        return frame_step(
+            name, self.dev, self.params.guard, self._detect_whole, self._use_wide,
+            failed, Failure.NOTHING_FOUND, wanted=wanted,
+        )
+
+    def _use_wide(self, dets: list[Detection]) -> None:
+        """The wide views add up: the choice is made among all they found."""
+        self._remember(dets)
+        self.result = None
+        self._choose(self.detections)
+
+    def _detect_whole(self, frame: Frame, pose: Pose) -> list[Detection]:
+        dets = self._detect_work(frame, pose)
+        camera = self.dev.camera
+        if not self._two_views() or camera is None:
+            return dets
+        return [d for d in dets if wholly_in_view(d, camera.intrinsics(), pose)]
 
     def _detect_step(self, name: str, judge_end: bool = False) -> GuardedMotion:
         """Take a frame and find the parts in it (or, ``judge_end``, judge the chosen part's end
@@ -270,16 +354,12 @@ class Look:
         return any(p.name == d.part for p in self.catalogue)
 
     # --- the steps' commands and checks ------------------------------------------------------
-    def _over_bin(self) -> None:
+    def _over_bin(self, which: int) -> None:
+        """The camera over the bin for wide view ``which`` (none asked for past the last)."""
+        if which >= len(self._wide):
+            return
         p = self.params
-        top = self.floor_z + self.wanted_top
-        camera, height = self.dev.camera, p.view_height
-        if camera is not None:
-            height = covering_height(
-                camera.intrinsics(), camera.tool_T_camera(), self._view_xy, self.roi, top,
-                p.view_height, p.max_view_height,
-            )
-        target = camera_over(self._view_xy, height, self.dev)
+        target = camera_over(self._wide[which], p.view_height, self.dev)
         self.dev.arm.move_to(target, p.speed, p.acceleration)
 
     def _beyond_end(self, which: int) -> None:
@@ -390,11 +470,7 @@ class Look:
     def _remember(self, dets: list[Detection]) -> None:
         """The second, closer view sees less of the bin: it refines the parts it sees again
         and adds any new ones, but never forgets what the wide view found."""
-        merged = list(dets)
-        for old in self.detections:
-            if all(math.dist(old.center[XY], d.center[XY]) > SAME_PART_DISTANCE for d in dets):
-                merged.append(old)
-        self.detections = merged
+        self.detections = merge_views(self.detections, dets)
 
     def _none_found(self) -> str | None:
         return None if self.result is not None else "no part found in the bin"

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from drivers.camera import Intrinsics
 from drivers.devices import Devices
 from drivers.parts import Section
 from drivers.pose import Pose
@@ -24,6 +25,9 @@ MOUNT = Pose(np.array([0.0, 0.08, 0.03]), np.eye(3))
 class _Camera:
     def tool_T_camera(self) -> Pose:
         return MOUNT
+
+    def intrinsics(self) -> Intrinsics:  # a D435's colour stream at 640 x 480
+        return Intrinsics(640, 480, 615.0, 615.0, 320.0, 240.0)
 
 
 def _devices() -> Devices:
@@ -74,13 +78,16 @@ def _detection(yaw: float) -> Detection:
     )
 
 
+def _step(look: Look, name: str):  # type: ignore[no-untyped-def]
+    return next(step for step in look.sequence.steps if step.name == name)
+
+
 def _close_view(grip_yaw: object) -> Pose:
     dev = _devices()
     look = Look(dev, [], (0.3, 0.7, -0.2, 0.2), (0.5, 0.0), (0.3, 0.0),  # type: ignore[arg-type]
                 grip_yaw=grip_yaw)  # type: ignore[arg-type]
     look.result = _detection(0.3)
-    look.sequence.steps[6].start()  # "camera over the part"
-    assert look.sequence.steps[6].name == "camera over the part"
+    _step(look, "camera over the part").start()
     kind, waypoints = dev.arm.commands[-1]  # type: ignore[attr-defined]
     assert kind == "path"
     return waypoints[-1]  # type: ignore[no-any-return]
@@ -104,7 +111,7 @@ def test_a_turned_close_view_is_slowed_to_the_turn_rate() -> None:
     look = Look(dev, [], (0.3, 0.7, -0.2, 0.2), (0.5, 0.0), (0.3, 0.0),  # type: ignore[arg-type]
                 grip_yaw=lambda d: d.yaw + math.pi)
     look.result = _detection(0.3)
-    look.sequence.steps[6].start()
+    _step(look, "camera over the part").start()
     target = dev.arm.commands[-1][1][-1]  # type: ignore[attr-defined, index]
     distance, angle = Pose(np.array([0.4, 0.0, 0.3])).distance(target)
     p = look.params
