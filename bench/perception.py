@@ -1,13 +1,16 @@
 """Benchmark: bin perception over rendered scenes, classical and learned, against ground truth.
 
 Run by hand:  python bench/perception.py [--scenes 200] [--seed 10000] [--pipelines classical]
+              [--fill random]
 
 Runs ``cell perceive`` for each pipeline on the same scenes and prints one table: recall, false
 positives, position and yaw errors (median, p95) and the median processing time per frame
 (rendering excluded), wall clock and this process's CPU time: wall above CPU means the run waited
 for a core (another job on the machine), CPU above wall means extra threads. Targets:
 recall >= 0.98, yaw p95 <= 2 deg, position p95 <= 3 mm, median <= 60 ms per frame for the
-classical pipeline, on this 2-core machine.
+classical pipeline, on this 2-core machine. Also the time per scene with all the views the
+Look takes of it (the wide view or two, the end views), by the number of parts in the bin: how
+it scales.
 """
 
 from __future__ import annotations
@@ -27,12 +30,14 @@ def run() -> None:
     ap.add_argument("--scenes", type=int, default=200)
     ap.add_argument("--seed", type=int, default=10000)
     ap.add_argument("--pipelines", nargs="+", default=["classical", "learned"])
+    ap.add_argument("--fill", choices=["staged", "random"], default="staged")
     args = ap.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for pipeline in args.pipelines:
             out = Path(tmp) / f"{pipeline}.json"
-            argv = ["perceive", "--scenes", str(args.scenes), "--seed", str(args.seed)]
+            argv = ["perceive", "--scenes", str(args.scenes), "--seed", str(args.seed),
+                    "--fill", args.fill]
             code = cell([*argv, "--json", str(out), "--pipeline", pipeline])
             if code == 0:
                 rows.append(json.loads(out.read_text()))
@@ -64,6 +69,14 @@ def run() -> None:
             f"   missed by part: {r['missed_by_part']}; open end decided for "
             f"{r['open_end_decided']} of {r['open_end_one_ended_parts']} cups/bottles, right "
             f"{r['open_end_decided_right']}"
+        )
+        print(
+            f"   {r['ms_per_scene_median']:.0f} ms per scene with all its views (median); by "
+            "parts in the bin: "
+            + ", ".join(
+                f"{k}: {v['ms_median']:.0f} ms ({v['scenes']} scenes)"
+                for k, v in r["ms_per_scene_by_parts"].items()
+            )
         )
 
 

@@ -132,6 +132,7 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     matches, missed, false_pos, times, cpu_times, failed = [], 0, 0, [], [], []
     second_times: list[float] = []
+    scene_times: list[tuple[int, float]] = []  #: (parts in the bin, s for all its views)
     missed_names: dict[str, int] = {}
     rows: list[tuple[Any, str, Any]] = []  #: (truth, situation, match or None) per scored part
     not_lying: dict[str, int] = {}
@@ -144,6 +145,8 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         times.append(scene.wall)
         cpu_times.append(scene.cpu)
         second_times += scene.second_wall
+        # the whole scene as the Look sees it: its wide view(s) and every end view taken
+        scene_times.append((len(scene.truths), scene.wall + sum(scene.second_wall)))
         for label in scene.not_lying:
             not_lying[label] = not_lying.get(label, 0) + 1
         truths, dets = scene.truths, scene.detections
@@ -203,6 +206,8 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         "ms_per_second_view_median": (
             1e3 * float(np.median(second_times)) if second_times else math.nan
         ),
+        "ms_per_scene_median": 1e3 * float(np.median([t for _, t in scene_times])),
+        "ms_per_scene_by_parts": _by_parts(scene_times),
         "recall_lying_flat": flat_found / len(flat) if flat else math.nan,
         "lying_flat_parts": len(flat),
         "not_lying": not_lying,
@@ -225,6 +230,12 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         f"{result['open_end_decided_right']}",
         f"time        {result['ms_per_frame_median']:.0f} ms per frame (median wall; p95 "
         f"{result['ms_per_frame_p95']:.0f}), {result['cpu_ms_per_frame_median']:.0f} ms CPU",
+        f"per scene   {result['ms_per_scene_median']:.0f} ms median with all its views; by "
+        "parts: "
+        + ", ".join(
+            f"{k}: {v['ms_median']:.0f} ({v['scenes']})"
+            for k, v in result["ms_per_scene_by_parts"].items()
+        ),
     ]
     if args.fill == "random":
         lines.append(
@@ -243,6 +254,18 @@ def cmd_perceive(args: argparse.Namespace) -> int:
     lines.append(f"wrote {args.json}")
     print("\n".join(lines))
     return 0
+
+
+def _by_parts(scene_times: list[tuple[int, float]]) -> dict[str, dict[str, float]]:
+    """Median ms per scene (all its views) by how many parts lay in it, in bands of two."""
+    bands: dict[str, list[float]] = {}
+    for n, t in scene_times:
+        lo = 2 * ((n - 1) // 2) + 1  # exact: bands 1-2, 3-4, ...
+        bands.setdefault(f"{lo}-{lo + 1}", []).append(t)
+    return {
+        k: {"scenes": len(v), "ms_median": 1e3 * float(np.median(v))}
+        for k, v in sorted(bands.items(), key=lambda kv: int(kv[0].split("-")[0]))
+    }
 
 
 def _split(rows: list[tuple[Any, str, Any]], key: Any) -> dict[str, dict[str, Any]]:
