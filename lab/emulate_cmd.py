@@ -20,7 +20,8 @@ and the D435's frames on ``devices.camera.stream``.
 One thread owns PyBullet (:class:`sim.emulate.realtime.RealTimeLoop`): each control period it
 runs the UR controller's cycle (which commands the twin's arm) and one twin step; the device
 servers exchange values with it under locks. The camera renders in a forked process
-(:mod:`sim.emulate.camera_process`). Faults on the wire: on the schedule of ``emulate.faults``,
+(:mod:`sim.emulate.camera_process`), the FT300 streams from a spawned one
+(:mod:`sim.emulate.ft300_process`). Faults on the wire: on the schedule of ``emulate.faults``,
 and by signal: SIGUSR1 pulls the arm's Ethernet cable (every UR socket dropped, new connections
 refused), a second SIGUSR1 plugs it back; SIGUSR2 raises a protective stop.
 """
@@ -61,6 +62,11 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_emulate)
 
 
+def _ft_stats(ft: Any) -> dict[str, Any]:
+    frames, gap, late = ft.stats()
+    return {"frames_sent": frames, "max_gap_ms": round(1e3 * gap, 1), "late_frames": late}
+
+
 def _report(backend: Any, controller: Any, loop: Any, faults: list[dict[str, Any]],
             wires: Any) -> dict[str, Any]:
     where = backend.parts_where()
@@ -78,8 +84,7 @@ def _report(backend: Any, controller: Any, loop: Any, faults: list[dict[str, Any
         ],
         "ur": controller.status(),
         "faults": faults,
-        "ft": {"frames_sent": wires.ft.frames_sent, "max_gap_ms": round(1e3 * wires.ft.max_gap, 1),
-               "late_frames": wires.ft.late_frames},
+        "ft": _ft_stats(wires.ft),
         "gripper": {"modbus_requests": wires.rtu.requests, "crc_errors": wires.rtu.crc_errors},
         "realtime": loop.margin_stats(),
     }
@@ -222,7 +227,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     from cell.assemble import build_twin
     from cell.cell_cmds import load_prepared, report_config_error
     from sim.emulate.camera_process import CameraProcess
-    from sim.emulate.ft300_stream import FT300Emulator, TwinWrist
+    from sim.emulate.ft300_process import FT300Process
     from sim.emulate.gripper_server import Gripper2F85, ModbusRtuServer, TwinFingers, UrcapServer
     from sim.emulate.ur_controller import (
         ControllerSettings,
@@ -281,9 +286,10 @@ def cmd_emulate(args: argparse.Namespace) -> int:
         opened.append(urcap.stop)
         ft_listen = _socket_url(dev.ft.port, "devices.ft.port")
         try:
-            wrist = TwinWrist(robot.ft)
-            ft = FT300Emulator(wrist, unit_id=dev.ft.slave_id,
-                               seed=config.sim.seed, listen=ft_listen).start()
+            # its own process: in this one its thread waited behind PyBullet's steps
+            ft = FT300Process(robot.ft, backend.world, unit_id=dev.ft.slave_id,
+                              seed=config.sim.seed, listen=ft_listen).start()
+            wrist = ft.wrist
         except OSError as exc:
             raise UserError(f"devices.ft.port: cannot listen on {dev.ft.port}: {exc}") from None
         opened.append(ft.close)
