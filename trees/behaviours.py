@@ -700,10 +700,14 @@ class PutBack(SkillBehaviour):
     section = "put_back"
 
     def keys(self) -> dict[str, common.Access]:
-        return {"/part/target": common.Access.READ}
+        return {"/part/target": common.Access.READ, "/cell/bin_empty": common.Access.READ}
 
     def make_skill(self) -> Skill:
         ctx = self.ctx
+        if self.bb.exists("/cell/bin_empty") and self.bb.get("/cell/bin_empty"):
+            # nothing was taken: the arm is where the look left it, high over the bin (a rise
+            # from there is out of reach); home by a joint move
+            return go_home(ctx.devices, ctx.geometry.home_joints, self.settings("go_home"))
         if self.bb.exists("/part/target"):
             key = location_key(self.bb.get("/part/target")["detection"].center)
             ctx.failures[key] = ctx.failures.get(key, 0) + 1

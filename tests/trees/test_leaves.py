@@ -379,6 +379,21 @@ def test_put_back_without_a_chosen_part_remembers_nothing(ctx) -> None:
     assert ctx.failures == {} and len(ctx.devices.arm.commands) == 2
 
 
+def test_put_back_after_an_empty_bin_goes_home_without_the_rise(ctx) -> None:
+    """Nothing was taken: the arm is where the look left it, high over the bin, where a rise is
+    out of the UR5's reach (the twin's arm faulted there)."""
+    bb = blackboard()
+    bb.set("/part/target", target(ctx, 0.45, 0.02))
+    bb.set("/cell/bin_empty", True)
+    try:
+        statuses = run(lv.PutBack("put back", ctx), ctx)
+    finally:
+        bb.set("/cell/bin_empty", False)
+    assert statuses[-1] == Status.FAILURE and not ctx.events.aborts
+    assert [c[0] for c in ctx.devices.arm.commands] == ["joints"]  # home, no rise
+    assert ctx.failures == {}  # no pick failed
+
+
 def test_put_back_opens_under_the_load_of_a_pinched_part_within_its_node_limit(ctx) -> None:
     holding(ctx)
     ft = ctx.devices.ft
