@@ -68,7 +68,9 @@ def _ft_stats(ft: Any) -> dict[str, Any]:
 
 
 def _report(backend: Any, controller: Any, loop: Any, faults: list[dict[str, Any]],
-            wires: Any) -> dict[str, Any]:
+            wires: Any, ft: dict[str, Any]) -> dict[str, Any]:
+    """``ft``: the FT300's stream counters (:func:`_ft_stats`, asked of its process before the
+    stepping lock is taken: a stalled child must not hold up the twin)."""
     where = backend.parts_where()
     account = backend.account()
     packed = account["packed"]
@@ -84,7 +86,7 @@ def _report(backend: Any, controller: Any, loop: Any, faults: list[dict[str, Any
         ],
         "ur": controller.status(),
         "faults": faults,
-        "ft": _ft_stats(wires.ft),
+        "ft": ft,
         "gripper": {"modbus_requests": wires.rtu.requests, "crc_errors": wires.rtu.crc_errors},
         "realtime": loop.margin_stats(),
     }
@@ -327,8 +329,9 @@ def _serve(args: argparse.Namespace, backend: Any, controller: Any, servers: Any
     def write_report() -> None:
         if args.report is None:
             return
+        ft = _ft_stats(wires.ft)
         with lock:
-            report = _report(backend, controller, loop, schedule.fired, wires)
+            report = _report(backend, controller, loop, schedule.fired, wires, ft)
         args.report.parent.mkdir(parents=True, exist_ok=True)
         tmp = args.report.with_suffix(args.report.suffix + ".tmp")
         tmp.write_text(json.dumps(report, indent=2))

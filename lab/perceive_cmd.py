@@ -174,7 +174,9 @@ def cmd_perceive(args: argparse.Namespace) -> int:
         bar.update(i + 1, f"missed {missed}  false {false_pos}")
     bar.close()
     pos = np.array([x.pos_err for x in matches]) * 1e3 if matches else np.array([math.nan])
-    yaw = np.degrees([x.yaw_err for x in matches]) if matches else np.array([math.nan])
+    # a standing part has no yaw to get wrong: its matches stay out of the yaw figures
+    lying = [x for x in matches if not x.truth.standing]
+    yaw = np.degrees([x.yaw_err for x in lying]) if lying else np.array([math.nan])
     ends = [x for x in matches if x.end_right is not None]
     seen = [x for x in ends if x.detection.open_end_seen]
     total = len(matches) + missed
@@ -260,7 +262,7 @@ def _by_parts(scene_times: list[tuple[int, float]]) -> dict[str, dict[str, float
     """Median ms per scene (all its views) by how many parts lay in it, in bands of two."""
     bands: dict[str, list[float]] = {}
     for n, t in scene_times:
-        lo = 2 * ((n - 1) // 2) + 1  # exact: bands 1-2, 3-4, ...
+        lo = 2 * ((max(n, 1) - 1) // 2) + 1  # exact: bands 1-2, 3-4, ... (none: 1-2)
         bands.setdefault(f"{lo}-{lo + 1}", []).append(t)
     return {
         k: {"scenes": len(v), "ms_median": 1e3 * float(np.median(v))}
@@ -279,7 +281,8 @@ def _split(rows: list[tuple[Any, str, Any]], key: Any) -> dict[str, dict[str, An
         found = [m for _, _, m in g if m is not None]
         ends = [m for m in found if m.end_right is not None]
         seen = [m for m in ends if m.detection.open_end_seen]
-        yaw = np.degrees([m.yaw_err for m in found]) if found else np.array([math.nan])
+        level = [m for m in found if not m.truth.standing]
+        yaw = np.degrees([m.yaw_err for m in level]) if level else np.array([math.nan])
         pos = 1e3 * np.array([m.pos_err for m in found]) if found else np.array([math.nan])
         out[name] = {
             "parts": len(g),

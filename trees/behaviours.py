@@ -188,7 +188,8 @@ class Perceive(SkillBehaviour):
             # the look's views are straight moves from where the arm stands: not from home
             reach=self.ctx.reach_here or self.ctx.reach,
             floor_z=g.bin_floor_z,
-            wanted_top=self.ctx.part.outer,  # the wide view takes in every part it may pick
+            # the wide views take in every part the cell may pick: lying, or standing on an end
+            wanted_top=max(self.ctx.part.outer, self.ctx.part.length),
         )
         return _TolerantLook(self.look)
 
@@ -352,7 +353,7 @@ class PlanPick(Behaviour):
             ctx.events.event(EventKind.BIN_EMPTY, skipped=skipped, left=left)
             return Status.FAILURE
         pool = [d for d in usable if id(d) in (clear or drags)]
-        # A part standing on its open end goes first: no pivot, and it shades its neighbours.
+        # A part standing, its open end up, goes first: no pivot, and it shades its neighbours.
         pool = [d for d in pool if d.standing] or pool
         if pool[0].standing:
             target = min(pool, key=lambda d: math.hypot(d.center[0], d.center[1]))
@@ -401,7 +402,7 @@ class PlanPick(Behaviour):
                 for o in dets
                 if o is not d
             ]
-            if d.standing:  # on its open end already: the hole grasp from above, no pivot
+            if d.standing:  # its open end up already: the hole grasp from above, no pivot
                 up = plan_standing_pick(
                     d.center, ctx.part, pivot, [*walls, *neighbours], width, g.bin_floor_z,
                     reach=ctx.reach,
@@ -507,7 +508,7 @@ class _TargetStands(Behaviour):
 
 @declare(
     "part_standing",
-    "condition: the chosen part stands on its open end (picked from above, no pivot)",
+    "condition: the chosen part stands, its open end up (picked from above, no pivot)",
     "Condition",
 )
 class PartStanding(_TargetStands):
@@ -521,12 +522,12 @@ class PartLying(_TargetStands):
 
 @declare(
     "pick_standing",
-    "hole grasp from above of a part found standing on its open end (counted apart: no pivot)",
+    "hole grasp from above of a part found standing, its open end up (counted apart: no pivot)",
     "Action",
     MOTION,
 )
 class PickStanding(SkillBehaviour):
-    """The chosen part stands on its open end: look at its rim close up and take the hole
+    """The chosen part stands, its open end up: look at its rim close up and take the hole
     grasp from above. Journaled as ``picked`` with ``standing: true``, counted apart."""
 
     section = "pivot"

@@ -57,9 +57,13 @@ class SharedWrist:
     def __init__(self, block: Any, ft: Any) -> None:
         """``ft``: the twin's ``SimForceTorqueSensor``."""
         self._block, self._ft = block, ft
+        self.closed = False
 
     def feed(self) -> None:
-        """Copy the newest noiseless load (a world ``after_step`` callback)."""
+        """Copy the newest noiseless load (a world ``after_step`` callback; a no-op once the
+        process is closed: the world keeps its callbacks)."""
+        if self.closed:
+            return
         self._block[_LOAD:_LOAD + 6] = [float(v) for v in self._ft.sampled_true_load()]
 
     def inject(self, wrench: NDArray[np.float64]) -> None:
@@ -137,10 +141,13 @@ class FT300Process:
         self._proc.start()
         child.close()
         self._conn = parent
-        if not parent.poll(_ANSWER_S):
+        try:
+            if not parent.poll(_ANSWER_S):
+                raise OSError("the FT300 emulator's process did not come up")
+            kind, value = parent.recv()
+        except (EOFError, OSError) as exc:  # it died before it answered
             self.close()
-            raise OSError("the FT300 emulator's process did not come up")
-        kind, value = parent.recv()
+            raise OSError(f"the FT300 emulator's process: {exc or 'ended'}") from None
         if kind == "error":
             self.close()
             raise OSError(value)
@@ -169,12 +176,16 @@ class FT300Process:
     def stats(self) -> tuple[int, float, int]:
         """(frames sent, the longest gap between two (s), frames later than two periods)."""
         self._send("stats")
-        if self._conn is None or not self._conn.poll(_ANSWER_S):
+        try:
+            if self._conn is None or not self._conn.poll(_ANSWER_S):
+                return 0, 0.0, 0
+            frames, gap, late = self._conn.recv()
+        except (EOFError, OSError):  # the child is gone
             return 0, 0.0, 0
-        frames, gap, late = self._conn.recv()
         return int(frames), float(gap), int(late)
 
     def close(self) -> None:
+        self.wrist.closed = True
         self._send("close")
         if self._proc is not None:
             self._proc.join(timeout=5.0)

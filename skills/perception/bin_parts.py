@@ -543,12 +543,13 @@ def detect_parts(
     from skills.perception.standing import find_standing  # it builds on Detection
 
     standing = find_standing(hm, catalogue)
-    # A standing part's flank can pass for a short lying part beside it: the top decides.
+    # A standing part's flank can pass for a short lying part there: the top decides. A part
+    # lying against it (its centre a radius and more away) stays.
     lying = [
         d
         for d in lying
         if all(
-            math.dist(d.center[:2], s.center[:2]) > 0.5 * (s.outer + d.outer)  # exact: radii
+            math.dist(d.center[:2], s.center[:2]) > 0.5 * s.outer  # exact: its radius
             for s in standing
         )
     ]

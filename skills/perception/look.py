@@ -415,6 +415,13 @@ class Look:
         if not near:
             return
         d = min(near, key=lambda d: math.dist(d.center[XY], r.center[XY]))
+        if r.standing:  # its axis moves, its top stays straight above it
+            if not d.standing:
+                return  # a lying part's flank, not its top
+            centre = np.array([d.center[0], d.center[1], r.center[Z]])
+            top = np.array([d.center[0], d.center[1], r.open_end[Z]])
+            self.result = dataclasses.replace(r, center=centre, open_end=top)
+            return
         yaw = d.yaw if math.cos(d.yaw - r.yaw) >= 0.0 else d.yaw + math.pi
         yaw = math.atan2(math.sin(yaw), math.cos(yaw))
         u = np.array([math.cos(yaw), math.sin(yaw), 0.0])

@@ -60,8 +60,9 @@ def score(
         used_d.add(j)
         t, d = truths[i], detections[j]
         direct = abs(_wrap(d.yaw - t.yaw))
-        if t.standing:  # round about its axis: no yaw; its end on top is the open one or not
-            err, right = 0.0, (None if t.open_ends == 2 else t.open_up)  # exact: a tube
+        if t.standing:  # round about its axis: no yaw; the end on top read right or not
+            err = 0.0
+            right = None if t.open_ends == 2 else d.open_end_seen == t.open_up  # exact: a tube
         elif t.open_ends == 2:  # exact: both ends open, a tube
             err, right = min(direct, math.pi - direct), None
         else:

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.parts import Part
+from skills.axes import XY, Z
 from skills.perception.bin_parts import Detection
 from skills.perception.heightmap import MM_PER_M, HeightMap
 
@@ -40,6 +41,8 @@ INSIDE_SHARE = 0.6
 #: m: the inside reads this far below the rim (the hole's depth seen through the opening) for
 #: the end on top to count as open; a closed end's face reads at the rim within the noise
 OPEN_DEPTH = 0.010
+#: pixels touching at a corner join a blob: a rim a pixel wide runs on diagonals
+CONNECTIVITY = 8
 #: m: parts thinner than this (the 7.6 mm rail) are not looked for standing: their top is a
 #: few pixels, like any edge crossing the band (DetectorSettings.thin_part)
 THIN = 0.015
@@ -74,7 +77,7 @@ def find_standing(hm: HeightMap, catalogue: list[Part]) -> list[Detection]:
         band = (np.abs(h - part.length) < BAND) & ~taken
         if int(band.sum()) < MIN_PIXELS:
             continue
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(band.astype(np.uint8), 8)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(band.astype(np.uint8), CONNECTIVITY)
         for k in range(1, n):
             if stats[k, cv2.CC_STAT_AREA] < MIN_PIXELS:
                 continue
@@ -88,19 +91,21 @@ def find_standing(hm: HeightMap, catalogue: list[Part]) -> list[Detection]:
 
 def _standing(hm: HeightMap, part: Part, mask: NDArray[np.bool_]) -> Detection | None:
     """The blob ``mask`` as ``part`` standing, or None when its size is not the part's."""
-    xy = hm.points[mask][:, :2].astype(np.float64)
+    xy = hm.points[mask][:, XY].astype(np.float64)
     xy = xy[np.isfinite(xy[:, 0])]
     if len(xy) < MIN_PIXELS:
         return None
     (cx, cy), r_mm = cv2.minEnclosingCircle((xy * MM_PER_M).astype(np.float32))
     radius = r_mm / MM_PER_M
-    expected = 0.5 * part.outer * (SQUARE_DIAGONAL if part.hole_shape == "rectangle" else 1.0)
+    corner = SQUARE_DIAGONAL if part.hole_shape == "rectangle" else 1.0
+    expected = 0.5 * part.outer * corner  # exact: half the outer size, to a side or a corner
     if abs(radius - expected) > SIZE_TOLERANCE:
         return None
     center = np.array([cx, cy]) / MM_PER_M
     rel = xy - center
     out = np.hypot(rel[:, 0], rel[:, 1]) > 0.5 * radius  # exact: past half the radius
-    sectors = np.floor((np.arctan2(rel[out, 1], rel[out, 0]) + math.pi) / (2 * math.pi) * SECTORS)
+    turn = np.arctan2(rel[out, 1], rel[out, 0]) + math.pi  # 0 .. 2 pi
+    sectors = np.floor(turn / math.tau * SECTORS)
     if len(np.unique(sectors)) < MIN_SECTORS:
         return None  # not a whole rim round its centre
     # The inside: pixels whose points lie within INSIDE_SHARE of the hole's radius of the axis.
@@ -126,14 +131,15 @@ def _standing(hm: HeightMap, part: Part, mask: NDArray[np.bool_]) -> Detection |
         open_top = True
     floor = hm.plane
     up = floor.normal
-    base = np.array([center[0], center[1], 0.0])
-    base[2] = (floor.offset - up[0] * base[0] - up[1] * base[1]) / up[2]  # on the floor plane
+    # the axis' foot on the floor plane: up . p = offset
+    foot_z = (floor.offset - float(up[XY] @ center)) / float(up[Z])
+    base = np.array([center[0], center[1], foot_z])
     top = base + part.length * up
     return Detection(
         center=base + 0.5 * part.length * up,  # exact: the axis' middle
         yaw=0.0,
         length=part.length,
-        outer=2.0 * radius / (SQUARE_DIAGONAL if part.hole_shape == "rectangle" else 1.0),
+        outer=2.0 * radius / corner,  # exact: the diameter is twice the radius
         part=part.name,
         open_end=top,
         open_end_seen=bool(open_top),

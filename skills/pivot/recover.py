@@ -187,7 +187,7 @@ STANDING_SIDE_STEP = math.pi / 4.0
 
 
 class PickStanding(PickFromAbove):
-    """A part found standing on its open end: the hole grasp from above, without the let-go
+    """A part found standing, its open end up: the hole grasp from above, without the let-go
     (nothing is held). Not the paper's maneuver -- the part needs no pivot -- so its picks are
     counted apart (``standing``). ``center_xy``: where the wide view saw its axis (m); the
     close look over it measures the rim before the fingers go down."""
@@ -230,8 +230,10 @@ def plan_standing_pick(
     rim = floor_z + part.length
     depth = min(params.wall_depth, part.length - params.floor_clearance)
     section = part.section(finger_width)
-    sides = int(round(2.0 * math.pi / STANDING_SIDE_STEP))
-    order = [0] + [s * k for k in range(1, sides // 2 + 1) for s in (1, -1)]
+    radius = 0.5 * part.outer  # exact: the frame's centre height, as a lying part's
+    sides = int(round(math.tau / STANDING_SIDE_STEP))
+    half = sides // 2  # exact: as many steps one way round as the other
+    order = [0] + [s * k for k in range(1, half + 1) for s in (1, -1)]
     for k in order[:sides]:
         yaw = toward + k * STANDING_SIDE_STEP
         u = np.array([math.cos(yaw), math.sin(yaw), 0.0])
@@ -249,5 +251,5 @@ def plan_standing_pick(
         )
         if not clear or (reach is not None and reach(poses) is not None):
             continue
-        return PivotFrame(section, np.array([*c, floor_z + 0.5 * part.outer]), yaw, floor_z)
+        return PivotFrame(section, np.array([*c, floor_z + radius]), yaw, floor_z)
     return None

@@ -77,3 +77,9 @@ def test_a_standing_part_is_scored_found_only_by_a_detection_that_says_it_stands
     assert (len(matches), missed, false) == (0, 1, 1)
     matches, missed, false = score([truth], [seen(True)])
     assert (missed, false) == (0, 0) and matches[0].end_right is True and matches[0].yaw_err == 0
+
+
+def test_a_bushing_lying_against_a_standing_one_is_found_too() -> None:
+    # axis along y, its wall touching the standing one's: centres one outer size apart
+    dets, c = wide_view("bushing", True, [("bushing", 0.034, 0.0, np.pi / 2)])
+    assert sorted((d.part, d.standing) for d in dets) == [("bushing", False), ("bushing", True)]
