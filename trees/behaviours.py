@@ -456,54 +456,53 @@ def _target_frame(bb: Any) -> PivotFrame:
     return bb.get("/part/target")["frame"]
 
 
+class _OnTarget(Behaviour):
+    """A condition on plan_pick's choice (``/part/target``): :meth:`holds` judges it; nothing
+    chosen: FAILURE."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/target", access=common.Access.READ)
+
+    def holds(self, target: dict[str, Any]) -> tuple[bool, str]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def update(self) -> Status:
+        if not self.bb.exists("/part/target"):
+            self.feedback_message = "no part chosen"
+            return Status.FAILURE
+        ok, self.feedback_message = self.holds(self.bb.get("/part/target"))
+        return Status.SUCCESS if ok else Status.FAILURE
+
+
 @declare(
     "pivot_clears",
     "condition: the chosen part's pivot clears the walls and neighbours where it lies",
     "Condition",
 )
-class PivotClears(Behaviour):
+class PivotClears(_OnTarget):
     """Condition: SUCCESS when plan_pick found the chosen part pickable where it lies; FAILURE
     when it needs a drag first (or nothing was chosen)."""
 
-    moves = False
-
-    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
-        super().__init__(name=name)
-        self.ctx = ctx
-        self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key="/part/target", access=common.Access.READ)
-
-    def update(self) -> Status:
-        if not self.bb.exists("/part/target"):
-            self.feedback_message = "no part chosen"
-            return Status.FAILURE
-        if self.bb.get("/part/target").get("reposition") is not None:
-            self.feedback_message = "the pivot would hit a wall or a neighbour: drag it first"
-            return Status.FAILURE
-        self.feedback_message = "the pivot clears where the part lies"
-        return Status.SUCCESS
+    def holds(self, target: dict[str, Any]) -> tuple[bool, str]:
+        if target.get("reposition") is not None:
+            return False, "the pivot would hit a wall or a neighbour: drag it first"
+        return True, "the pivot clears where the part lies"
 
 
-class _TargetStands(Behaviour):
+class _TargetStands(_OnTarget):
     """Condition on plan_pick's choice: SUCCESS when it stands on an end as :attr:`wanted`
     says (nothing chosen: FAILURE)."""
 
-    moves = False
     wanted = True
 
-    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
-        super().__init__(name=name)
-        self.ctx = ctx
-        self.bb = self.attach_blackboard_client(name=name)
-        self.bb.register_key(key="/part/target", access=common.Access.READ)
-
-    def update(self) -> Status:
-        if not self.bb.exists("/part/target"):
-            self.feedback_message = "no part chosen"
-            return Status.FAILURE
-        stands = bool(self.bb.get("/part/target").get("standing"))
-        self.feedback_message = "the part stands on an end" if stands else "the part lies"
-        return Status.SUCCESS if stands == self.wanted else Status.FAILURE
+    def holds(self, target: dict[str, Any]) -> tuple[bool, str]:
+        stands = bool(target.get("standing"))
+        return stands == self.wanted, "the part stands on an end" if stands else "the part lies"
 
 
 @declare(

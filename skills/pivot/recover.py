@@ -50,14 +50,21 @@ class PickFromAbove(HoleGraspSkill):
         part: Part,
         params: PivotParams,
         dev: Devices,
+        center_xy: NDArray[np.float64] | None = None,
     ) -> None:
+        """``center_xy``: where a part found standing was seen (m): nothing is held, so no
+        let-go; without it, the axis is predicted from the pivot's frame as the jaws let go."""
         super().__init__(frame, part, params, dev)
         self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
         self._frame: PivotFrame | None = None  #: read from the source when the skill starts
-        self.predicted_axis: NDArray[np.float64] | None = None  #: from the pivot (m, x y)
+        #: m, x y: from the pivot (set at the let-go), or where the part was seen standing
+        self.predicted_axis: NDArray[np.float64] | None = None
         self.seen: UprightPart | None = None  #: what the camera found
+        let_go = self._let_go_steps()
+        if center_xy is not None:
+            self.predicted_axis, let_go = np.asarray(center_xy, float)[XY].copy(), []
         self.sequence = Sequence(
-            "pick from above", [*self._let_go_steps(), *self._find_steps(), *self._grasp_steps()]
+            self.name, [*let_go, *self._find_steps(), *self._grasp_steps()]
         )
 
     # --- the phases --------------------------------------------------------------------------
@@ -188,23 +195,11 @@ STANDING_SIDE_STEP = math.pi / 4.0
 
 class PickStanding(PickFromAbove):
     """A part found standing, its open end up: the hole grasp from above, without the let-go
-    (nothing is held). Not the paper's maneuver -- the part needs no pivot -- so its picks are
-    counted apart (``standing``). ``center_xy``: where the wide view saw its axis (m); the
+    (nothing is held; pass ``center_xy``, where the wide view saw its axis). Not the paper's
+    maneuver -- the part needs no pivot -- so its picks are counted apart (``standing``). The
     close look over it measures the rim before the fingers go down."""
 
     name = "pick standing"
-
-    def __init__(
-        self,
-        frame: PivotFrame | Callable[[], PivotFrame],
-        part: Part,
-        params: PivotParams,
-        dev: Devices,
-        center_xy: NDArray[np.float64],
-    ) -> None:
-        super().__init__(frame, part, params, dev)
-        self.predicted_axis = np.asarray(center_xy, float)[XY].copy()
-        self.sequence = Sequence("pick standing", [*self._find_steps(), *self._grasp_steps()])
 
 
 def plan_standing_pick(
