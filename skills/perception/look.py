@@ -186,7 +186,8 @@ class LookParams:
     #: pi rad/s and the arm stopped), so the turn's own rate is bounded as well
     turn_rate: float = si(
         1.5, "rad/s", 0.1, 3.0,
-        "of the tool's turn, at most, in the move to the close view when it turns the tool",
+        "of the tool's turn, at most, in every move between views that turns the tool (the "
+        "close view turned to the next skill's yaw; the wide view after a drag)",
     )
     acceleration: float = si(1.0, "m/s^2", 0.05, 3.0, "of the TCP between views")
     #: 1 by default: the pivot's own trials take the view turned (`cell pivot`, `cell compare`:
@@ -360,7 +361,19 @@ class Look:
             return
         p = self.params
         target = camera_over(self._wide[which], p.view_height, self.dev)
-        self.dev.arm.move_to(target, p.speed, p.acceleration)
+        self._move_turning(target, p.speed)
+
+    def _move_turning(self, target: Pose, speed: float) -> None:
+        """A straight move to ``target`` at ``speed``, slower where the tool turns: the path's
+        length over the time the turn needs at ``turn_rate``. After a drag or a roll the tool
+        starts turned to the part; turned back at the look's speed on the way up to the wide
+        view, the wrist ran into the UR5's joint speed limit (the twin's arm faulted), and the
+        wrist's own swing read 91-97 N at the sensor."""
+        p = self.params
+        distance, angle = self.dev.arm.tool_pose().distance(target)
+        if angle > 0.0:
+            speed = min(speed, max(distance, TURN_PATH * angle) * p.turn_rate / angle)
+        self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _beyond_end(self, which: int) -> None:
         """The camera beyond the chosen part's ``which`` end (0: the better place); where the
@@ -379,7 +392,7 @@ class Look:
         if d is None:
             if which == 0:  # decided (or leaning): look again, closer, from above it
                 target = camera_over(self._view_xy, p.second_height, self.dev)
-                self.dev.arm.move_to(target, p.speed, p.acceleration)
+                self._move_turning(target, p.speed)
             return
         xy = end_views(d, p.second_offset, self.roi, self.detections)[which]
         target = camera_over(xy, p.second_height, self.dev)
@@ -387,7 +400,7 @@ class Look:
         # as one against a wall is not; the other end's view may still decide it
         self._out_of_reach = self._reach is not None and self._reach([target]) is not None
         if not self._out_of_reach:
-            self.dev.arm.move_to(target, p.speed, p.acceleration)
+            self._move_turning(target, p.speed)
 
     def _over_part(self) -> None:
         r, p = self.result, self.params
@@ -399,10 +412,7 @@ class Look:
         target = camera_over(xy, p.close_height, self.dev, yaw)
         if yaw != 0.0 and self._reach is not None and self._reach([target]) is not None:
             target, speed = camera_over(xy, p.close_height, self.dev), p.speed
-        distance, angle = self.dev.arm.tool_pose().distance(target)
-        if angle > 0.0:  # the path's length over the time the turn needs at turn_rate
-            speed = min(speed, max(distance, TURN_PATH * angle) * p.turn_rate / angle)
-        self.dev.arm.move_to(target, speed, p.acceleration)
+        self._move_turning(target, speed)
 
     def _refine(self, dets: list[Detection]) -> None:
         """The chosen part's centre and axis as the close view saw them; what the earlier views

@@ -127,3 +127,20 @@ def test_the_turn_path_is_the_arms_own() -> None:
     from drivers.ur5.kinematics import ROTATION_LENGTH
 
     assert TURN_PATH == ROTATION_LENGTH
+
+
+@pytest.mark.parametrize("step", ["camera over the bin", "camera beyond its end"])
+def test_every_view_move_that_turns_the_tool_is_slowed_to_the_turn_rate(step: str) -> None:
+    """After a drag the tool starts turned to the part; the way up to the wide view at the
+    look's speed ran the wrist into the UR5's joint speed limit (the twin's arm faulted)."""
+    dev = _devices()  # the tool starts half a turn from the look's own (pointing up)
+    look = Look(dev, [], (0.3, 0.7, -0.2, 0.2), (0.5, 0.0), (0.3, 0.0))  # type: ignore[arg-type]
+    look.result = _detection(0.3)
+    _step(look, step).start()
+    target = dev.arm.commands[-1][1][-1]  # type: ignore[attr-defined, index]
+    distance, angle = Pose(np.array([0.4, 0.0, 0.3])).distance(target)
+    p = look.params
+    assert angle > math.radians(150.0)
+    path = max(distance, TURN_PATH * angle)
+    assert dev.arm.speeds[-1] == pytest.approx(min(p.speed, path * p.turn_rate / angle))
+    assert dev.arm.speeds[-1] < p.speed  # slowed, not at the look's speed
