@@ -51,7 +51,7 @@ from skills.reposition import RepositionPlan, plan_reposition
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
-from trees.node_type import MOTION, declare
+from trees.node_type import MOTION, Param, declare
 
 Status = common.Status
 
@@ -240,20 +240,33 @@ def location_key(xy: Any) -> tuple[int, int]:
     return (int(round(float(xy[0]) * 100)), int(round(float(xy[1]) * 100)))
 
 
-@declare("plan_pick", "choose the part and its pivot frame", "Action")
+@declare(
+    "plan_pick",
+    "choose the part and its pivot frame",
+    "Action",
+    {
+        "ahead": Param(
+            bool,
+            doc="planned from a look while the machine runs: the next pick takes it "
+            "(planned_ahead) instead of looking again",
+        )
+    },
+)
 class PlanPick(Behaviour):
     """Choose the part to pick from the detections and the pivot frame the skills use.
 
     Skips parts of another kind, parts outside the bin's inside, and parts that already failed
     ``max_failures_per_part`` picks. Nothing left: writes ``/cell/bin_empty`` and fails, which
-    ends the cell's cycles.
+    ends the cell's cycles. With ``ahead``, a plan made marks itself as the next pick's
+    (:class:`PlannedAhead`): nothing touches the bin between a look while the machine runs and
+    the next cycle's pick, so looking again would only cost the arm's time.
     """
 
     moves = False
 
-    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+    def __init__(self, name: str, ctx: CellContext, ahead: bool = False, **params: Any) -> None:
         super().__init__(name=name)
-        self.ctx, self.params = ctx, params
+        self.ctx, self.params, self.ahead = ctx, params, ahead
         self.bb = self.attach_blackboard_client(name=name)
         self.bb.register_key(key="/part/detections", access=common.Access.READ)
         self.bb.register_key(key="/part/seen", access=common.Access.READ)
@@ -270,9 +283,12 @@ class PlanPick(Behaviour):
 
     def initialise(self) -> None:
         self._work, self._pending, self._job = None, None, None
+        self.ctx.planned_ahead = False  # whatever this plan chooses replaces an older one
 
     def terminate(self, new_status: Status) -> None:
         self._work, self._job = None, None  # a worker still running finishes unread
+        if new_status == Status.SUCCESS:
+            self.ctx.planned_ahead = self.ahead
 
     def update(self) -> Status:
         if self._job is not None:
@@ -514,6 +530,34 @@ class PartStanding(_TargetStands):
     wanted = True
 
 
+@declare(
+    "planned_ahead",
+    "condition: a pick was planned while the machine ran and nothing touched the bin since "
+    "(true once)",
+    "Condition",
+)
+class PlannedAhead(Behaviour):
+    """Condition: SUCCESS when ``plan_pick`` with ``ahead`` chose a part since the bin was last
+    touched. It consumes the plan: a pick that fails puts the part back, which moves the bin,
+    so the next attempt must look again."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/part/target", access=common.Access.READ)
+
+    def update(self) -> Status:
+        ready = self.ctx.planned_ahead and self.bb.exists("/part/target")
+        self.ctx.planned_ahead = False
+        self.feedback_message = (
+            "planned while the machine ran" if ready else "no plan from a look while machining"
+        )
+        return Status.SUCCESS if ready else Status.FAILURE
+
+
 @declare("part_lying", "condition: the chosen part lies (the pivot's case)", "Condition")
 class PartLying(_TargetStands):
     wanted = False
@@ -731,9 +775,41 @@ class GoHome(SkillBehaviour):
         return go_home(self.ctx.devices, self.ctx.geometry.home_joints, self.settings())
 
 
-@declare("wait_machining", "start the machine, wait until done", "Action")
+@declare(
+    "start_machining",
+    "start the machine on the fed part, do not wait (wait_machining waits)",
+    "Action",
+)
+class StartMachining(Behaviour):
+    """Start the machine and go on: the arm can look at the bin while it runs, and
+    ``wait_machining`` then waits only for what is left of the machining."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext, **params: Any) -> None:
+        super().__init__(name=name)
+        self.ctx, self.params = ctx, params
+
+    def update(self) -> Status:
+        fault = self.ctx.machine.fault()
+        if fault:
+            self.feedback_message = f"machine fault: {fault}"
+            return Status.FAILURE
+        if not self.ctx.machining_started:
+            self.ctx.machine.start()
+            self.ctx.machining_started = True
+        self.feedback_message = "machine started"
+        return Status.SUCCESS
+
+
+@declare(
+    "wait_machining",
+    "start the machine unless start_machining did, wait until done",
+    "Action",
+)
 class WaitMachining(Behaviour):
-    """Start the machine on the fed part and wait for it (polls once per tick)."""
+    """Wait for the machine on the fed part (polls once per tick); start it first unless
+    ``start_machining`` did."""
 
     moves = False
 
@@ -742,7 +818,9 @@ class WaitMachining(Behaviour):
         self.ctx, self.params = ctx, params
 
     def initialise(self) -> None:
-        self.ctx.machine.start()
+        if not self.ctx.machining_started:
+            self.ctx.machine.start()
+            self.ctx.machining_started = True
         self._t0 = self.ctx.devices.clock.now()
 
     def update(self) -> Status:
@@ -754,10 +832,35 @@ class WaitMachining(Behaviour):
         if self.ctx.machine.busy():
             self.feedback_message = f"machining: {elapsed:.1f} s"
             return Status.RUNNING
-        self.feedback_message = f"machined in {elapsed:.1f} s"
+        self.feedback_message = f"machined ({elapsed:.1f} s waited)"
+        self.ctx.machining_started = False
         self.ctx.slot_state = SlotState.MACHINED
         self.ctx.events.event(EventKind.MACHINED)
         return Status.SUCCESS
+
+
+@declare(
+    "cycle_follows",
+    "condition: another cycle follows this one (workflow.cycles not reached with it)",
+    "Condition",
+)
+class CycleFollows(Behaviour):
+    """Condition: SUCCESS while the cycle running is not the last one asked for. Gates the look
+    ahead: on the last cycle it would only move the arm."""
+
+    moves = False
+
+    def __init__(self, name: str, ctx: CellContext) -> None:
+        super().__init__(name=name)
+        self.ctx = ctx
+        self.bb = self.attach_blackboard_client(name=name)
+        self.bb.register_key(key="/cell/cycles_done", access=common.Access.READ)
+
+    def update(self) -> Status:
+        done = self.bb.get("/cell/cycles_done") if self.bb.exists("/cell/cycles_done") else 0
+        left = self.ctx.limits.cycles - int(done) - 1
+        self.feedback_message = f"{left} cycle(s) after this one"
+        return Status.SUCCESS if left > 0 else Status.FAILURE
 
 
 @declare("slot_holds_part", "condition: the slot holds a part (fed or machined)", "Condition")

@@ -42,7 +42,9 @@ def btcpp_ids() -> dict[str, tuple[str, str]]:
 def _by_id() -> dict[str, str]:
     return {xml_id: kind for kind, (xml_id, _) in btcpp_ids().items()}
 _CATEGORIES = frozenset({"Action", "Condition", "Control", "Decorator"})
-_CPP_TYPES = {int: "int", float: "double", str: "std::string"}
+_CPP_TYPES = {bool: "bool", int: "int", float: "double", str: "std::string"}
+#: the words BehaviorTree.CPP reads as a bool port's values
+_BOOLS = {"true": True, "false": False, "1": True, "0": False}
 TREE_ID = "CellTree"
 
 
@@ -53,6 +55,8 @@ class BtcppError(ConfigError):
 def _text(value: Any) -> str:
     """A port value as BehaviorTree.CPP reads it: whole floats without ``.0``, so ``20`` in the
     YAML stays ``20`` both ways."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, float) and value.is_integer():
         return str(int(value))
     return str(value)
@@ -262,6 +266,10 @@ def _value(el: ET.Element, xml_id: str, key: str, raw: str, p: Param, err: Any) 
             el, f"<{xml_id}> {key}={raw!r}: blackboard references are not supported; give the value"
         )
     kind = _kind_of(p)
+    if kind is bool:
+        if raw.lower() not in _BOOLS:
+            raise err(el, f"<{xml_id}> {key}={raw!r}: expected true or false")
+        return _BOOLS[raw.lower()]
     try:
         value: Any = kind(raw) if kind is not int else int(raw, 10)
     except ValueError:

@@ -134,6 +134,12 @@ class CellContext:
     tick: int = 0
     #: What the machine's slot holds (restored on resume).
     slot_state: SlotState = SlotState.EMPTY
+    #: The machine was started on the part in the slot and has not been waited for yet (a look
+    #: at the bin runs in between: ``start_machining`` then ``wait_machining``).
+    machining_started: bool = False
+    #: ``/part/target`` was planned from a look taken while the machine ran, and nothing has
+    #: touched the bin since: the next pick may use it instead of looking again (once).
+    planned_ahead: bool = False
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

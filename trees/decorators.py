@@ -410,6 +410,38 @@ class StopOnFailure(_LeanDecorator):
         return status
 
 
+@declare(
+    "optional",
+    "a step the cycle can do without: its failure is not the cycle's (succeeds either way)",
+    "Decorator",
+)
+class OptionalStep(_LeanDecorator):
+    """A step that only saves time (a look at the bin while the machine runs): when it fails
+    the cycle goes on and does the work later, where it always did. Its failure still shows in
+    the log and the phases, and a stop the cell was told to make still stops it."""
+
+    def __init__(self, name: str, child: Behaviour, ctx: CellContext) -> None:
+        super().__init__(name=name, child=child)
+        self.ctx = ctx
+
+    @classmethod
+    def from_spec(
+        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
+        defaults: dict[str, float],
+    ) -> OptionalStep:
+        return cls(name, child, ctx)
+
+    def update(self) -> Status:
+        status = self.decorated.status
+        self.feedback_message = self.decorated.feedback_message
+        if status is Status.FAILURE:
+            if self.ctx.events.stopped:
+                return Status.FAILURE
+            self.feedback_message = f"{self.name} skipped: {_deepest_feedback(self.decorated)}"
+            return Status.SUCCESS
+        return status
+
+
 @declare("cycles", "repeats the child until workflow.cycles or the bin is empty", "Decorator")
 class Cycles(_LeanDecorator):
     """Run the workflow's cycle again and again: SUCCESS when the count is reached or the bin is

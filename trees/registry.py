@@ -56,7 +56,7 @@ _in_order()
 
 def _check_value(doc: LinedDocument, path: KeyPath, key: str, value: Any, p: Param) -> Any:
     kinds = p.kind if isinstance(p.kind, tuple) else (p.kind,)
-    ok = isinstance(value, kinds) and not isinstance(value, bool)
+    ok = isinstance(value, kinds) and (bool in kinds or not isinstance(value, bool))
     if float in kinds and isinstance(value, int) and not isinstance(value, bool):
         ok, value = True, float(value)
     if not ok:

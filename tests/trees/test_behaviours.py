@@ -206,6 +206,24 @@ def test_wait_machining_polls_the_machine_on_the_cell_clock(ctx) -> None:
     assert ctx.events.kinds() == ["machined"]
 
 
+def test_a_machine_started_ahead_is_not_started_again_and_the_wait_is_what_is_left(ctx) -> None:
+    start = lv.StartMachining("start", ctx)
+    start.tick_once()
+    assert start.status == Status.SUCCESS and ctx.machine.busy()
+    ctx.devices.clock.t += 4.0  # the arm looks at the bin meanwhile
+    wait = lv.WaitMachining("wait", ctx)
+    wait.tick_once()
+    assert wait.status == Status.RUNNING
+    ctx.devices.clock.t += 1.5  # 5 s after the start, not after the wait's
+    wait.tick_once()
+    assert wait.status == Status.SUCCESS
+    assert ctx.machine.cycles == 1
+    # the next part's wait starts the machine itself
+    wait2 = lv.WaitMachining("wait", ctx)
+    wait2.tick_once()
+    assert wait2.status == Status.RUNNING and ctx.machine.cycles == 2
+
+
 def test_plan_pick_on_an_empty_bin_fails_and_marks_it_empty(ctx) -> None:
     node = lv.PlanPick("plan", ctx)
     client = py_trees.blackboard.Client(name="test")
@@ -334,3 +352,16 @@ def test_a_motion_waits_for_a_spike_to_pass_before_it_starts_and_trips_if_it_sta
     stuck.tick_once()
     assert stuck.status == Status.FAILURE and "force-torque abort" in stuck.feedback_message
     assert not ctx.devices.arm.commands
+
+
+def test_the_look_ahead_gate_holds_on_every_cycle_but_the_last(ctx) -> None:
+    ctx.limits.cycles = 3
+    board = py_trees.blackboard.Client(name="cycles")
+    board.register_key("/cell/cycles_done", access=py_trees.common.Access.WRITE)
+    outcomes = []
+    for done in range(3):
+        board.set("/cell/cycles_done", done)
+        node = lv.CycleFollows("follows", ctx)
+        node.tick_once()
+        outcomes.append(node.status)
+    assert outcomes == [Status.SUCCESS, Status.SUCCESS, Status.FAILURE]

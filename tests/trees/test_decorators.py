@@ -17,7 +17,16 @@ from py_trees.common import Access, ParallelPolicy, Status
 from drivers.health import DeviceError
 from tests.trees.helpers import fresh_ctx
 from trees import behaviours as lv
-from trees.decorators import WRENCH_KEY, Cycles, FTGuard, FTSampler, Retry, StopOnFailure, Timeout
+from trees.decorators import (
+    WRENCH_KEY,
+    Cycles,
+    FTGuard,
+    FTSampler,
+    OptionalStep,
+    Retry,
+    StopOnFailure,
+    Timeout,
+)
 
 
 @pytest.fixture
@@ -280,6 +289,23 @@ def test_stop_on_failure_halted_mid_motion_stops_the_arm_and_not_the_cell(ctx) -
     halt_by_parent(node)
     assert leaf.status == Status.INVALID and ctx.devices.arm.stops == 1
     assert ctx.events.stopped is None
+
+
+# ------------------------------------------------------------------------------------ Optional
+def test_an_optional_step_that_fails_lets_the_cycle_go_on_and_says_it_was_skipped(ctx) -> None:
+    child = Scripted("look ahead", Status.RUNNING, Status.FAILURE, message="nothing seen")
+    node = OptionalStep("while the machine runs", child, ctx)
+    assert tick(node) == Status.RUNNING
+    assert tick(node) == Status.SUCCESS
+    assert "skipped" in node.feedback_message and "nothing seen" in node.feedback_message
+    assert ctx.events.stopped is None
+
+
+def test_an_optional_step_does_not_hide_a_stop_the_cell_was_told_to_make(ctx) -> None:
+    inner = StopOnFailure("s", Scripted("child", Status.FAILURE), ctx, reason="part lost")
+    node = OptionalStep("opt", inner, ctx)
+    assert tick(node) == Status.FAILURE
+    assert ctx.events.stopped is not None
 
 
 # ------------------------------------------------------------------------------------ Cycles

@@ -758,3 +758,37 @@ def test_grasp_in_straight_reach_moves_straight_away(ctx) -> None:
     node = lv.Grasp("grasp", ctx)
     kinds = _grasp_commands(ctx, node)
     assert kinds and "joints" not in kinds
+
+
+# ------------------------------------------------------------------ the look while machining
+def test_a_plan_made_ahead_is_taken_once_and_a_plan_made_now_is_not_ahead(ctx) -> None:
+    bb = blackboard()
+    bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
+    ahead = lv.PlanPick("plan ahead", ctx, ahead=True)
+    settle(ahead)
+    assert ahead.status == Status.SUCCESS
+    taken = lv.PlannedAhead("planned ahead", ctx)
+    taken.tick_once()
+    assert taken.status == Status.SUCCESS
+    # a failed pick puts the part back: the bin moved, the next attempt must look again
+    again = lv.PlannedAhead("planned ahead again", ctx)
+    again.tick_once()
+    assert again.status == Status.FAILURE
+    settle(ahead)  # planned ahead once more, then a plan made now replaces it
+    now = lv.PlanPick("plan", ctx)
+    settle(now)
+    assert now.status == Status.SUCCESS
+    third = lv.PlannedAhead("planned ahead third", ctx)
+    third.tick_once()
+    assert third.status == Status.FAILURE
+
+
+def test_a_look_ahead_that_finds_nothing_to_pick_leaves_no_plan_to_take(ctx) -> None:
+    bb = blackboard()
+    bb.set("/part/detections", [])
+    ahead = lv.PlanPick("plan ahead", ctx, ahead=True)
+    settle(ahead)
+    assert ahead.status == Status.FAILURE
+    taken = lv.PlannedAhead("planned ahead", ctx)
+    taken.tick_once()
+    assert taken.status == Status.FAILURE
