@@ -47,14 +47,7 @@ from drivers.pose import Pose
 from skills.axes import FZ, XY, Z
 from skills.force import world_force
 from skills.frames import frame_step
-from skills.motion import (
-    Failed,
-    Guard,
-    GuardedMotion,
-    Sequence,
-    arm_failure,
-    turn_bounded_speed,
-)
+from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure
 from skills.params import guard_field, si
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import hole_grasp_rotation, pinched_span
@@ -136,17 +129,6 @@ class SlotParams:
         0.20, "m", 0.05, 1.0, "of the camera above the rim when looking (pick)"
     )
     view_search: float = si(0.03, "m", 0.0, 0.2, "the part may stand off the slot's centre")
-    #: The hand is empty on the way to the view, and the way is long when the arm comes from
-    #: home after a look at the bin taken while the machine ran: at ``travel_speed`` (chosen
-    #: for a part in the hand) the way cost more than the look saved. The turn is bounded by
-    #: ``turn_rate`` as the camera's moves are (a turn at speed ran into the UR5's joint speed
-    #: limit).
-    view_speed: float = si(
-        0.5, "m/s", 0.01, 1.0, "of the TCP to the camera's view of the slot, the hand empty (pick)"
-    )
-    turn_rate: float = si(
-        1.5, "rad/s", 0.1, 3.0, "of the tool's turn, at most, on the way to that view (pick)"
-    )
     use_camera: bool = True  #: PickFromSlot finds the rim with the camera (if there is one)
     #: A part that came out with the gripper loses nothing, one left in the slot all of its
     #: weight; half tells them apart with the FT300's noise far below a part's weight.
@@ -666,11 +648,9 @@ class PickFromSlot(_SlotSkill):
         target = np.array([*self.slot_xy, self._rim_z + p.view_height]) - self._rotation @ cam
         pose = Pose(target, self._rotation)
         arm = self.dev.arm
-        start = arm.tool_pose()
-        path = travel_path(start, pose, p.min_radius)
-        length = sum(a.distance(b)[0] for a, b in zip([start, *path[:-1]], path, strict=True))
-        speed = turn_bounded_speed(length, start.distance(pose)[1], p.view_speed, p.turn_rate)
-        arm.move_path(path, speed, p.acceleration)
+        arm.move_path(
+            travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed, p.acceleration
+        )
 
     def _locate(self, frame: Frame, world_T_camera: Pose) -> UprightPart | None:
         camera = self.dev.camera

@@ -940,7 +940,30 @@ class FeedSlot(SkillBehaviour):
 
     def on_success(self) -> None:
         self.ctx.slot_state = SlotState.FED
+        self.ctx.feed_end_joints = np.asarray(self.ctx.devices.arm.joint_positions(), float)
         self.ctx.events.event(EventKind.FED)
+
+
+@declare(
+    "back_over_slot",
+    "joint move back to where feed_slot left the arm (after a look while the machine runs)",
+    "Action",
+    MOTION,
+)
+class BackOverSlot(SkillBehaviour):
+    """Return over the slot by a joint move to the joints the feed ended at, so the pick from
+    the slot starts where it always does. Why not a straight move: from the look over the bin
+    to the slot's view the tool turns by about 100 deg, and straight moves there ran the twin's
+    arm into its joint speed limit (read as 90-95 N at the wrist as it stopped); a joint move
+    has no such pose on its way, and its joints are known, so no inverse kinematics."""
+
+    section = "go_home"
+
+    def make_skill(self) -> Skill:
+        joints = self.ctx.feed_end_joints
+        if joints is None:
+            raise SetupError("no pose over the slot recorded (feed_slot has not run)")
+        return go_home(self.ctx.devices, joints, self.settings())
 
 
 @declare("pick_from_slot", "the same hole grasp on the part in the slot", "Action", MOTION)

@@ -140,6 +140,10 @@ class CellContext:
     #: ``/part/target`` was planned from a look taken while the machine ran, and nothing has
     #: touched the bin since: the next pick may use it instead of looking again (once).
     planned_ahead: bool = False
+    #: The arm's joints (rad) where ``feed_slot`` left it, over the slot: a look while the
+    #: machine runs returns there by a joint move, and the pick from the slot starts where it
+    #: always does.
+    feed_end_joints: Any = None
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

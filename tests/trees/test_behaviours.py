@@ -365,3 +365,16 @@ def test_the_look_ahead_gate_holds_on_every_cycle_but_the_last(ctx) -> None:
         node.tick_once()
         outcomes.append(node.status)
     assert outcomes == [Status.SUCCESS, Status.SUCCESS, Status.FAILURE]
+
+
+def test_back_over_slot_is_a_joint_move_to_where_the_feed_ended_and_needs_that_pose(ctx) -> None:
+    missing = lv.BackOverSlot("back", ctx)
+    missing.tick_once()
+    assert missing.status == Status.FAILURE and "cannot start" in missing.feedback_message
+    over_slot = np.array([1.2, -1.1, 1.4, -1.8, -1.6, 0.3])
+    ctx.feed_end_joints = over_slot
+    node = lv.BackOverSlot("back", ctx)
+    statuses = tick_tree(node, ctx, ticks=10)
+    assert statuses[-1] == Status.SUCCESS
+    assert ctx.devices.arm.commands[-1][0] == "joints"
+    assert np.allclose(ctx.devices.arm.commands[-1][1], over_slot)

@@ -120,7 +120,7 @@ def test_the_shipped_tree_has_the_limits_its_yaml_states(ctx) -> None:
     assert guards["reposition"] == (60.0, 8.0, 30.0)
     assert guards["look again"] == (80.0, 8.0, 20.0)
     assert guards["look ahead"] == (80.0, 8.0, 20.0)  # while the machine runs
-    assert guards["home to look"] == guards["home to the slot"] == (80.0, 8.0, 20.0)
+    assert guards["home to look"] == guards["back over slot"] == (80.0, 8.0, 20.0)
     # every motion leaf in the shipped tree is guarded, and nothing else is
     moving = [n for n in root.iterate() if getattr(type(n), "moves", False)]
     assert guards["pick standing"] == (60.0, 8.0, 40.0)
