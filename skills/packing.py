@@ -141,6 +141,24 @@ class PackParams:
     weight_check: float = si(
         0.5, "1", 0.0, 1.0, "fraction of the part's weight the wrench must lose; 0: no check"
     )
+    #: The way up gives way in the plane only while a fingertip can touch the part: in force
+    #: mode the open hand rises at the speed its small press gives (the twin's admittance:
+    #: 15 mm/s at 3 N), and the whole 40 mm took 2.7 s of each packing. Above the rim by this
+    #: much, the rest of the way up is a position move.
+    rim_margin: float = si(
+        0.003, "m", 0.0, 0.05,
+        "the open fingertips rise this far above the part's rim, giving way, before the rest "
+        "of the way up is a position move",
+    )
+    #: A part that came up with the open hand hangs on the finger in its hole (the twin: the
+    #: inner pad wedged, the part lifted 10 mm with it; seed 20502's first packing): closing
+    #: the jaws takes it in the hole grasp again, and the tree's retry packs it once more
+    #: instead of stopping the cell with a part dangling from one finger.
+    regrip_force: float = si(
+        20.0, "N", 0.1, 235.0,
+        "per finger, taking a part that came up with the open hand in the hole grasp again",
+        actuator="grip_force",
+    )
     guard: Guard = field(default_factory=Guard)
     push_guard: Guard = guard_field(30.0, 15.0, "every push and the descent into the box")
 
@@ -186,6 +204,7 @@ class PackInBox(SequenceSkill):
         self._jaws_still = Settled(dev.gripper, dev.clock, p.settle)  #: the let go's end
         self._open_from = 0.0  #: m, the jaws' reported opening when the let go began
         self._let_go_from = Pose()  #: the TCP's pose when the let go began
+        self._came_up: str | None = None  #: why the weight check failed (None: it passed)
         self._make_contact_moves()
         self.sequence = Sequence(
             "pack in box",
@@ -239,7 +258,8 @@ class PackInBox(SequenceSkill):
         # whole packed row dragged 6 mm off its wall. Giving way, the corner slides off the wall.
         self.withdraw = ForcePush(
             "withdraw up", dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
-            p.grip_depth + p.clear_height, settle=p.contact_settle, still_speed=p.still_speed,
+            p.grip_depth + min(p.rim_margin, p.clear_height), settle=p.contact_settle,
+            still_speed=p.still_speed,
             free=(0, 1), reference=self._empty_hand, free_speed=p.release_speed,
         )
 
@@ -301,8 +321,10 @@ class PackInBox(SequenceSkill):
             dev.move("off the wall", g, self._off_the_wall),
             self.withdraw.motion,
             check("withdrawn", dev, g, self._withdrawn),
+            dev.move("up clear", g, self._up_clear),
             self.reference.hold("settle", g, p.settle),
-            check("part left in the box", dev, g, self._let_go),
+            GuardedMotion("part left in the box", self._grip_if_lifted, self._gripped_again,
+                          dev.arm, dev.ft, dev.clock, g, self._came_up_reason),
         ]
 
     # --- where the part goes -----------------------------------------------------------------
@@ -391,6 +413,12 @@ class PackInBox(SequenceSkill):
         dx, dy = -p.release_clearance * self._x[XY]
         self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
+    def _up_clear(self) -> None:
+        """The rest of the way up to ``clear_height`` above the rim, the fingertips above it."""
+        p = self.params
+        rest = max(0.0, p.clear_height - p.rim_margin)
+        self.dev.arm.move_to(self._shifted(0.0, 0.0, rest), p.approach_speed, p.acceleration)
+
     def _empty_hand(self) -> NDArray[np.float64] | None:
         """The force on the empty hand (N, base frame): the hanging part's reading less its
         weight, so the way up presses ``contact_force`` whatever the part weighs. None before
@@ -406,6 +434,23 @@ class PackInBox(SequenceSkill):
                 f"{1e3 * self.withdraw.travelled:.0f} mm above where it let go"
             )
         return None
+
+    def _grip_if_lifted(self) -> None:
+        """The weight check; a part that came up is taken in the hole grasp again (see
+        ``regrip_force``), so it is held, not dangling, when the step fails."""
+        self._came_up = self._let_go()
+        if self._came_up is not None:
+            self._jaws_still.reset()
+            self.dev.gripper.close(self.params.regrip_force, self.params.release_speed)
+
+    def _gripped_again(self) -> bool:
+        return self._came_up is None  # else the step ends in _came_up_reason, jaws closed
+
+    def _came_up_reason(self) -> str | None:
+        if self._came_up is None or not self._jaws_still():
+            return None
+        held = "gripped again" if self.dev.gripper.object_detected() else "the jaws closed empty"
+        return f"{self._came_up}; {held}"
 
     def _let_go(self) -> str | None:
         p, part = self.params, self.part

@@ -242,12 +242,18 @@ def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall() -> None
     # force mode (up, giving way in the plane)
     later = d["arm"].commands[seen["commands"] - 1 :]
     paths = [c for c in later if c[0] == "path"]
-    relax, off = paths
+    relax, off, up = paths
     assert relax[1][-1].position == pytest.approx(before.position)
     back = off[1][-1].position - after.position
     assert back == pytest.approx(-pack.params.release_clearance * x, abs=1e-9)
-    assert later[-1][0] == "force" and later[-1][1][2] > 0.0
-    assert d["arm"].pose.position[2] > off[1][-1].position[2] + 0.03
+    # up in force mode until the fingertips clear the rim, then the rest by a position move
+    forces = [i for i, c in enumerate(later) if c[0] == "force"]
+    assert forces and later[forces[-1]][1][2] > 0.0
+    assert next(i for i, c in enumerate(later) if c is up) > forces[-1]
+    p = pack.params
+    rise = up[1][-1].position - off[1][-1].position
+    assert rise[:2] == pytest.approx(0.0, abs=1e-6)
+    assert rise[2] == pytest.approx(p.grip_depth + p.clear_height, abs=2e-3)
 
 
 def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
@@ -386,3 +392,41 @@ def test_packing_withdraws_measured_from_the_empty_hand_read_before_the_let_go()
     assert wrench[2] == pytest.approx(0.4 + pack.params.contact_force)
     assert limits[0] == limits[1] == pytest.approx(pack.params.release_speed)
     assert limits[2] == pytest.approx(pack.params.approach_speed)
+
+
+def test_a_part_that_came_up_with_the_open_hand_is_gripped_again_and_the_packing_fails() -> None:
+    """The weight check after the withdrawal still reads the part: it hangs on the finger in
+    its hole. The jaws close on it again (so the retry can pack it once more, and no part
+    dangles from one finger) and the step fails with the check's code."""
+    from skills.slot import GRAVITY
+    from skills.status import Failure
+
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+    hanging = (0.0, 0.0, -PART.mass * GRAVITY)
+
+    def watch(step: str) -> None:
+        if step in ("hold still", "read the hanging part", "settle", "part left in the box"):
+            push_back(d, hanging)  # before and, wrongly, after the let go
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.FAILURE and result.code is Failure.CHECK_FAILED
+    assert "came up with the gripper" in result.message and "gripped again" in result.message
+    assert d["gripper"].closed_on is not None  # the jaws closed on the part again
+    assert d["gripper"].width() == pytest.approx(d["gripper"].object_width)
+
+
+def test_a_part_left_in_the_box_is_not_gripped_again() -> None:
+    from skills.slot import GRAVITY
+
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+    hanging = (0.0, 0.0, -PART.mass * GRAVITY)
+
+    def watch(step: str) -> None:
+        if step in ("hold still", "read the hanging part"):
+            push_back(d, hanging)
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.SUCCESS, result.message
+    assert d["gripper"].width() > d["gripper"].object_width + 0.004  # left open
