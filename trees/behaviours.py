@@ -955,14 +955,15 @@ class BackOverSlot(SkillBehaviour):
     the slot starts where it always does. Why not a straight move: from the look over the bin
     to the slot's view the tool turns by about 100 deg, and straight moves there ran the twin's
     arm into its joint speed limit (read as 90-95 N at the wrist as it stopped); a joint move
-    has no such pose on its way, and its joints are known, so no inverse kinematics."""
+    has no such pose on its way, and its joints are known, so no inverse kinematics. A cell
+    resumed with a part in the slot has no such joints: it goes home instead."""
 
     section = "go_home"
 
     def make_skill(self) -> Skill:
         joints = self.ctx.feed_end_joints
-        if joints is None:
-            raise SetupError("no pose over the slot recorded (feed_slot has not run)")
+        if joints is None:  # a resumed cell: no feed in this run; home, as a resume starts
+            joints = self.ctx.geometry.home_joints
         return go_home(self.ctx.devices, joints, self.settings())
 
 
