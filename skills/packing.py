@@ -174,7 +174,9 @@ class PackInBox(SequenceSkill):
 
     Steps: over the place, read the hanging part; down into the box and onto its floor; push
     ``+x``, ``+y`` and ``+x`` again; let go with the finger in the hole held still, move the open
-    hand off the wall, withdraw up, check the weight stayed in the box.
+    hand off the wall, withdraw up (giving way until the fingertips are out of the hole, then a
+    position move), check the weight stayed in the box; a part that came up with the hand is
+    gripped again and the step fails, so a retry can pack it once more.
     """
 
     def __init__(
@@ -205,6 +207,7 @@ class PackInBox(SequenceSkill):
         self._open_from = 0.0  #: m, the jaws' reported opening when the let go began
         self._let_go_from = Pose()  #: the TCP's pose when the let go began
         self._came_up: str | None = None  #: why the weight check failed (None: it passed)
+        self._closing_seen = False  #: the jaws were seen moving since the re-grip began
         self._make_contact_moves()
         self.sequence = Sequence(
             "pack in box",
@@ -250,15 +253,17 @@ class PackInBox(SequenceSkill):
         self.push_x_again = push(
             "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,), lean_y
         )
-        # The open hand comes up in force mode, giving way in the plane to anything it touches,
-        # with nothing pressed beyond the empty hand's reading (:meth:`_empty_hand`).
+        # The open hand comes up in force mode until its fingertips are above the part's rim,
+        # giving way in the plane to anything it touches, with nothing pressed beyond the empty
+        # hand's reading (:meth:`_empty_hand`); the rest of the way up is a position move.
         # A position move up dragged the part sideways by the finger still touching the hole's
         # wall: a flat pad in a round (or 12-sided) hole touches it with a corner once the part
         # has turned a little in the grasp, and the twin measured 22-25 N on that corner and a
         # whole packed row dragged 6 mm off its wall. Giving way, the corner slides off the wall.
         self.withdraw = ForcePush(
             "withdraw up", dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
-            p.grip_depth + min(p.rim_margin, p.clear_height), settle=p.contact_settle,
+            lambda: self._tip_depth() + min(p.rim_margin, p.clear_height),
+            settle=p.contact_settle,
             still_speed=p.still_speed,
             free=(0, 1), reference=self._empty_hand, free_speed=p.release_speed,
         )
@@ -413,10 +418,25 @@ class PackInBox(SequenceSkill):
         dx, dy = -p.release_clearance * self._x[XY]
         self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
 
-    def _up_clear(self) -> None:
-        """The rest of the way up to ``clear_height`` above the rim, the fingertips above it."""
+    def _tip_depth(self) -> float:
+        """How far (m) the fingertips reach below the part's rim, measured: the TCP's height
+        when the part stood on the floor (``contacts["floor"]``) against the part's length.
+        The grasp may have slipped from the nominal ``grip_depth``; the force mode's way up
+        must last until the tips are out of the hole, wherever they are."""
         p = self.params
-        rest = max(0.0, p.clear_height - p.rim_margin)
+        floor = self.contacts.get("floor")
+        if floor is None:
+            return p.grip_depth
+        tips = float(floor.position[Z]) - p.tip_offset
+        return max(p.grip_depth, self.floor_z + self.part.length - tips)
+
+    def _up_clear(self) -> None:
+        """The rest of the way up: the fingertips ``clear_height`` above the rim (nothing
+        there to touch: the packed parts are no higher than the part just let go)."""
+        p = self.params
+        tool = self.dev.arm.tool_pose()
+        top = self.floor_z + self.part.length + p.clear_height + p.tip_offset
+        rest = max(0.0, top - float(tool.position[Z]))
         self.dev.arm.move_to(self._shifted(0.0, 0.0, rest), p.approach_speed, p.acceleration)
 
     def _empty_hand(self) -> NDArray[np.float64] | None:
@@ -439,15 +459,22 @@ class PackInBox(SequenceSkill):
         """The weight check; a part that came up is taken in the hole grasp again (see
         ``regrip_force``), so it is held, not dangling, when the step fails."""
         self._came_up = self._let_go()
+        self._closing_seen = False
         if self._came_up is not None:
             self._jaws_still.reset()
+            # as slowly as the jaws let go: the pads meet the part's wall gently
             self.dev.gripper.close(self.params.regrip_force, self.params.release_speed)
 
     def _gripped_again(self) -> bool:
         return self._came_up is None  # else the step ends in _came_up_reason, jaws closed
 
     def _came_up_reason(self) -> str | None:
-        if self._came_up is None or not self._jaws_still():
+        if self._came_up is None:
+            return None
+        gripper = self.dev.gripper
+        # a gripper that starts late is still before it moves: wait until it moved or holds
+        self._closing_seen = self._closing_seen or gripper.moving()
+        if not self._jaws_still() or not (self._closing_seen or gripper.object_detected()):
             return None
         held = "gripped again" if self.dev.gripper.object_detected() else "the jaws closed empty"
         return f"{self._came_up}; {held}"

@@ -940,6 +940,7 @@ class FeedSlot(SkillBehaviour):
 
     def on_success(self) -> None:
         self.ctx.slot_state = SlotState.FED
+        self.ctx.machining_started = False  # a part just fed: its machining has not begun
         self.ctx.feed_end_joints = np.asarray(self.ctx.devices.arm.joint_positions(), float)
         self.ctx.events.event(EventKind.FED)
 
@@ -1017,6 +1018,10 @@ class PackInBox(SkillBehaviour):
 
 __all__ = [
     "Align",
+    "BackOverSlot",
+    "CycleFollows",
+    "PlannedAhead",
+    "StartMachining",
     "PickFromAbove",
     "FeedSlot",
     "GoHome",

@@ -14,6 +14,7 @@ from cell.catalogue import load_catalogue
 from drivers.arm import MotionState
 from drivers.devices import Devices
 from drivers.layout import tray_places
+from drivers.pose import Pose
 from skills.packing import PackInBox
 from skills.slot import FeedSlot, PickFromSlot, travel_path
 from skills.status import Status
@@ -252,8 +253,10 @@ def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall() -> None
     assert next(i for i, c in enumerate(later) if c is up) > forces[-1]
     p = pack.params
     rise = up[1][-1].position - off[1][-1].position
-    assert rise[:2] == pytest.approx(0.0, abs=1e-6)
-    assert rise[2] == pytest.approx(p.grip_depth + p.clear_height, abs=2e-3)
+    assert rise[:2] == pytest.approx(0.0, abs=1e-6) and rise[2] > 0.0
+    # the fingertips end clear_height above the part's rim
+    tips = up[1][-1].position[2] - p.tip_offset
+    assert tips == pytest.approx(PLACE[2] + PART.length + p.clear_height, abs=1e-9)
 
 
 def test_pack_in_box_fails_when_nothing_stops_the_push() -> None:
@@ -430,3 +433,35 @@ def test_a_part_left_in_the_box_is_not_gripped_again() -> None:
     result, _ = run_pack(pack, d, watch)
     assert result.status is Status.SUCCESS, result.message
     assert d["gripper"].width() > d["gripper"].object_width + 0.004  # left open
+
+
+def test_the_way_up_gives_way_until_the_fingertips_measured_in_the_hole_are_out() -> None:
+    """The force mode's way up lasts as deep as the tips were found to reach below the rim when
+    the part stood on the floor (a grasp that slipped deeper), not the nominal depth only."""
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    p = pack.params
+    assert pack._tip_depth() == pytest.approx(p.grip_depth)  # nothing measured yet
+    deeper = 0.006
+    tcp_z = PLACE[2] + PART.length - p.grip_depth - deeper + p.tip_offset
+    pack.contacts["floor"] = Pose(np.array([0.16, -0.41, tcp_z]), np.eye(3))
+    assert pack._tip_depth() == pytest.approx(p.grip_depth + deeper)
+    pack.contacts["floor"] = Pose(np.array([0.16, -0.41, tcp_z + 2 * deeper]), np.eye(3))
+    assert pack._tip_depth() == pytest.approx(p.grip_depth)  # never less than the nominal
+
+
+def test_a_part_that_came_up_but_the_jaws_close_on_nothing_says_so() -> None:
+    from skills.slot import GRAVITY
+    from skills.status import Failure
+
+    d = devices(object_width=None)  # the part fell off the finger meanwhile
+    pack = PackInBox(PLACE, PART, dev(d))
+    hanging = (0.0, 0.0, -PART.mass * GRAVITY)
+
+    def watch(step: str) -> None:
+        if step in ("hold still", "read the hanging part", "settle", "part left in the box"):
+            push_back(d, hanging)
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.FAILURE and result.code is Failure.CHECK_FAILED
+    assert "closed empty" in result.message
