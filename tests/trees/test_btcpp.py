@@ -178,6 +178,7 @@ def test_what_groot2_writes_is_read_subtrees_inlined() -> None:
         (('BTCPP_format="4"', 'BTCPP_format="3"'), 2, "BTCPP_format is '3'"),
         (('main_tree_to_execute="Main"', 'main_tree_to_execute="Nope"'), 2, "'Nope'"),
         (("</Fallback>", "</Fallbak>"), 15, "not well-formed"),
+        (("<PlanPick/>", '<PlanPick ahead="maybe"/>'), 6, "expected true or false"),
     ],
 )
 def test_refusals_name_the_line(change: tuple[str, str], line: int, needle: str) -> None:

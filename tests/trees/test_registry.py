@@ -379,3 +379,10 @@ def test_the_shipped_trees_limits_are_listed_for_cell_tree(ctx) -> None:
     lines = limits_table(root)
     assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 30 N*m, 20 s" in lines
     assert len(lines) == 17  # every guarded motion leaf, once
+
+
+@pytest.mark.parametrize("value", ["1", "maybe", "0.5"])
+def test_a_bool_parameter_takes_true_or_false_only(ctx, value: str) -> None:
+    assert isinstance(build("type: plan_pick\nahead: true\n", ctx), Behaviour)
+    err = error(f"type: plan_pick\nahead: {value}\n", ctx)
+    assert err.key.endswith("ahead") and "expected bool" in str(err)
