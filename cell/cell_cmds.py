@@ -625,15 +625,16 @@ def left_reasons(
 
     if stop_reason:
         return unnamed(left_in_bin or 0, f"left when the cell stopped: {stop_reason}", [])
-    ends = [e for e in events if e["kind"] == EventKind.BIN_EMPTY]
-    last = events[-1] if events else None
-    ended_empty = bool(ends) and last is not None and last["kind"] in (
-        EventKind.BIN_EMPTY,
-        EventKind.CYCLE_FAILED,
-    ) and any(e is ends[-1] for e in events[-2:])
+    ends = [i for i, e in enumerate(events) if e["kind"] == EventKind.BIN_EMPTY]
+    # The run ended on an empty bin when nothing was picked from the bin after the last time
+    # the cell found it empty: that look may be the one taken while the machine ran, with the
+    # part in the slot still to be machined, picked and packed after it.
+    ended_empty = bool(ends) and not any(
+        e["kind"] == EventKind.PICKED for e in events[ends[-1] + 1 :]
+    )
     if not ended_empty:
         return unnamed(left_in_bin or 0, "not tried: the run ended first", [])
-    seen: list[dict[str, Any]] = list(ends[-1].get("left", []))
+    seen: list[dict[str, Any]] = list(events[ends[-1]].get("left", []))
     if left_in_bin is not None and left_in_bin > len(seen):
         seen += unnamed(left_in_bin - len(seen), "not found by perception", seen)
     return seen

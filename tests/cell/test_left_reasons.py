@@ -20,7 +20,9 @@ def test_a_run_that_found_nothing_to_pick_names_what_it_passed_over_and_what_it_
 
 
 def test_a_run_that_ended_on_its_cycles_left_the_rest_untried() -> None:
-    events = [_e("bin_empty", left=[]), _e("cycle_failed"), _e("packed"), _e("cycle_done")]
+    events = [
+        _e("bin_empty", left=[]), _e("cycle_failed"), _e("picked"), _e("packed"), _e("cycle_done")
+    ]
     untried = {"part": "a part", "reason": "not tried: the run ended first"}
     assert left_reasons(events, 2) == [untried, untried]
     assert left_reasons(events, 0) == []
@@ -50,3 +52,16 @@ def test_a_stopped_cell_names_each_part_the_twin_holds_in_the_bin() -> None:
     twin = [{"part": "bushing at (0.300, -0.100) m", "at": [0.3, -0.1], "lies": "free"}]
     out = left_reasons([_e("cycle_failed")], 1, "3 cycles in a row failed", twin)
     assert out == [{**twin[0], "reason": "left when the cell stopped: 3 cycles in a row failed"}]
+
+
+def test_a_bin_found_empty_by_the_look_while_the_machine_ran_ends_the_run_on_it() -> None:
+    """The look taken while the machine runs finds nothing to pick; the part in the slot is
+    then picked from it and packed, and the run ends: the bin was empty, not the run short."""
+    passed = {"part": "bushing at (0.400, 0.100) m", "reason": "2 picks failed"}
+    events = [
+        _e("picked"), _e("fed"), _e("bin_empty", left=[passed]), _e("machined"),
+        _e("picked_from_slot"), _e("packed"), _e("cycle_done"),
+    ]
+    assert left_reasons(events, 2) == [
+        passed, {"part": "a part", "reason": "not found by perception"}
+    ]
