@@ -410,15 +410,8 @@ class StopOnFailure(_LeanDecorator):
         return status
 
 
-@declare(
-    "optional",
-    "a step the cycle can do without: its failure is not the cycle's (succeeds either way)",
-    "Decorator",
-)
-class OptionalStep(_LeanDecorator):
-    """A step that only saves time (a look at the bin while the machine runs): when it fails
-    the cycle goes on and does the work later, where it always did. Its failure still shows in
-    the log and the phases, and a stop the cell was told to make still stops it."""
+class _CellDecorator(_LeanDecorator):
+    """A decorator built from its child and the cell's context alone (no parameters)."""
 
     def __init__(self, name: str, child: Behaviour, ctx: CellContext) -> None:
         super().__init__(name=name, child=child)
@@ -428,8 +421,19 @@ class OptionalStep(_LeanDecorator):
     def from_spec(
         cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
         defaults: dict[str, float],
-    ) -> OptionalStep:
+    ) -> _CellDecorator:
         return cls(name, child, ctx)
+
+
+@declare(
+    "optional",
+    "a step the cycle can do without: its failure is not the cycle's (succeeds either way)",
+    "Decorator",
+)
+class OptionalStep(_CellDecorator):
+    """A step that only saves time (a look at the bin while the machine runs): when it fails
+    the cycle goes on and does the work later, where it always did. Its failure still shows in
+    the log and the phases, and a stop the cell was told to make still stops it."""
 
     def update(self) -> Status:
         status = self.decorated.status
@@ -443,26 +447,18 @@ class OptionalStep(_LeanDecorator):
 
 
 @declare("cycles", "repeats the child until workflow.cycles or the bin is empty", "Decorator")
-class Cycles(_LeanDecorator):
+class Cycles(_CellDecorator):
     """Run the workflow's cycle again and again: SUCCESS when the count is reached or the bin is
     empty; FAILURE when the cell was told to stop or too many cycles in a row failed."""
 
     def __init__(self, name: str, child: Behaviour, ctx: CellContext) -> None:
-        super().__init__(name=name, child=child)
-        self.ctx = ctx
+        super().__init__(name, child, ctx)
         self.done = 0
         self.failed_in_a_row = 0
         self.bb = self.attach_blackboard_client(name=name)
         self._cycles_done = _BoardKey(self.bb, "/cell/cycles_done", common.Access.WRITE)
         self._bin_empty = _BoardKey(self.bb, "/cell/bin_empty", common.Access.READ)
         self._cycles_done.set(0)
-
-    @classmethod
-    def from_spec(
-        cls, name: str, child: Behaviour, ctx: CellContext, params: dict[str, Any],
-        defaults: dict[str, float],
-    ) -> Cycles:
-        return cls(name, child, ctx)
 
     def initialise(self) -> None:
         self.done = self.ctx.limits.cycles_done  # a resumed cell goes on counting

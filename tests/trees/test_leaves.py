@@ -761,26 +761,27 @@ def test_grasp_in_straight_reach_moves_straight_away(ctx) -> None:
 
 
 # ------------------------------------------------------------------ the look while machining
+def taken(ctx, name: str) -> Status:  # type: ignore[no-untyped-def]
+    """What the next pick's ``planned_ahead`` condition says now."""
+    node = lv.PlannedAhead(name, ctx)
+    node.tick_once()
+    return node.status
+
+
 def test_a_plan_made_ahead_is_taken_once_and_a_plan_made_now_is_not_ahead(ctx) -> None:
     bb = blackboard()
     bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
     ahead = lv.PlanPick("plan ahead", ctx, ahead=True)
     settle(ahead)
     assert ahead.status == Status.SUCCESS
-    taken = lv.PlannedAhead("planned ahead", ctx)
-    taken.tick_once()
-    assert taken.status == Status.SUCCESS
+    assert taken(ctx, "planned ahead") == Status.SUCCESS
     # a failed pick puts the part back: the bin moved, the next attempt must look again
-    again = lv.PlannedAhead("planned ahead again", ctx)
-    again.tick_once()
-    assert again.status == Status.FAILURE
+    assert taken(ctx, "planned ahead again") == Status.FAILURE
     settle(ahead)  # planned ahead once more, then a plan made now replaces it
     now = lv.PlanPick("plan", ctx)
     settle(now)
     assert now.status == Status.SUCCESS
-    third = lv.PlannedAhead("planned ahead third", ctx)
-    third.tick_once()
-    assert third.status == Status.FAILURE
+    assert taken(ctx, "planned ahead third") == Status.FAILURE
 
 
 def test_a_look_ahead_that_finds_nothing_to_pick_leaves_no_plan_to_take(ctx) -> None:
@@ -789,6 +790,4 @@ def test_a_look_ahead_that_finds_nothing_to_pick_leaves_no_plan_to_take(ctx) -> 
     ahead = lv.PlanPick("plan ahead", ctx, ahead=True)
     settle(ahead)
     assert ahead.status == Status.FAILURE
-    taken = lv.PlannedAhead("planned ahead", ctx)
-    taken.tick_once()
-    assert taken.status == Status.FAILURE
+    assert taken(ctx, "planned ahead") == Status.FAILURE
