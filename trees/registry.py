@@ -61,8 +61,10 @@ def _check_value(doc: LinedDocument, path: KeyPath, key: str, value: Any, p: Par
         ok, value = True, float(value)
     if not ok:
         what = " or ".join(k.__name__ for k in kinds)
+        numeric = float in kinds or int in kinds
         hint = (
-            "; numbers are SI and the unit is in the key's name" if isinstance(value, str) else ""
+            "; numbers are SI and the unit is in the key's name"
+            if isinstance(value, str) and numeric else ""
         )
         raise doc.error((*path, key), f"expected {what}, got {value!r}{hint}")
     if p.low is not None and value < p.low or p.high is not None and value > p.high:

@@ -386,3 +386,4 @@ def test_a_bool_parameter_takes_true_or_false_only(ctx, value: str) -> None:
     assert isinstance(build("type: plan_pick\nahead: true\n", ctx), Behaviour)
     err = error(f"type: plan_pick\nahead: {value}\n", ctx)
     assert err.key.endswith("ahead") and "expected bool" in str(err)
+    assert "SI" not in str(err)  # the units hint is for numbers
