@@ -181,21 +181,6 @@ class GuardedMotion:
 Failed = tuple[Failure, str]
 
 
-#: m of path a straight move counts per radian of its turn (the UR5's moveL and its twin's):
-#: a move that turns more than it travels is timed by its turn at this rate
-TURN_PATH = 0.1
-
-
-def turn_bounded_speed(distance: float, angle: float, speed: float, turn_rate: float) -> float:
-    """``speed`` (m/s) for a move of ``distance`` (m) that turns the tool by ``angle`` (rad), or
-    less, so that the turn takes at least ``angle / turn_rate``. Why: a fast move that also turns
-    the tool far (back from a part's yaw, round to the slot's) drives the wrist's last joint past
-    the UR5's joint speed limit, and the arm stops in a fault."""
-    if angle <= 0.0:
-        return speed
-    return min(speed, max(distance, TURN_PATH * angle) * turn_rate / angle)
-
-
 def arm_failure(arm: Arm, contact: bool = False) -> Failed | None:
     """The arm's own reason to stop a motion: a fault, or a stop that no contact explains."""
     st = arm.status()

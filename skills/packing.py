@@ -476,7 +476,7 @@ class PackInBox(SequenceSkill):
         self._closing_seen = self._closing_seen or gripper.moving()
         if not self._jaws_still() or not (self._closing_seen or gripper.object_detected()):
             return None
-        held = "gripped again" if self.dev.gripper.object_detected() else "the jaws closed empty"
+        held = "gripped again" if gripper.object_detected() else "the jaws closed empty"
         return f"{self._came_up}; {held}"
 
     def _let_go(self) -> str | None:

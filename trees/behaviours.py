@@ -775,6 +775,13 @@ class GoHome(SkillBehaviour):
         return go_home(self.ctx.devices, self.ctx.geometry.home_joints, self.settings())
 
 
+def _start_machine(ctx: CellContext) -> None:
+    """Start the machine on the fed part unless it was started already (once per part)."""
+    if not ctx.machining_started:
+        ctx.machine.start()
+        ctx.machining_started = True
+
+
 @declare(
     "start_machining",
     "start the machine on the fed part, do not wait (wait_machining waits)",
@@ -795,9 +802,7 @@ class StartMachining(Behaviour):
         if fault:
             self.feedback_message = f"machine fault: {fault}"
             return Status.FAILURE
-        if not self.ctx.machining_started:
-            self.ctx.machine.start()
-            self.ctx.machining_started = True
+        _start_machine(self.ctx)
         self.feedback_message = "machine started"
         return Status.SUCCESS
 
@@ -818,9 +823,7 @@ class WaitMachining(Behaviour):
         self.ctx, self.params = ctx, params
 
     def initialise(self) -> None:
-        if not self.ctx.machining_started:
-            self.ctx.machine.start()
-            self.ctx.machining_started = True
+        _start_machine(self.ctx)
         self._t0 = self.ctx.devices.clock.now()
 
     def update(self) -> Status:

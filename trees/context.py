@@ -143,7 +143,7 @@ class CellContext:
     #: The arm's joints (rad) where ``feed_slot`` left it, over the slot: a look while the
     #: machine runs returns there by a joint move, and the pick from the slot starts where it
     #: always does.
-    feed_end_joints: Any = None
+    feed_end_joints: NDArray[np.float64] | None = None
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

@@ -18,7 +18,7 @@ from drivers.parts import Part
 from drivers.pose import Pose, rot_z
 from skills.axes import XY, Z
 from skills.frames import frame_step
-from skills.motion import Guard, GuardedMotion, Sequence, turn_bounded_speed
+from skills.motion import Guard, GuardedMotion, Sequence
 from skills.params import si
 from skills.perception.bin_parts import (
     Detection,
@@ -39,6 +39,9 @@ SAME_PART_DISTANCE = 0.02
 VERTICAL_X = 0.01
 #: ``turn_view_to_grasp`` at or above this turns the last view (the key is 0 or 1)
 TURN_VIEW = 0.5
+#: m of path a straight move counts per radian of its turn (the UR5's moveL and its twin's):
+#: a move that turns more than it travels is timed by its turn at this rate
+TURN_PATH = 0.1
 
 
 def camera_over(
@@ -368,7 +371,8 @@ class Look:
         wrist's own swing read 91-97 N at the sensor."""
         p = self.params
         distance, angle = self.dev.arm.tool_pose().distance(target)
-        speed = turn_bounded_speed(distance, angle, speed, p.turn_rate)
+        if angle > 0.0:
+            speed = min(speed, max(distance, TURN_PATH * angle) * p.turn_rate / angle)
         self.dev.arm.move_to(target, speed, p.acceleration)
 
     def _beyond_end(self, which: int) -> None:

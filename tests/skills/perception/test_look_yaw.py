@@ -12,9 +12,8 @@ from drivers.camera import Intrinsics
 from drivers.devices import Devices
 from drivers.parts import Section
 from drivers.pose import Pose
-from skills.motion import TURN_PATH
 from skills.perception.bin_parts import Detection
-from skills.perception.look import Look, camera_over, tool_yaw
+from skills.perception.look import TURN_PATH, Look, camera_over, tool_yaw
 from skills.pivot.clearance import likely_grasp_rotation
 from skills.pivot.frame import PivotFrame
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper
