@@ -102,6 +102,17 @@ class PackParams:
     lift_off: float = si(
         0.0005, "m", 0.0, 0.005, "back up after the floor contact, so the part slides freely"
     )
+    #: The sideways pushes give way along z and press the held part onto the box floor with
+    #: this force. Hanging ``lift_off`` above the floor, the held part touched its neighbour near
+    #: the neighbour's top, and the arm drifting up 0.3 mm in the push rubbed that wall upwards:
+    #: the neighbour, held up by the friction of the parts either side, lost the box floor, and
+    #: the contact's slight slope slid it 2.35 mm off the +y wall (the twin, seed 64303's third
+    #: packing). Pressed down, the held part cannot rise along its neighbour, and it stands on
+    #: the floor when the jaws open instead of dropping onto it. 0: the pushes hold z.
+    floor_press: float = si(
+        1.0, "N", 0.0, 20.0,
+        "the held part presses the box floor with during the sideways pushes (0: z held)",
+    )
     #: back after the +x contact, so the +y push does not rub along the +x neighbour (pressed
     #: together, two parts sliding past each other stopped the push short)
     back_off: float = si(0.001, "m", 0.0, 0.01, "back after the +x contact")
@@ -238,6 +249,21 @@ class PackInBox(SequenceSkill):
                 settle=p.contact_settle, still_speed=p.still_speed, free=free, lean=lean,
             )
 
+        def sideways(
+            name: str, direction: tuple[float, float, float], reach: float,
+            free: tuple[int, ...] = (), lean: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        ) -> ForcePush:
+            """A push in the floor's plane, pressing the part onto the floor (``floor_press``).
+            Its nothing-pressed is the hanging part's reading: read at the push's start, it
+            would hold the press of the push before as nothing and press again on top."""
+            if p.floor_press <= 0:
+                return push(name, direction, reach, free, lean)
+            return ForcePush(
+                name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
+                settle=p.contact_settle, still_speed=p.still_speed, free=(*free, Z),
+                lean=(lean[0], lean[1], -p.floor_press), reference=self._hanging,
+            )
+
         lean_y = (0.0, p.lean_force, 0.0)
 
         self.floor = push("push -z onto the floor", (0.0, 0.0, -1.0), p.floor_gap + p.overshoot)
@@ -247,10 +273,10 @@ class PackInBox(SequenceSkill):
         # it still met it below the line and the row buckled 2-4 mm off the wall; leaning, it
         # slides up to the wall (or the row before it) on the way and meets the neighbour on
         # their centre line.
-        self.push_x = push("push +x", (1.0, 0.0, 0.0), self._reach, (1,), lean_y)
-        self.push_y = push("push +y", (0.0, 1.0, 0.0), self._reach)
+        self.push_x = sideways("push +x", (1.0, 0.0, 0.0), self._reach, (1,), lean_y)
+        self.push_y = sideways("push +y", (0.0, 1.0, 0.0), self._reach)
         #: Closes the ``back_off`` again: a short +x push once the part sits home on +y.
-        self.push_x_again = push(
+        self.push_x_again = sideways(
             "push +x again", (1.0, 0.0, 0.0), p.back_off + p.push_again_margin, (1,), lean_y
         )
         # The open hand comes up in force mode until its fingertips are above the part's rim,
@@ -438,6 +464,11 @@ class PackInBox(SequenceSkill):
         top = self.floor_z + self.part.length + p.clear_height + p.tip_offset
         rest = max(0.0, top - float(tool.position[Z]))
         self.dev.arm.move_to(self._shifted(0.0, 0.0, rest), p.approach_speed, p.acceleration)
+
+    def _hanging(self) -> NDArray[np.float64] | None:
+        """The force on the tool (N, base frame) with the part hanging free, read over the
+        place; None before that reading."""
+        return self.reference.force
 
     def _empty_hand(self) -> NDArray[np.float64] | None:
         """The force on the empty hand (N, base frame): the hanging part's reading less its
