@@ -75,8 +75,8 @@ class PackParams:
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
     settle: float = si(0.2, "s", 0.0, 5.0, "held still before a reference wrench is read")
     floor_gap: float = si(0.005, "m", 0.0, 0.05, "above the floor where the fast descent ends")
-    #: 3 N, not 6: the held part hangs 0.5 mm above the floor (``lift_off``), so a push needs
-    #: no force to move it, only one the wrist feels far above its noise (the FT300's is about
+    #: 3 N, not 6: a push needs only the floor's friction on the held part (pressed down by
+    #: ``floor_press``) and a force the wrist feels far above its noise (the FT300's is about
     #: 0.1 N); every newton more is pressed into packed parts that the floor holds by their
     #: weight's friction alone (the bushing's: under 1 N) and a contact off their centre line
     #: turns sideways. At 6 N the twin moved packed bushings up to 1.8 mm a push.
@@ -100,7 +100,8 @@ class PackParams:
         0.004, "m", 0.0, 0.02, "the -z push aims below the floor (contact stops it)"
     )
     lift_off: float = si(
-        0.0005, "m", 0.0, 0.005, "back up after the floor contact, so the part slides freely"
+        0.0005, "m", 0.0, 0.005,
+        "back up after the floor contact, so the first push starts free of the floor",
     )
     #: The sideways pushes give way along z and press the held part onto the box floor with
     #: this force. Hanging ``lift_off`` above the floor, the held part touched its neighbour near

@@ -39,10 +39,34 @@ def test_a_free_axis_must_be_another_base_axis(free: tuple[int, ...]) -> None:
 
 
 def test_packing_pushes_along_x_give_way_along_y_and_the_y_push_holds_x() -> None:
-    pack = PackInBox(PLACE, PART, dev(devices()))
+    pack = PackInBox(PLACE, PART, dev(devices()), floor_press=0.0)
     assert pack.push_x.free == (1,) and pack.push_x_again.free == (1,)
     assert pack.push_y.free == () and pack.floor.free == ()
     assert np.allclose(pack.place_xy, PLACE[:2])
+
+
+def test_packing_sideways_pushes_press_the_part_onto_the_floor_the_floor_push_does_not() -> None:
+    """Each sideways push gives way along z and presses ``floor_press`` down, so the held
+    part stands on the floor instead of rubbing its neighbour upwards."""
+    pack = PackInBox(PLACE, PART, dev(devices()), floor_press=1.5)
+    for push in (pack.push_x, pack.push_y, pack.push_x_again):
+        assert 2 in push.free and push.lean[2] == pytest.approx(-1.5)
+    assert pack.push_x.free == (1, 2) and pack.push_y.free == (2,)
+    assert pack.floor.free == () and not pack.floor.lean.any()
+
+
+def test_packing_sideways_pushes_measure_from_the_hanging_part_not_from_their_start() -> None:
+    """A push starting with the part already pressed onto the floor by the push before must
+    not take that press as nothing pressed (it would press twice as hard, then three times)."""
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), floor_press=1.0)
+    pack.reference.force = np.array([0.0, 0.0, -2.0])  # the hanging part, read over the place
+    push_back(d, (0.0, 0.0, 1.0))  # now pressed onto the floor: the wrist reads the floor's push
+    pack.push_y.motion.tick()
+    _, wrench, _ = d["arm"].force
+    # the arm carries the hanging part's weight less the press (from the reading at the start
+    # it would command -1 - 1 = -2 N: pressing 3 N into the floor)
+    assert wrench[2] == pytest.approx(2.0 - 1.0)
 
 
 def test_a_lean_presses_along_its_free_axis_on_top_of_the_reference() -> None:
@@ -64,7 +88,7 @@ def test_a_lean_off_the_free_axes_is_refused(free: tuple[int, ...], lean: tuple)
 
 
 def test_packing_x_pushes_lean_towards_the_y_wall_and_the_others_do_not() -> None:
-    pack = PackInBox(PLACE, PART, dev(devices()))
+    pack = PackInBox(PLACE, PART, dev(devices()), floor_press=0.0)
     assert pack.push_x.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
     assert pack.push_x_again.lean.tolist() == [0.0, pack.params.lean_force, 0.0]
     assert not pack.push_y.lean.any() and not pack.floor.lean.any()
