@@ -177,3 +177,34 @@ def test_the_opening_is_reported_in_counts_at_the_poll_rate(world: SimWorld) -> 
     polls = 40 * g.spec.poll_hz / world.settings.control_hz
     assert changes <= polls + 1
     assert changes >= 0.5 * polls
+
+
+def _watch_states(g, states) -> int:  # type: ignore[no-untyped-def]
+    """Feed ``g`` the given per-step ``(qa, va, qb, vb)`` joint states as its watch reads
+    them after each control step; the step index where it first reported a stall, or -1."""
+    for k, (qa, va, qb, vb) in enumerate(states):
+        g._watch([(qa, va), (qb, vb)])
+        if g._stalled:
+            return k
+    return -1
+
+
+def test_a_pinch_stalls_on_the_motors_position_not_on_the_solvers_finger_speeds(
+    world: SimWorld, robot: SimRobot
+) -> None:
+    """The unit reads one motor's encoder: in a stiff pinch the twin's fingers stand still to
+    0.01 mm while PyBullet reports their speeds at +-10 mm/s tick to tick (measured on a 4 mm
+    wall); that is a stall. So is both fingers rocking the same way with the opening steady
+    (the motor between them does not turn). A motor still moving closes on."""
+    g = robot.gripper
+    steps = g._stall_steps + 3
+    noisy = [(0.0018, 0.010 * (-1) ** k, 0.0017, -0.008 * (-1) ** k) for k in range(steps * 3)]
+    g.close(force=20.0, speed=0.02)
+    assert _watch_states(g, noisy) >= 0
+    rock = [(0.0018 + 1e-4 * k, 0.01, 0.0017 - 1e-4 * k, -0.01) for k in range(steps * 3)]
+    g.close(force=20.0, speed=0.02)
+    assert _watch_states(g, rock) >= 0
+    dt = world.settings.control_dt
+    closing = [(0.02 - 0.01 * dt * k, -0.01, 0.02 - 0.01 * dt * k, -0.01) for k in range(steps * 3)]
+    g.close(force=20.0, speed=0.02)
+    assert _watch_states(g, closing) == -1
