@@ -73,8 +73,8 @@ class GripperSpec:
     #: how the unit tells an object: "contact" -- the fingers stopped by contact (motor current
     #: at its limit) before reaching the requested position (the 2F-85's gOBJ)
     detection: str = "contact"
-    #: m/s, the motor (the fingers' mean position) moving slower than this over ``stall_time``
-    #: counts as stopped by contact
+    #: m/s, a finger whose position moved slower than this over ``stall_time`` counts as
+    #: stopped by contact
     stall_speed: float = 0.002
     stall_time: float = 0.04  #: s
 

@@ -5,11 +5,10 @@ What the description decides here, as on the unit: the force a close applies is 
 register's step in the unit's range (a 2F-85 asked for 2 N grips with 20 N: its register's 0 is
 its weakest grip); the finger speed is clamped into the unit's range; the opening the skills
 read is the unit's position count, refreshed at the driver's poll rate (sample and hold); an
-object is detected when contact stops the motor before the requested opening -- one motor drives
-both fingers, so its position is their mean, and it counts as stopped when that position, read
-as an encoder reads it, moved less than ``stall_speed`` over ``stall_time`` (the joints' speeds
-PyBullet reports in a stiff pinch jitter at +-10 mm/s with the fingers still to 0.01 mm, and
-both fingers rocking the same way leave the motor where it is); and each pad
+object is detected when contact stops the fingers before the requested opening -- stopped as
+a position sensor tells it: each finger's position moved less than ``stall_speed`` times
+``stall_time`` over the last ``stall_time`` (the joints' speeds PyBullet reports in a stiff
+pinch jitter at +-10 mm/s with the fingers still to 0.01 mm); and each pad
 rides on a second, coupled joint along the approach axis (``<finger>_lift``) that follows the
 linkage's tip travel as the opening changes (:meth:`GripperSpec.tip_advance`), so a 2F-85's tips
 advance about 2.5 mm over a close from 70 to 61 mm, as the real fingers do.
@@ -92,8 +91,8 @@ class SimGripper:
         self.commanded_force = 0.0  #: N per finger the last close applies (the register's step)
         self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
-        self._still = 0  # consecutive control steps with the motor still
-        self._trail: list[float] = []  # the motor's position (m) over the last control steps
+        self._still = 0  # consecutive control steps with both fingers still
+        self._trail: list[tuple[float, float]] = []  # the fingers' positions (m), last steps
         self._steps = 0  # control steps since the last command
         self._active = False  # a command is in progress (fingers not yet arrived or stalled)
         self._stalled = False
@@ -287,7 +286,7 @@ class SimGripper:
         (``moving()`` True, ``object_detected()`` False) until they arrive or stall anew. Small
         finger motion in a pinch (a part turning) does not end the stall.
 
-        Arrival and stall are the motor's (the module doc): its position is the fingers' mean.
+        A stall is judged from the fingers' positions over ``stall_time`` (the module doc).
 
         Two fingers: plain floats, not numpy (the same double arithmetic, without numpy's
         per-call cost on two-element arrays every control step).
@@ -296,22 +295,20 @@ class SimGripper:
             return
         self._steps += 1
         qa, qb = states[0][0], states[1][0]
-        motor = 0.5 * (qa + qb)
         half = self._target / 2
-        if abs(motor - half) < ARRIVED:
+        if abs(qa - half) < ARRIVED and abs(qb - half) < ARRIVED:
             self._active = False
             self._stalled = False
             self._target = None
             return
         trail = self._trail
-        trail.append(motor)
+        trail.append((qa, qb))
         if len(trail) > self._stall_steps + 1:
             trail.pop(0)
-        moved = abs(trail[-1] - trail[0])
-        span = (len(trail) - 1) * self._world.settings.control_dt
-        self._still = (
-            self._still + 1 if len(trail) > 1 and moved < self.spec.stall_speed * span else 0
-        )
+        (qa0, qb0), span = trail[0], (len(trail) - 1) * self._world.settings.control_dt
+        most = self.spec.stall_speed * span
+        still = len(trail) > 1 and abs(qa - qa0) < most and abs(qb - qb0) < most
+        self._still = self._still + 1 if still else 0
         width = qa + qb
         if self._stalled:
             if abs(width - self._target) < abs(self._stall_width - self._target) - LOST:
