@@ -28,8 +28,12 @@ def test_a_step_that_overran_is_not_caught_up_in_a_burst() -> None:
     thread.join(timeout=5.0)
     gaps = [b - a for a, b in zip(starts[5:-1], starts[6:], strict=True)]
     # Catching up would run the next five steps back to back (gaps near zero): the world would
-    # move faster than the wall clock with no command from the cell between them.
-    assert min(gaps) > 0.5 * PERIOD, [round(g * 1e3, 1) for g in gaps]
+    # move faster than the wall clock with no command from the cell between them. Counted over
+    # the steps after the overrun, not gap by gap: on a loaded machine one step started late
+    # shortens the gap after it (a 4.6 ms gap was seen), but a burst shortens their sum by the
+    # five periods it catches up.
+    assert sum(gaps) > (len(gaps) - 1) * PERIOD, [round(g * 1e3, 1) for g in gaps]
+    assert sum(g < 0.5 * PERIOD for g in gaps) <= 1, [round(g * 1e3, 1) for g in gaps]
     stats = loop.margin_stats()
     assert stats["overruns"] >= 1
     assert stats["slipped_s"] >= 4 * PERIOD  # the twin's time fell behind by about the overrun
