@@ -78,8 +78,9 @@ class PackParams:
     #: 3 N, not 6: the held part hangs 0.5 mm above the floor (``lift_off``, unless
     #: ``floor_press`` presses it down), so a push needs little force to move it, only one the
     #: wrist feels far above its noise (the FT300's is about 0.1 N); every newton more is
-    #: pressed into packed parts that the floor holds by their weight's friction alone (the bushing's: under 1 N) and a contact off their centre line
-    #: turns sideways. At 6 N the twin moved packed bushings up to 1.8 mm a push.
+    #: pressed into packed parts that the floor holds by their weight's friction alone (the
+    #: bushing's: under 1 N), and a contact off their centre line turns sideways. At 6 N the
+    #: twin moved packed bushings up to 1.8 mm a push.
     contact_force: float = si(
         3.0, "N", 0.5, 50.0,
         "each push presses with in force mode",
