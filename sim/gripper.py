@@ -39,6 +39,7 @@ one mu_S.
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -92,7 +93,8 @@ class SimGripper:
         self._reported = (0.0, False, False)  #: (opening, moving, object) as last polled
         self._target: float | None = None  # opening (m) of the command being watched
         self._still = 0  # consecutive control steps with both fingers still
-        self._trail: list[tuple[float, float]] = []  # the fingers' positions (m), last steps
+        #: the fingers' positions (m) over the last ``stall_time`` (its steps and the one before)
+        self._trail: deque[tuple[float, float]] = deque(maxlen=self._stall_steps + 1)
         self._steps = 0  # control steps since the last command
         self._active = False  # a command is in progress (fingers not yet arrived or stalled)
         self._stalled = False
@@ -208,7 +210,7 @@ class SimGripper:
         self._active = True
         self._stalled = False
         self._still = 0
-        self._trail = []
+        self._trail.clear()
         self._steps = 0
 
     def _release(self) -> None:
@@ -303,8 +305,6 @@ class SimGripper:
             return
         trail = self._trail
         trail.append((qa, qb))
-        if len(trail) > self._stall_steps + 1:
-            trail.pop(0)
         (qa0, qb0), span = trail[0], (len(trail) - 1) * self._world.settings.control_dt
         most = self.spec.stall_speed * span
         still = len(trail) > 1 and abs(qa - qa0) < most and abs(qb - qb0) < most

@@ -22,6 +22,7 @@ walls and parts already packed.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -247,10 +248,12 @@ class PackInBox(SequenceSkill):
         def push(
             name: str, direction: tuple[float, float, float], reach: float,
             free: tuple[int, ...] = (), lean: tuple[float, float, float] = (0.0, 0.0, 0.0),
+            reference: Callable[[], NDArray[np.float64] | None] | None = None,
         ) -> ForcePush:
             return ForcePush(
                 name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
                 settle=p.contact_settle, still_speed=p.still_speed, free=free, lean=lean,
+                reference=reference,
             )
 
         def sideways(
@@ -262,11 +265,8 @@ class PackInBox(SequenceSkill):
             would hold the press of the push before as nothing and press again on top."""
             if p.floor_press <= 0:
                 return push(name, direction, reach, free, lean)
-            return ForcePush(
-                name, dev, p.push_guard, direction, p.contact_force, p.push_speed, reach,
-                settle=p.contact_settle, still_speed=p.still_speed, free=(*free, Z),
-                lean=(lean[0], lean[1], -p.floor_press), reference=self._hanging,
-            )
+            return push(name, direction, reach, (*free, Z), (lean[0], lean[1], -p.floor_press),
+                        lambda: self.reference.force)
 
         lean_y = (0.0, p.lean_force, 0.0)
 
@@ -468,11 +468,6 @@ class PackInBox(SequenceSkill):
         top = self.floor_z + self.part.length + p.clear_height + p.tip_offset
         rest = max(0.0, top - float(tool.position[Z]))
         self.dev.arm.move_to(self._shifted(0.0, 0.0, rest), p.approach_speed, p.acceleration)
-
-    def _hanging(self) -> NDArray[np.float64] | None:
-        """The force on the tool (N, base frame) with the part hanging free, read over the
-        place; None before that reading."""
-        return self.reference.force
 
     def _empty_hand(self) -> NDArray[np.float64] | None:
         """The force on the empty hand (N, base frame): the hanging part's reading less its
