@@ -202,12 +202,18 @@ def test_pack_in_box_pushes_down_then_x_then_y_and_lets_go() -> None:
     assert d["arm"].pose.position[2] > pack.contacts["+y"].position[2] + 0.03
 
 
-def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall() -> None:
+@pytest.mark.parametrize("follow", [None, 0.35])
+def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall(
+    follow: float | None,
+) -> None:
     """The jaws open symmetrically; the arm follows the outer finger (tool +x) out by
-    ``release_follow`` of the opening the gripper reports, under half, so the finger in the
-    hole moves off the wall it pressed, towards the hole's centre, and never into it."""
+    ``release_follow`` of the opening the gripper reports (0 by default: it stands still),
+    under half, so the finger in the hole moves off the wall it pressed, towards the hole's
+    centre, and never into it. Run at the default and at a follow that moves the arm."""
     d = devices()
-    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    given = {} if follow is None else {"release_follow": follow}
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0, **given)
+    assert follow is not None or pack.params.release_follow == 0.0
     seen: dict[str, object] = {}
     follow_errors: list[float] = []
 
@@ -232,7 +238,7 @@ def test_pack_in_box_lets_go_with_the_inner_finger_easing_off_the_wall() -> None
     before, after = seen["before"], seen["after"]
     x = before.rotation[:, 0]  # the outer finger's side
     follow = pack.params.release_follow
-    assert 0.0 < follow < 0.5
+    assert 0.0 <= follow < 0.5
     assert after.position == pytest.approx(
         before.position + follow * pack.params.release * x, abs=1e-9
     )
