@@ -816,15 +816,22 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     mostly hidden under a taller one from its free end (None: it matches no catalogue part)."""
     settings = inputs.settings
     crest = _crest(seg, inputs.hgt[seg.upper])
+    placed: _Placement | None = None
+    for axis, across, s, c in _crest_axis_candidates(seg, crest, settings):
+        c_mid = float(np.median(c[crest]))
+        s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+        s_mid = 0.5 * (s_lo + s_hi)  # exact: the middle
+        center_uv = seg.mean + s_mid * axis + c_mid * across
+        length = s_hi - s_lo
+        part, err = _match(length, seg.outer, inputs.catalogue, settings.match_tolerance)
+        if part is not None and (placed is None or err < placed.err):
+            placed = _Placement(part, err, False, axis, across, center_uv, length)
+    if placed is not None:
+        return placed
     axis, across, s, c = _crest_axis(seg, crest, settings)
     c_mid = float(np.median(c[crest]))
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
-    s_mid = 0.5 * (s_lo + s_hi)  # exact: the middle
-    center_uv = seg.mean + s_mid * axis + c_mid * across
     length = s_hi - s_lo
-    part, err = _match(length, seg.outer, inputs.catalogue, settings.match_tolerance)
-    if part is not None:
-        return _Placement(part, err, False, axis, across, center_uv, length)
     if seg.thin is None:
         return _raised(seg, inputs)
     # A thin part partly hidden under a taller one: see _hidden_thin_part.
@@ -892,21 +899,43 @@ def _crest_axis(
     The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
     than wide; its whole top only 1.5 times): its direction is the better axis, unless
     the whole top is the longer strip. Not for a thin part: its flat top is all crest."""
+    return _crest_axis_candidates(seg, crest, settings)[0]
+
+
+def _crest_axis_candidates(
+    seg: _Segment, crest: NDArray[np.bool_], settings: DetectorSettings
+) -> list[
+    tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+]:
+    """:func:`_crest_axis`'s choice first; then, where the crest is the longer strip of the
+    two but short of ``CREST_ASPECT``, the crest's own direction too, for the catalogue to
+    decide between them (:func:`_place`). A short, wide part lying (a sleeve 50 mm long and
+    60 mm across) shows a top wider than long, so the top's principal direction runs across
+    it, while its crest (about 2.4 times longer than wide) still runs along the axis: taken
+    from the top alone, the pivot's Grasp came down 64-90 deg off the part's axis."""
     axis, across, s, c = seg.axis, seg.across, seg.s, seg.c
     pts = seg.uv[crest]
-    if len(pts) >= MIN_CREST_AXIS and seg.outer >= settings.thin_part:
-        _, crest_axis = _principal(pts)
-        rel = pts - pts.mean(axis=0)
-        along = dot_last(rel, crest_axis)
-        side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
-        aspect = float(np.std(along)) / max(float(np.std(side)), MIN_SPREAD)
-        whole = float(np.std(s)) / max(float(np.std(c)), MIN_SPREAD)
-        if aspect > CREST_ASPECT and aspect > whole:
-            axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
-            across = np.array([-axis[1], axis[0]])
-            s = dot_last(seg.uv - seg.mean, axis)
-            c = dot_last(seg.uv - seg.mean, across)
-    return axis, across, s, c
+    if len(pts) < MIN_CREST_AXIS or seg.outer < settings.thin_part:
+        return [(axis, across, s, c)]
+    _, crest_axis = _principal(pts)
+    rel = pts - pts.mean(axis=0)
+    along = dot_last(rel, crest_axis)
+    side = dot_last(rel, np.array([-crest_axis[1], crest_axis[0]]))
+    aspect = float(np.std(along)) / max(float(np.std(side)), MIN_SPREAD)
+    whole = float(np.std(s)) / max(float(np.std(c)), MIN_SPREAD)
+    if aspect <= whole:
+        return [(axis, across, s, c)]
+    crest_axis = crest_axis if float(crest_axis @ axis) >= 0 else -crest_axis
+    crest_across = np.array([-crest_axis[1], crest_axis[0]])
+    along_crest = (
+        crest_axis,
+        crest_across,
+        dot_last(seg.uv - seg.mean, crest_axis),
+        dot_last(seg.uv - seg.mean, crest_across),
+    )
+    if aspect > CREST_ASPECT:
+        return [along_crest]
+    return [(axis, across, s, c), along_crest]
 
 
 def _hidden_under_neighbour(
