@@ -435,8 +435,8 @@ class PackInBox(SequenceSkill):
     def _follow_opening(self) -> bool:
         """Keep the arm ``release_follow`` of the *reported* opening after the outer finger (0,
         the default: the arm stands still and the jaws open about it); done once the jaws have
-        stood still for ``settle``. Following what the gripper reports, the
-        arm can lag the jaws but never lead them, however late they start."""
+        stood still for ``settle``. Following what the gripper reports, the arm can lag the
+        jaws but never lead them, however late they start."""
         p, start = self.params, self._let_go_from
         opened = max(0.0, self.dev.gripper.width() - self._open_from)
         dx, dy = p.release_follow * opened * self._x[XY]

@@ -816,10 +816,13 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     mostly hidden under a taller one from its free end (None: it matches no catalogue part)."""
     settings = inputs.settings
     crest = _crest(seg, inputs.hgt[seg.upper])
+    #: per candidate axis: (axis, across, s_lo, s_hi, c_mid), the first the default
+    fits: list[tuple[NDArray[np.float64], NDArray[np.float64], float, float, float]] = []
     placed: _Placement | None = None
     for axis, across, s, c in _crest_axis_candidates(seg, crest, settings):
         c_mid = float(np.median(c[crest]))
         s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+        fits.append((axis, across, s_lo, s_hi, c_mid))
         s_mid = 0.5 * (s_lo + s_hi)  # exact: the middle
         center_uv = seg.mean + s_mid * axis + c_mid * across
         length = s_hi - s_lo
@@ -828,9 +831,7 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
             placed = _Placement(part, err, False, axis, across, center_uv, length)
     if placed is not None:
         return placed
-    axis, across, s, c = _crest_axis(seg, crest, settings)
-    c_mid = float(np.median(c[crest]))
-    s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+    axis, across, s_lo, s_hi, c_mid = fits[0]
     length = s_hi - s_lo
     if seg.thin is None:
         return _raised(seg, inputs)
@@ -890,29 +891,23 @@ def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
     return crest
 
 
-def _crest_axis(
-    seg: _Segment, crest: NDArray[np.bool_], settings: DetectorSettings
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """The axis, the direction across and the upper points along and across it: the crest's
-    direction where that is the better axis, else the segment's principal one.
-
-    The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
-    than wide; its whole top only 1.5 times): its direction is the better axis, unless
-    the whole top is the longer strip. Not for a thin part: its flat top is all crest."""
-    return _crest_axis_candidates(seg, crest, settings)[0]
-
-
 def _crest_axis_candidates(
     seg: _Segment, crest: NDArray[np.bool_], settings: DetectorSettings
 ) -> list[
     tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 ]:
-    """:func:`_crest_axis`'s choice first; then, where the crest is the longer strip of the
-    two but short of ``CREST_ASPECT``, the crest's own direction too, for the catalogue to
+    """The axes to fit along, each with the direction across and the upper points along and
+    across it; the first is the default.
+
+    The crest of a lying cylinder is a strip along its axis (a cup's is 4-5 times longer
+    than wide; its whole top only 1.5 times): where it is the longer strip of the two and
+    longer than ``CREST_ASPECT`` times its width, its direction is the axis; short of that,
+    both the segment's principal direction and the crest's are given, for the catalogue to
     decide between them (:func:`_place`). A short, wide part lying (a sleeve 50 mm long and
     60 mm across) shows a top wider than long, so the top's principal direction runs across
     it, while its crest (about 2.4 times longer than wide) still runs along the axis: taken
-    from the top alone, the pivot's Grasp came down 64-90 deg off the part's axis."""
+    from the top alone, the pivot's Grasp came down 64-90 deg off the part's axis. Not for a
+    thin part: its flat top is all crest."""
     axis, across, s, c = seg.axis, seg.across, seg.s, seg.c
     pts = seg.uv[crest]
     if len(pts) < MIN_CREST_AXIS or seg.outer < settings.thin_part:
