@@ -113,6 +113,12 @@ class RepositionParams:
     )
     roll_speed: float = si(0.02, "m/s", 0.002, 0.1, "of the fingertips rolling the part")
     roll_max: float = si(0.05, "m", 0.005, 0.2, "the farthest a part is rolled")
+    #: the pivot turns a lying part about its far corner on the floor (G): one whose axis is
+    #: this much higher than lying on the floor puts it (on a neighbour, on a wall's foot) is
+    #: laid down first (:func:`plan_lay_down`), as is one seen leaning
+    max_raise: float = si(
+        0.006, "m", 0.001, 0.05, "a part's axis above where lying puts it: laid down first"
+    )
     guard: Guard = field(default_factory=Guard)
     descent_guard: Guard = guard_field(25.0, 10.0, "the jaws down beside the part")
 
@@ -122,6 +128,9 @@ class MoveKind(StrEnum):
 
     DRAG = "drag"  #: pinched across its diameter, lifted, carried, set down
     ROLL = "roll"  #: rolled across its axis under the closed fingertips
+    #: raised off the floor (leaning on a neighbour or a wall): pinched where it is, lifted
+    #: clear, carried and lowered until it touches the floor
+    LAY_DOWN = "lay down"
 
 
 @dataclass(frozen=True)
@@ -142,6 +151,9 @@ class RepositionPlan:
     shift: NDArray[np.float64]
     grip: Grip = field(default_factory=lambda: Grip())  #: where the jaws take the part
     kind: MoveKind = MoveKind.DRAG
+    #: m the part's axis goes down from where it is taken to where it lies on the floor (a
+    #: lay down; 0 for a part already on it)
+    drop: float = 0.0
 
     @property
     def distance(self) -> float:
@@ -261,8 +273,10 @@ def _plan_drag(
     frame: PivotFrame, part: Part, pivot: PivotParams, params: RepositionParams,
     obstacles: Seq[Obstacle], neighbours: Seq[Obstacle], interior: Seq[float],
     finger_width: float, base_xy: Seq[float], free: list[Grip], reach: Reach,
+    drop: float = 0.0,
 ) -> RepositionPlan | None:
-    """The shortest drag with one of the ``free`` pinches (:func:`plan_reposition`)."""
+    """The shortest drag with one of the ``free`` pinches (:func:`plan_reposition`); the part
+    comes to lie ``drop`` (m) lower than it is taken (a lay down), its pinch with it."""
     steps = np.arange(params.shift_step, params.max_shift + SHIFT_ROUNDING, params.shift_step)
     directions = [frame.u[XY], -frame.u[XY], frame.normal[XY], -frame.normal[XY]]
     for s in steps:
@@ -270,19 +284,66 @@ def _plan_drag(
             shift = float(s) * np.asarray(d, float)
             center = np.asarray(frame.center, float).copy()
             center[XY] += shift
+            center[Z] -= drop
             moved = replace(frame, center=center)
             if not _fits(moved, part, params, interior, neighbours):
                 continue
             # the same pinch must clear where the part is set down
             grip = next((g for g in free if _pinch_clear(moved, part, params, obstacles,
-                                                          finger_width, g)), None)
+                                                          finger_width, _lowered(g, drop))),
+                        None)
             if grip is None:
                 continue
             choice = choose_end(moved, pivot, obstacles, finger_width, part.open_ends,
                                 margin=params.plan_margin, base_xy=base_xy, reach=reach)
             if choice.clearance.clear:
-                return RepositionPlan(frame, moved, shift, grip)
+                kind = MoveKind.LAY_DOWN if drop > 0.0 else MoveKind.DRAG
+                return RepositionPlan(frame, moved, shift, grip, kind, drop)
     return None
+
+
+def _lowered(grip: Grip, drop: float) -> Grip:
+    """``grip`` on the part lowered by ``drop`` (m)."""
+    if drop <= 0.0 or grip.height is None:
+        return grip
+    return replace(grip, height=grip.height - drop)
+
+
+def plan_lay_down(
+    frame: PivotFrame,
+    axis_height: float,
+    part: Part,
+    pivot: PivotParams,
+    params: RepositionParams,
+    walls: Seq[Obstacle],
+    neighbours: Seq[Obstacle],
+    interior: Seq[float],
+    finger_width: float,
+    base_xy: Seq[float] = (0.0, 0.0),
+    *,
+    reach: Reach,
+) -> RepositionPlan | None:
+    """A part whose axis is ``axis_height`` (m) above the floor at its middle, more than
+    lying on it puts it: leaning on a neighbour or a wall, or lying on one. The pivot turns a
+    part about its far corner on the floor (G), so this one is laid down first: pinched
+    across its diameter where it is (the fingertips ``grip_below_axis`` under its axis), lifted
+    clear, carried to the nearest place where a pivot clears (as a drag, :func:`_plan_drag`)
+    and lowered until it touches the floor. ``frame``: the part's pivot frame as if it lay on
+    the floor where it is. None when no pinch clears or no place does."""
+    lying = 0.5 * part.outer  # exact: a lying part's axis is half its size up
+    drop = max(0.0, axis_height - lying)
+    height = axis_height - params.grip_below_axis
+    raised = np.asarray(frame.center, float).copy()
+    raised[Z] = frame.floor_z + axis_height
+    here = replace(frame, center=raised)
+    obstacles = [*walls, *neighbours]
+    along = {g.along for g in grips(part, params, finger_width)}
+    free = [Grip(a, height) for a in sorted(along, key=abs)
+            if _pinch_clear(here, part, params, obstacles, finger_width, Grip(a, height))]
+    if not free:
+        return None
+    return _plan_drag(here, part, pivot, params, obstacles, neighbours, interior, finger_width,
+                      base_xy, free, reach, drop)
 
 
 def is_round(part: Part) -> bool:
@@ -449,18 +510,33 @@ class Reposition(SequenceSkill):
         gripper = dev.gripper
         shift = np.array([plan.shift[0], plan.shift[1], 0.0])
         opening = part.outer + 2.0 * p.side_gap  # exact: a side gap each side of the part
+        lift = p.lift + plan.drop  # a raised part: clear of what it rests on by ``lift``
+        if plan.drop > 0.0:
+            # lowered until the part touches the floor, however it hangs in the pinch: aimed
+            # ``lift`` below where it would lie, ended by the touch
+            lying = pinch_pose(plan.target, part, p, replace(plan.grip,
+                               height=plan.grip.height - plan.drop - p.lift))
+            self.lower: ContactMove | None = ContactMove(
+                "lay it down", dev, p.descent_guard, lambda: lying, p.drag_speed,
+                p.acceleration, p.contact_force,
+            )
+            set_down = self.lower.motion
+        else:
+            self.lower = None
+            set_down = dev.move("set it down", g, lambda: self._move_by(-up * p.lift, p.speed))
         self.sequence = Sequence(
             "reposition",
             [
                 dev.grip("open", g, lambda: gripper.open(opening)),
                 dev.move("over the part", g, self._over),
                 self.descend.motion,
-                check("down to the floor", dev, g, self._down, Failure.BLOCKED),
+                check("down to the part" if plan.drop > 0.0 else "down to the floor", dev, g,
+                      self._down, Failure.BLOCKED),
                 dev.grip("pinch", g, lambda: gripper.close(p.grip_force, p.close_speed)),
                 check("holding it", dev, g, self._holding, Failure.MISSED),
-                dev.move("lift it", g, lambda: self._move_by(up * p.lift, p.speed)),
+                dev.move("lift it", g, lambda: self._move_by(up * lift, p.speed)),
                 dev.move("carry it", g, lambda: self._move_by(shift, p.drag_speed)),
-                dev.move("set it down", g, lambda: self._move_by(-up * p.lift, p.speed)),
+                set_down,
                 dev.grip("let go", g, lambda: gripper.open(opening)),
                 wait("settle", dev, g, p.release_settle),
                 dev.move("up", g, lambda: self._move_by(up * (part.outer + p.approach_height),

@@ -47,7 +47,7 @@ from skills.pivot.clearance import (
     seen_part,
 )
 from skills.reposition import Reposition as RepositionSkill
-from skills.reposition import RepositionPlan, plan_reposition
+from skills.reposition import RepositionPlan, plan_lay_down, plan_reposition
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
@@ -321,7 +321,7 @@ class PlanPick(Behaviour):
             if d.standing and not d.open_end_seen:
                 left.append({"part": where, "reason": "standing on its open end", "at": at})
                 continue
-            if not d.open_end_seen:
+            if not d.open_end_seen and not d.tilted:  # a raised part is laid down first
                 left.append({"part": where, "reason": "its open end was not made out", "at": at})
                 continue
             if not (x0 <= d.center[0] <= x1 and y0 <= d.center[1] <= y1):
@@ -440,6 +440,25 @@ class PlanPick(Behaviour):
                 d.yaw,
                 floor_z=g.bin_floor_z,
             )
+            axis = float(d.center[2]) - g.bin_floor_z
+            raised = axis - 0.5 * ctx.part.outer > drag.max_raise
+            if d.tilted or raised:  # no G on the floor for the pivot until it is laid down
+                down = plan_lay_down(
+                    frame, axis, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width,
+                    reach=ctx.reach,
+                )
+                if down is not None:
+                    drags[id(d)] = down
+                    continue
+                left.append(
+                    {
+                        "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
+                        "reason": f"off the floor ({'leaning, ' if d.tilted else ''}its axis "
+                        f"{1e3 * axis:.0f} mm up): no lay down clears",
+                        "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
+                    }
+                )
+                continue
             choice = choose_end(
                 frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends, reach=ctx.reach
             )

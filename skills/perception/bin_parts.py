@@ -644,6 +644,9 @@ class _Placement:
     center_uv: NDArray[np.float64]
     length: float
     tilted: bool = False  #: not level on the floor (:func:`_raised`): its ends are not judged
+    #: m above the floor, its axis at its middle, where that is not half its seen height (a
+    #: part raised at one end or both: its crest's height there less half the catalogue size)
+    axis_height: float | None = None
 
 
 def _fit_one(idx: NDArray[np.int64], inputs: _FitInputs, split: bool = True) -> list[Detection]:
@@ -874,8 +877,12 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
     if part is None or part.outer < settings.thin_part:
         return None
-    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across  # exact: the middle
-    return _Placement(part, err, False, axis, across, center_uv, length, tilted=True)
+    s_mid = 0.5 * (s_lo + s_hi)  # exact: the middle
+    center_uv = mean + s_mid * axis + c_mid * across
+    crest = float(hb.mean()) + slope * (s_mid - float(sb.mean()))  # the crest's line there
+    axis_height = crest - 0.5 * part.outer  # exact: the axis is half the size under the crest
+    return _Placement(part, err, False, axis, across, center_uv, length, tilted=True,
+                      axis_height=axis_height)
 
 
 def _crest(seg: _Segment, hs: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -995,11 +1002,12 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
     """The placed part in the base frame, with the end for the hole finger."""
     hm, e1, e2, part = inputs.hm, inputs.e1, inputs.e2, placed.part
     center_uv, axis = placed.center_uv, placed.axis
-    center = (
-        center_uv[0] * e1
-        + center_uv[1] * e2
-        + (hm.plane.offset + 0.5 * seg.outer) * (hm.plane.normal)  # exact: a lying part's axis
-    )
+    # Level, its axis is half its size under its top: half the top's height on the floor,
+    # higher on something (the raised part the cell lays down before the pivot)
+    up = placed.axis_height
+    if up is None:
+        up = max(0.5 * seg.outer, seg.outer - 0.5 * part.outer)  # exact: halves
+    center = center_uv[0] * e1 + center_uv[1] * e2 + (hm.plane.offset + up) * hm.plane.normal
     direction = axis[0] * e1 + axis[1] * e2
     half = 0.5 * part.length  # exact: an end is half the length from the centre
     ends = [center + half * direction, center - half * direction]
