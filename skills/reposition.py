@@ -13,6 +13,12 @@ A round part the jaws cannot come down beside (along a wall, between neighbours)
 instead (:func:`plan_roll`): the closed fingertips press on its top and push across its axis in
 the arm's force mode, a stroke at a time, as a person rolls it under a flat hand.
 
+A part raised off the floor -- leaning on a neighbour or a wall, or lying on one -- has no far
+corner on the floor for the pivot to turn it about (G, Sec. II), so it is laid down first
+(:func:`plan_lay_down`): pinched across its diameter at the height it was seen at, lifted
+clear by as much as it is raised, carried to where a pivot clears and lowered until it touches
+the floor; let go, a leaning part falls flat about its low end.
+
 This is not the pivot: it is a preparatory move, counted apart (``repositioned``), and it ends
 with the jaws open and the part lying on the floor -- the hole grasp is still reached by the
 paper's maneuver, without letting go.

@@ -617,8 +617,8 @@ class PickStanding(SkillBehaviour):
 
 @declare(
     "reposition",
-    "drag (or roll, a round part the jaws cannot come down beside) the chosen part to where a "
-    "pivot clears (counted apart as repositioned)",
+    "drag (or roll, a round part the jaws cannot come down beside; or lay down, a part raised "
+    "off the floor) the chosen part to where a pivot clears (counted apart as repositioned)",
     "Action",
     MOTION,
 )

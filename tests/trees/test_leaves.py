@@ -677,6 +677,34 @@ def test_plan_pick_names_a_part_nothing_frees_and_leaves_it(ctx) -> None:
     assert any(r.startswith("no pivot clears") and "no drag frees it" in r for r in reasons)
 
 
+@pytest.mark.parametrize(
+    "how", ["leaning", "on a neighbour", "leaning, its open end not made out"]
+)
+def test_plan_pick_lays_a_raised_part_down_instead_of_pivoting_it_as_it_lies(ctx, how) -> None:
+    """A part free for the pivot where it lies, but off the floor: laid down first (the pivot
+    turns it about its far corner on the floor). A part 5 mm higher is pivoted as it lies."""
+    bb = blackboard()
+    free = lying(0.47, 0.0, 0.0)
+    raised = {
+        "leaning": dataclasses.replace(free, tilted=True, center=np.array([0.47, 0.0, 0.026])),
+        "on a neighbour": dataclasses.replace(free, center=np.array([0.47, 0.0, 0.051])),
+        "leaning, its open end not made out": dataclasses.replace(
+            free, tilted=True, open_end_seen=False, center=np.array([0.47, 0.0, 0.026])
+        ),
+    }[how]
+    bb.set("/part/detections", [raised])
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.SUCCESS, node.feedback_message
+    move = bb.get("/part/target")["reposition"]
+    assert move is not None and move.kind.value == "lay down"
+    assert move.drop == pytest.approx(float(raised.center[2]) - 0.017)
+    bb.set("/part/detections", [dataclasses.replace(free, center=np.array([0.47, 0.0, 0.022]))])
+    node = lv.PlanPick("plan", ctx)
+    settle(node)
+    assert node.status == Status.SUCCESS and bb.get("/part/target")["reposition"] is None
+
+
 def test_plan_pick_spreads_its_sweeps_over_ticks(ctx) -> None:
     bb = blackboard()
     bb.set("/part/detections", [lying(0.47, 0.0, 0.0)])
