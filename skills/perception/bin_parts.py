@@ -151,6 +151,21 @@ LEAN_CREST_BAND = 0.2
 MIN_LEAN_CREST = 30
 #: rise over run along the crest below which a part is level (0.07: 4 deg)
 LEVEL_SLOPE = 0.07
+#: m: a top this much higher than the part's size lies on something, not on the floor (eight
+#: sigma of the depth noise, under the thinnest part, 7.6 mm)
+MIN_FOOT = 0.006
+#: shares of a level segment's width: its middle band (either side of the middle) and where
+#: its outer quarters begin (:func:`_lying_profile`)
+PROFILE_MIDDLE = 0.15
+PROFILE_SIDE = 0.25
+#: share of a lying cylinder's diameter by which its top, seen from above, falls at the
+#: median of an outer quarter (about 3/8 of the width off the middle: r (1 - sqrt(1 - 0.75^2))
+#: = 0.17 d; 4-6 mm seen on 34 mm parts in the twin), and the range of it accepted
+ROUND_FALL = 0.17
+ROUND_FALL_RANGE = (0.5, 2.0)
+#: share of the part's size within which a top counts as flat (a box's top; a cylinder's
+#: crest band)
+PROFILE_FLAT = 0.1
 #: the crest is the upper points above this share of the top (3 % under it: seen obliquely, a
 #: cylinder's far flank is hidden, so a wider band would be lopsided towards the camera) ...
 CREST_SHARE = 0.97
@@ -846,6 +861,71 @@ def _place(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     return _Placement(part, settings.match_tolerance, True, axis, across, center_uv, length)
 
 
+def _on_something(
+    seg: _Segment,
+    inputs: _FitInputs,
+    h: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    axis: NDArray[np.float64],
+    across: NDArray[np.float64],
+    s: NDArray[np.float64],
+    outer: float,
+    c_mid: float,
+) -> _Placement | None:
+    """A part lying level on something (another part, a wall's foot): seen from above, its
+    width is its outer size, and its top is higher than that size (what it lies on is mostly
+    hidden under it, so its height above that is not measured). Its top must show the part's
+    profile across it (:func:`_lying_profile`): a strip cut off a taller part's flat top (a
+    duct's half) or a piece between two parts does not. None on the floor or where nothing
+    matches. Fitted as ``tilted`` (not on the floor: its ends are not judged),
+    its axis half its size under its top."""
+    settings = inputs.settings
+    s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
+    length = s_hi - s_lo
+    part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
+    if part is None or part.outer < settings.thin_part:
+        return None
+    if seg.outer - part.outer < MIN_FOOT:
+        return None  # as high as its size: on the floor, and the height fit found nothing
+    if not _lying_profile(inputs.uv[seg.idx].astype(np.float64) - mean, h, seg.outer, across,
+                          c_mid, outer, part):
+        return None
+    center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across  # exact: the middle
+    axis_height = seg.outer - 0.5 * part.outer  # exact: the axis is half the size under the top
+    return _Placement(part, err, False, axis, across, center_uv, length, tilted=True,
+                      axis_height=axis_height)
+
+
+def _lying_profile(
+    uv: NDArray[np.float64],
+    h: NDArray[np.float64],
+    top: float,
+    across: NDArray[np.float64],
+    c_mid: float,
+    width: float,
+    part: Part,
+) -> bool:
+    """Whether the heights ``h`` across a level segment (``uv`` from its mean, ``across`` its
+    direction, ``c_mid`` its middle, ``width`` wide, ``top`` high) are ``part`` lying: a round
+    part's crest in the middle at the top and both flanks falling away from it by what a
+    cylinder's do (the median of each outer quarter and a half: :data:`ROUND_FALL` of the size),
+    a box's top flat across."""
+    c = dot_last(uv, across) - c_mid
+    middle = h[np.abs(c) < PROFILE_MIDDLE * width]
+    sides = [h[c < -PROFILE_SIDE * width], h[c > PROFILE_SIDE * width]]
+    if middle.size == 0 or any(x.size == 0 for x in sides):
+        return False
+    dip = top - float(np.median(middle))
+    falls = [top - float(np.median(x)) for x in sides]
+    if part.hole_shape == "circle":
+        lo, hi = ROUND_FALL_RANGE
+        expected = ROUND_FALL * part.outer
+        return dip < PROFILE_FLAT * part.outer and all(
+            lo * expected <= f <= hi * expected for f in falls
+        )
+    return max(abs(dip), *map(abs, falls)) < PROFILE_FLAT * part.outer
+
+
 def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     """A part leaning (one end on a neighbour or a wall): its height above the floor is then
     no measure of its size, nor is its upper half all of it; seen from above, its width still
@@ -869,9 +949,10 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     ds = sb - sb.mean()
     slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), MIN_SQUARED))
     if abs(slope) < LEVEL_SLOPE:
-        # Level: on the floor the height fit said what it shows; level on other parts looks
-        # like a strip cut off a taller part (a duct's half as a bushing), so it is not taken.
-        return None
+        # Level: on the floor the height fit said what it shows. Level on something (a part
+        # lying on a duct): what it lies on is the foot of its flanks, and it stands its own
+        # size above that; a strip cut off a taller part's flat top (a duct's half) does not.
+        return _on_something(seg, inputs, h, mean, axis, across, s, outer, c_mid)
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
     part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
