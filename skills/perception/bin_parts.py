@@ -154,9 +154,10 @@ LEVEL_SLOPE = 0.07
 #: m: a top this much higher than the part's size lies on something, not on the floor (eight
 #: sigma of the depth noise, under the thinnest part, 7.6 mm)
 MIN_FOOT = 0.006
-#: shares of a level segment's width: its middle band (either side of the middle) and where
-#: its outer quarters begin (:func:`_lying_profile`)
+#: share of a level segment's width either side of its middle that is its crest band
+#: (:func:`_lying_profile`)
 PROFILE_MIDDLE = 0.15
+#: share of a level segment's width off its middle where its outer quarters begin
 PROFILE_SIDE = 0.25
 #: share of a lying cylinder's diameter by which its top, seen from above, falls at the
 #: median of an outer quarter (about 3/8 of the width off the middle: r (1 - sqrt(1 - 0.75^2))
@@ -164,6 +165,7 @@ PROFILE_SIDE = 0.25
 #: quarter, as a part high up and off the view's centre is seen obliquely, its far flank
 #: hidden (a cup on a duct: 2.5-3.4 mm on that side against 8.2 mm)
 ROUND_FALL = 0.17
+#: the shares of :data:`ROUND_FALL` accepted (seen obliquely, a quarter; twice it at the most)
 ROUND_FALL_RANGE = (0.25, 2.0)
 #: share of the part's size within which a top counts as flat (a box's top; a cylinder's
 #: crest band)
