@@ -5,8 +5,8 @@ as a pivot success; the regrasp baseline (:mod:`skills.regrasp`) ends with it to
 The part stands where the Tilt (or the baseline) left it, known only roughly, so this looks, as
 the paper's cell does with its wrist camera:
 
-1. pressed on something (a pad on the rim: Align stopped on its guard), draw back a few
-   millimetres along the fingers; let go and draw the fingers back along their axis;
+1. pressed on something (a pad on the rim: Align stopped on its guard), move a few
+   millimetres the way the wrist is pushed; let go and draw the fingers back along their axis;
 2. move the wrist camera ``view_height`` above the predicted rim, find the rim's ring in the
    depth image (:func:`skills.perception.locate_upright_part`); fail if no standing part is seen;
 3. fingers straight down over the wall nearest the robot, the jaws open by ``wall_gap`` on each
@@ -128,15 +128,19 @@ class PickFromAbove(HoleGraspSkill):
 
     # --- the steps' commands and checks ------------------------------------------------------
     def _ease_off(self) -> None:
-        """Pressed (an Align stopped with a pad on the rim), draw the tool back ``ease_off``
-        along the fingers first: the jaws then open off the part, not into it."""
+        """Pressed (an Align stopped with a pad on the rim), move the tool ``ease_off`` the
+        way the wrist is pushed first: the jaws then open off the part, not into it."""
         arm, p = self.dev.arm, self.params
-        self._eased = float(np.linalg.norm(world_force(self.dev))) >= p.ease_force
+        force = world_force(self.dev)
+        pressed = float(np.linalg.norm(force))
+        self._eased = pressed >= p.ease_force
         if not self._eased:
             return
+        # the way the part pushes the tool: the way off it (back along the fingers drags a
+        # finger caught in the hole, part and all: 165 N in the twin)
         tool = arm.tool_pose()
-        back = tool.position - p.ease_off * tool.rotation[:, Z]
-        arm.move_to(Pose(back, tool.rotation), p.approach_speed, p.acceleration)
+        off = tool.position + p.ease_off * force / pressed
+        arm.move_to(Pose(off, tool.rotation), p.approach_speed, p.acceleration)
 
     def _release(self) -> None:
         frame, gripper = self._frame_now(), self.dev.gripper
