@@ -5,8 +5,8 @@ as a pivot success; the regrasp baseline (:mod:`skills.regrasp`) ends with it to
 The part stands where the Tilt (or the baseline) left it, known only roughly, so this looks, as
 the paper's cell does with its wrist camera:
 
-1. pressed on something (a pad on the rim: Align stopped on its guard), move a few
-   millimetres the way the wrist is pushed; let go and draw the fingers back along their axis;
+1. pressed on something (a pad on the rim: Align stopped on its guard), stop the jaws and move
+   a few millimetres the way the wrist is pushed; let go and draw the fingers back along their axis;
 2. move the wrist camera ``view_height`` above the predicted rim, find the rim's ring in the
    depth image (:func:`skills.perception.locate_upright_part`); fail if no standing part is seen;
 3. fingers straight down over the wall nearest the robot, the jaws open by ``wall_gap`` on each
@@ -128,16 +128,20 @@ class PickFromAbove(HoleGraspSkill):
 
     # --- the steps' commands and checks ------------------------------------------------------
     def _ease_off(self) -> None:
-        """Pressed (an Align stopped with a pad on the rim), move the tool ``ease_off`` the
-        way the wrist is pushed first: the jaws then open off the part, not into it."""
+        """Pressed (an Align stopped with a pad on the rim), stop the jaws and move the tool
+        ``ease_off`` the way the wrist is pushed first: the jaws then open off the part, not
+        into it."""
         arm, p = self.dev.arm, self.params
         force = world_force(self.dev)
         pressed = float(np.linalg.norm(force))
         self._eased = pressed >= p.ease_force
         if not self._eased:
             return
-        # the way the part pushes the tool: the way off it (back along the fingers drags a
-        # finger caught in the hole, part and all: 165 N in the twin)
+        # The jaws first stop where they are: the abort stopped the arm, not the jaws, and
+        # jaws still closing under force advance the tips into the part (55 N became 171 N in
+        # the twin with the arm still). Then the way the part pushes the tool: the way off it.
+        gripper = self.dev.gripper
+        gripper.open(gripper.width())
         tool = arm.tool_pose()
         off = tool.position + p.ease_off * force / pressed
         arm.move_to(Pose(off, tool.rotation), p.approach_speed, p.acceleration)
