@@ -22,7 +22,6 @@ from py_trees.behaviour import Behaviour
 from py_trees.decorators import Decorator
 
 from drivers.clock import Clock
-from drivers.devices import Devices
 from drivers.events import EventKind, StopKind
 from drivers.health import DeviceError
 from skills.status import Failure
@@ -110,21 +109,6 @@ def _checked(node: Behaviour, status: Any) -> Status:
         f"A behaviour returned an invalid status, setting to INVALID [{status}][{node.name}]"
     )
     return Status.INVALID
-
-
-def stop_motion(devices: Devices) -> None:
-    """An abort's stop: the arm, and jaws still travelling onto nothing. The jaws are a motion
-    too: a 2F-85's tips travel along the fingers as the jaws move, so jaws closing on with the
-    arm stopped press the tips on into what they touch (an aborted Align's pad on the rim: 55 N
-    became 191 N in the twin before the next leaf began). Jaws holding a part, stalled on it,
-    keep their grip: an abort keeps the part held."""
-    devices.arm.stop()
-    gripper = devices.gripper
-    try:
-        if gripper.moving() and not gripper.object_detected():
-            gripper.open(gripper.width())  # asked to stay where they are
-    except DeviceError:
-        pass  # a gripper that does not answer: the device's health check reports it
 
 
 class _CheckFirst(_LeanDecorator):
@@ -259,7 +243,7 @@ class FTGuard(_CheckFirst):
         return None
 
     def on_trip(self, reason: str) -> None:
-        stop_motion(self.ctx.devices)  # also when the child was not running a motion
+        self.ctx.devices.arm.stop()  # also when the child was not running a motion
         self.ctx.events.abort(reason, self.trip_code, leaf_name(self))
 
 
@@ -300,7 +284,7 @@ class Timeout(_CheckFirst):
         return None
 
     def on_trip(self, reason: str) -> None:
-        stop_motion(self.ctx.devices)
+        self.ctx.devices.arm.stop()
         self.ctx.events.abort(reason, Failure.TIMEOUT, leaf_name(self))
 
 

@@ -229,16 +229,6 @@ class PivotParams:
     )
     lift_height: float = si(0.05, "m", 0.0, 0.3, "the lift after Align")
     release: float = si(0.004, "m", 0.0, 0.03, "the jaws ease before Align turns the gripper")
-    #: The recovery's let go after an aborted Align: a pad left pressed on the rim is moved off
-    #: it (the way the wrist is pushed) before the jaws open, as the 2F-85's tips travel along
-    #: the fingers as the jaws move (the twin read 55 N become 184 N as the jaws opened on such
-    #: a pad, the arm stopped). A let go with less on the wrist than ``ease_force`` opens at once.
-    ease_off: float = si(
-        0.005, "m", 0.0, 0.03, "the tool moves off the part before the recovery lets go, pressed"
-    )
-    ease_force: float = si(
-        10.0, "N", 1.0, 100.0, "on the wrist at the recovery's let go that means a pad pressed"
-    )
     #: m the fingertips reach below the rim for the hole grasp; in the cell, the slot's
     #: ``grip_depth`` (the grasp the slot and the box expect), so it is not a key of its own.
     wall_depth: float = 0.040

@@ -5,8 +5,7 @@ as a pivot success; the regrasp baseline (:mod:`skills.regrasp`) ends with it to
 The part stands where the Tilt (or the baseline) left it, known only roughly, so this looks, as
 the paper's cell does with its wrist camera:
 
-1. pressed on something (a pad on the rim: Align stopped on its guard), stop the jaws and move
-   a few millimetres the way the wrist is pushed; let go and draw the fingers back along their axis;
+1. let go and draw the fingers back along their axis;
 2. move the wrist camera ``view_height`` above the predicted rim, find the rim's ring in the
    depth image (:func:`skills.perception.locate_upright_part`); fail if no standing part is seen;
 3. fingers straight down over the wall nearest the robot, the jaws open by ``wall_gap`` on each
@@ -23,15 +22,13 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from drivers.arm import MotionState
 from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import XY, Z
-from skills.force import world_force
 from skills.frames import frame_step
-from skills.motion import GuardedMotion, Sequence, arm_failure
+from skills.motion import GuardedMotion, Sequence
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import HoleGraspSkill, hole_grasp_rotation, pinched_span
 from skills.pivot.clearance import Obstacle, Reach, nearest, tool_points
@@ -63,7 +60,6 @@ class PickFromAbove(HoleGraspSkill):
         #: m, x y: from the pivot (set at the let-go), or where the part was seen standing
         self.predicted_axis: NDArray[np.float64] | None = None
         self.seen: UprightPart | None = None  #: what the camera found
-        self._eased = False  #: the let go began pressed, so the tool drew back first
         let_go = self._let_go_steps()
         if center_xy is not None:
             self.predicted_axis, let_go = np.asarray(center_xy, float)[XY].copy(), []
@@ -75,12 +71,6 @@ class PickFromAbove(HoleGraspSkill):
     def _let_go_steps(self) -> list[GuardedMotion]:
         dev, g = self.dev, self.params.guard
         return [
-            GuardedMotion(
-                "ease off the part", self._ease_off,
-                lambda: not self._eased or dev.arm.status().state is MotionState.DONE,
-                dev.arm, dev.ft, dev.clock, g,
-                lambda: arm_failure(dev.arm) if self._eased else None,
-            ),
             dev.grip("let go", g, self._release),
             dev.move("draw the fingers back", g, self._withdraw),
         ]
@@ -127,25 +117,6 @@ class PickFromAbove(HoleGraspSkill):
         return self.seen.center + middle * toward_robot
 
     # --- the steps' commands and checks ------------------------------------------------------
-    def _ease_off(self) -> None:
-        """Pressed (an Align stopped with a pad on the rim), stop the jaws and move the tool
-        ``ease_off`` the way the wrist is pushed first: the jaws then open off the part, not
-        into it."""
-        arm, p = self.dev.arm, self.params
-        force = world_force(self.dev)
-        pressed = float(np.linalg.norm(force))
-        self._eased = pressed >= p.ease_force
-        if not self._eased:
-            return
-        # The jaws first stop where they are: the abort stopped the arm, not the jaws, and
-        # jaws still closing under force advance the tips into the part (55 N became 171 N in
-        # the twin with the arm still). Then the way the part pushes the tool: the way off it.
-        gripper = self.dev.gripper
-        gripper.open(gripper.width())
-        tool = arm.tool_pose()
-        off = tool.position + p.ease_off * force / pressed
-        arm.move_to(Pose(off, tool.rotation), p.approach_speed, p.acceleration)
-
     def _release(self) -> None:
         frame, gripper = self._frame_now(), self.dev.gripper
         radius = 0.5 * self.part.outer  # exact: a radius is half the diameter

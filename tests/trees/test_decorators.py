@@ -133,31 +133,6 @@ def test_ft_guard_mid_motion_halts_the_leaf_and_stops_the_arm(ctx) -> None:
     assert len(ctx.events.aborts) == 1
 
 
-@pytest.mark.parametrize("holding", [False, True])
-def test_an_abort_stops_jaws_closing_onto_nothing_and_keeps_a_held_part(ctx, holding) -> None:
-    """The jaws are a motion too: closing on with the arm stopped, a linkage gripper's tips
-    press on into what they touch. Jaws stalled on a part keep their grip."""
-    gripper = ctx.devices.gripper
-    gripper.object_width = 0.03 if holding else None
-    gripper.step = 0.001  # a millimetre a tick
-    gripper.close(20.0)
-    for _ in range(80 if holding else 10):
-        gripper.tick()
-    assert gripper.object_detected() is holding
-    set_wrench(np.zeros(6))
-    guard = FTGuard("g", Scripted("child"), ctx, max_force=50.0, max_torque=5.0)
-    tick(guard)
-    set_wrench([0, 0, -80.0, 0, 0, 0])
-    assert tick(guard) == Status.FAILURE
-    width = gripper.width()
-    for _ in range(20):
-        gripper.tick()
-    if holding:
-        assert gripper.object_detected() and gripper.closed_on == pytest.approx(0.03)
-    else:
-        assert gripper.width() == pytest.approx(width)  # stopped where the abort found them
-
-
 def test_ft_guard_without_a_sampler_in_the_tree_does_not_block_its_child(ctx) -> None:
     child = Scripted("child", Status.SUCCESS)
     guard = FTGuard("g", child, ctx, max_force=50.0, max_torque=5.0)
