@@ -134,8 +134,8 @@ class MoveKind(StrEnum):
 
     DRAG = "drag"  #: pinched across its diameter, lifted, carried, set down
     ROLL = "roll"  #: rolled across its axis under the closed fingertips
-    #: raised off the floor (leaning on a neighbour or a wall): pinched where it is, lifted
-    #: clear, carried and lowered until it touches the floor
+    #: raised off the floor (leaning on a neighbour or a wall, or lying on one): pinched
+    #: where it is, lifted clear, carried and lowered until it touches the floor
     LAY_DOWN = "lay down"
 
 
@@ -296,7 +296,7 @@ def _plan_drag(
                 continue
             # the same pinch must clear where the part is set down
             grip = next((g for g in free if _pinch_clear(moved, part, params, obstacles,
-                                                          finger_width, _lowered(g, drop))),
+                                                          finger_width, _lowered(g, drop, params))),
                         None)
             if grip is None:
                 continue
@@ -308,11 +308,12 @@ def _plan_drag(
     return None
 
 
-def _lowered(grip: Grip, drop: float) -> Grip:
+def _lowered(grip: Grip, drop: float, params: RepositionParams) -> Grip:
     """``grip`` on the part lowered by ``drop`` (m)."""
-    if drop <= 0.0 or grip.height is None:
+    if drop <= 0.0:
         return grip
-    return replace(grip, height=grip.height - drop)
+    height = params.grip_height if grip.height is None else grip.height
+    return replace(grip, height=height - drop)
 
 
 def plan_lay_down(
@@ -328,6 +329,7 @@ def plan_lay_down(
     base_xy: Seq[float] = (0.0, 0.0),
     *,
     reach: Reach,
+    leaning: bool = False,
 ) -> RepositionPlan | None:
     """A part whose axis is ``axis_height`` (m) above the floor at its middle, more than
     lying on it puts it: leaning on a neighbour or a wall, or lying on one. The pivot turns a
@@ -335,7 +337,8 @@ def plan_lay_down(
     across its diameter where it is (the fingertips ``grip_below_axis`` under its axis), lifted
     clear, carried to the nearest place where a pivot clears (as a drag, :func:`_plan_drag`)
     and lowered until it touches the floor. ``frame``: the part's pivot frame as if it lay on
-    the floor where it is. None when no pinch clears or no place does."""
+    the floor where it is; ``leaning``: seen sloping (taken at its middle only). None when no
+    pinch clears or no place does. A part no higher than lying is a plain drag."""
     lying = 0.5 * part.outer  # exact: a lying part's axis is half its size up
     drop = max(0.0, axis_height - lying)
     height = axis_height - params.grip_below_axis
@@ -343,7 +346,9 @@ def plan_lay_down(
     raised[Z] = frame.floor_z + axis_height
     here = replace(frame, center=raised)
     obstacles = [*walls, *neighbours]
-    along = {g.along for g in grips(part, params, finger_width)}
+    # level on something, the axis is at that height all along it; leaning, only at its
+    # middle (its lean is not known here), so a leaning part is taken at its middle only
+    along = {g.along for g in grips(part, params, finger_width)} if not leaning else {0.0}
     free = [Grip(a, height) for a in sorted(along, key=abs)
             if _pinch_clear(here, part, params, obstacles, finger_width, Grip(a, height))]
     if not free:
@@ -486,7 +491,9 @@ class RollStroke:
 
 class Reposition(SequenceSkill):
     """Move a lying part by ``plan.shift``: a drag (pinch it at ``plan.grip``, lift, carry,
-    set down) or, ``plan.kind`` ROLL, a roll under the closed fingertips in strokes.
+    set down); ``plan.kind`` LAY_DOWN, the same from where it is raised, lifted by its raise
+    too and lowered until it touches the floor; or, ROLL, a roll under the closed fingertips
+    in strokes.
 
     Before: the part lies where ``plan.frame`` says, the jaws anywhere. After SUCCESS: the part
     lies about ``plan.shift`` further, the jaws ``approach_height`` above it (open after a
@@ -516,12 +523,13 @@ class Reposition(SequenceSkill):
         gripper = dev.gripper
         shift = np.array([plan.shift[0], plan.shift[1], 0.0])
         opening = part.outer + 2.0 * p.side_gap  # exact: a side gap each side of the part
-        lift = p.lift + plan.drop  # a raised part: clear of what it rests on by ``lift``
+        # a raised part is lifted by its raise as well: what it rests on may be as high as
+        # its raise under its low side, so that clears it by ``lift``
+        lift = p.lift + plan.drop
         if plan.drop > 0.0:
             # lowered until the part touches the floor, however it hangs in the pinch: aimed
             # ``lift`` below where it would lie, ended by the touch
-            lying = pinch_pose(plan.target, part, p, replace(plan.grip,
-                               height=plan.grip.height - plan.drop - p.lift))
+            lying = pinch_pose(plan.target, part, p, _lowered(plan.grip, plan.drop + p.lift, p))
             self.lower: ContactMove | None = ContactMove(
                 "lay it down", dev, p.descent_guard, lambda: lying, p.drag_speed,
                 p.acceleration, p.contact_force,

@@ -385,7 +385,7 @@ class PlanPick(Behaviour):
             "/part/target",
             {"detection": target, "frame": frame, "reposition": move, "standing": target.standing},
         )
-        what = f"drag {1e3 * move.distance:.0f} mm first, " if move is not None else ""
+        what = f"{move.kind.value} {1e3 * move.distance:.0f} mm first, " if move else ""
         self.feedback_message = (
             f"plan pick: {ctx.part.name} at ({target.center[0]:.3f}, {target.center[1]:.3f}) m, "
             f"yaw {math.degrees(frame.yaw):.1f} deg, {what}{len(clear)} pickable as they lie"
@@ -440,12 +440,12 @@ class PlanPick(Behaviour):
                 d.yaw,
                 floor_z=g.bin_floor_z,
             )
-            axis = float(d.center[2]) - g.bin_floor_z
-            raised = axis - 0.5 * ctx.part.outer > drag.max_raise
-            if d.tilted or raised:  # no G on the floor for the pivot until it is laid down
+            # its raise above the floor the view fitted, not the configured floor's height
+            axis = 0.5 * ctx.part.outer + d.raised  # exact: lying, half the size up
+            if d.tilted or d.raised > drag.max_raise:  # no G on the floor until laid down
                 down = plan_lay_down(
                     frame, axis, ctx.part, pivot, drag, walls, neighbours, g.bin_roi, width,
-                    reach=ctx.reach,
+                    reach=ctx.reach, leaning=d.tilted,
                 )
                 if down is not None:
                     drags[id(d)] = down

@@ -151,8 +151,8 @@ LEAN_CREST_BAND = 0.2
 MIN_LEAN_CREST = 30
 #: rise over run along the crest below which a part is level (0.07: 4 deg)
 LEVEL_SLOPE = 0.07
-#: m: a top this much higher than the part's size lies on something, not on the floor (eight
-#: sigma of the depth noise, under the thinnest part, 7.6 mm)
+#: m: a top this much higher than the part's size lies on something, not on the floor (about
+#: five sigma of the depth noise, under the thinnest part, 7.6 mm)
 MIN_FOOT = 0.006
 #: share of a level segment's width either side of its middle that is its crest band
 #: (:func:`_lying_profile`)
@@ -270,6 +270,10 @@ class Detection:
     #: standing on an end (:mod:`skills.perception.standing`): ``open_end`` is the top's
     #: centre, ``open_end_seen`` says the top is open; the pivot cannot take it as it stands
     standing: bool = False
+    #: m its axis lies higher than lying on the floor puts it, above the floor the view fitted
+    #: (on another part, leaning on one): what decides a lay down, free of how well the
+    #: configured floor height and the camera's calibration agree
+    raised: float = 0.0
 
     def pick(self) -> tuple[tuple[float, float], float]:
         """The grasp target the pivot planner needs: (open end x, y) and the axis yaw."""
@@ -879,10 +883,11 @@ def _on_something(
     """A part lying level on something (another part, a wall's foot): seen from above, its
     width is its outer size, and its top is higher than that size (what it lies on is mostly
     hidden under it, so its height above that is not measured). Its top must show the part's
-    profile across it (:func:`_lying_profile`): a strip cut off a taller part's flat top (a
-    duct's half) or a piece between two parts does not. None on the floor or where nothing
-    matches. Fitted as ``tilted`` (not on the floor: its ends are not judged),
-    its axis half its size under its top."""
+    profile across it (:func:`_lying_profile`): for a round part, a strip cut off a taller
+    part's flat top (a duct's half) or a piece between two parts does not; a box part is taken
+    on any flat top of its sizes. None on the floor or where nothing matches. Fitted as
+    ``tilted`` (not on the floor: its ends are not judged), its axis half its size under its
+    top."""
     settings = inputs.settings
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = s_hi - s_lo
@@ -954,8 +959,8 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
     slope = float(np.sum(ds * (hb - hb.mean())) / max(float(np.sum(ds * ds)), MIN_SQUARED))
     if abs(slope) < LEVEL_SLOPE:
         # Level: on the floor the height fit said what it shows. Level on something (a part
-        # lying on a duct): what it lies on is the foot of its flanks, and it stands its own
-        # size above that; a strip cut off a taller part's flat top (a duct's half) does not.
+        # lying on a duct): its width and length are its sizes, its top higher than its size,
+        # its profile across a lying part's; a piece of a flat top or between parts is not.
         return _on_something(seg, inputs, h, mean, axis, across, s, outer, c_mid)
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
@@ -1120,6 +1125,7 @@ def _detection(seg: _Segment, placed: _Placement, inputs: _FitInputs) -> Detecti
         confidence=conf * (1.0 if seen else UNDECIDED_END),
         pixels=len(seg.idx),
         tilted=placed.tilted,
+        raised=max(0.0, up - 0.5 * part.outer),  # exact: lying, the axis is half the size up
     )
 
 

@@ -65,14 +65,15 @@ def test_a_bushing_resting_on_another_is_laid_down_level_on_the_floor() -> None:
         # seen raised: leaning, its axis' height at its middle as it is
         assert d.tilted
         assert abs(float(d.center[2]) - float(pose.position[2])) < 0.005
+        assert abs(d.raised - raise_before) < 0.005
         lying = PivotFrame(part.section(width),
                            np.array([d.center[0], d.center[1], floor + 0.5 * part.outer]),
                            d.yaw, floor_z=floor)
         plan_ = plan_pivot(part, Gripper(), Frictions())
         pivot = PivotParams(l_a=plan_.l_a, alpha=plan_.alpha)
         params = RepositionParams()
-        move = plan_lay_down(lying, float(d.center[2]) - floor, part, pivot, params, walls,
-                             [neighbour], roi, width, reach=ur5_reach)
+        move = plan_lay_down(lying, 0.5 * part.outer + d.raised, part, pivot, params, walls,
+                             [neighbour], roi, width, reach=ur5_reach, leaning=d.tilted)
         assert move is not None and move.kind is MoveKind.LAY_DOWN
         assert move.drop > 0.008
 
@@ -117,4 +118,4 @@ def test_a_lay_down_takes_the_part_at_its_height_and_sets_it_on_the_floor() -> N
     # a part already lying is no lay down: its drop is none
     flat = plan_lay_down(frame, 0.5 * part.outer, part, pivot, params, walls, [], roi, width,
                          reach=ur5_reach)
-    assert flat is None or (flat.kind is MoveKind.DRAG and flat.drop == 0.0)
+    assert flat is not None and flat.kind is MoveKind.DRAG and flat.drop == 0.0

@@ -678,7 +678,7 @@ def test_plan_pick_names_a_part_nothing_frees_and_leaves_it(ctx) -> None:
 
 
 @pytest.mark.parametrize(
-    "how", ["leaning", "on a neighbour", "leaning, its open end not made out"]
+    "how", ["leaning", "leaning, 3 mm up", "on a neighbour", "leaning, its open end not made out"]
 )
 def test_plan_pick_lays_a_raised_part_down_instead_of_pivoting_it_as_it_lies(ctx, how) -> None:
     """A part free for the pivot where it lies, but off the floor: laid down first (the pivot
@@ -686,10 +686,11 @@ def test_plan_pick_lays_a_raised_part_down_instead_of_pivoting_it_as_it_lies(ctx
     bb = blackboard()
     free = lying(0.47, 0.0, 0.0)
     raised = {
-        "leaning": dataclasses.replace(free, tilted=True, center=np.array([0.47, 0.0, 0.026])),
-        "on a neighbour": dataclasses.replace(free, center=np.array([0.47, 0.0, 0.051])),
+        "leaning": dataclasses.replace(free, tilted=True, raised=0.009),
+        "leaning, 3 mm up": dataclasses.replace(free, tilted=True, raised=0.003),
+        "on a neighbour": dataclasses.replace(free, raised=0.034),
         "leaning, its open end not made out": dataclasses.replace(
-            free, tilted=True, open_end_seen=False, center=np.array([0.47, 0.0, 0.026])
+            free, tilted=True, open_end_seen=False, raised=0.009
         ),
     }[how]
     bb.set("/part/detections", [raised])
@@ -698,8 +699,8 @@ def test_plan_pick_lays_a_raised_part_down_instead_of_pivoting_it_as_it_lies(ctx
     assert node.status == Status.SUCCESS, node.feedback_message
     move = bb.get("/part/target")["reposition"]
     assert move is not None and move.kind.value == "lay down"
-    assert move.drop == pytest.approx(float(raised.center[2]) - 0.017)
-    bb.set("/part/detections", [dataclasses.replace(free, center=np.array([0.47, 0.0, 0.022]))])
+    assert move.drop == pytest.approx(raised.raised)
+    bb.set("/part/detections", [dataclasses.replace(free, raised=0.005)])
     node = lv.PlanPick("plan", ctx)
     settle(node)
     assert node.status == Status.SUCCESS and bb.get("/part/target")["reposition"] is None
