@@ -74,9 +74,12 @@ STANDING_UP = "standing up"
 STAND_POSES = 10
 #: Points along the part's axis (from G) and across it (each way) of its box in the sweep
 STAND_ALONG, STAND_ACROSS = 5, 3
-#: m, the thinnest a bin wall is modelled: one configured thinner (or 0) still has an inside
-#: that a point of the sweep can be found in
-MIN_WALL_THICKNESS = 0.002
+#: m, the thinnest a bin wall is modelled, its inside face where it is and the rest outward:
+#: the tool's model is points on its boxes' faces, as far apart as ``WRIST_STEP``, and a wall
+#: thinner than that can pass between two of them unseen. (A drag planned the 2F-85's body
+#: down over the 5 mm +x wall's top, its outer finger 0.7 mm outside the wall: 273 N in the
+#: twin, seed 20601.) Outside the bin nothing is planned to go below its walls' top.
+MIN_WALL_THICKNESS = WRIST_STEP
 
 
 @dataclass(frozen=True)

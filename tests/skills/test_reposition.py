@@ -187,3 +187,14 @@ def test_a_roll_stroke_presses_from_the_reading_before_the_touch_and_stops_at_it
             break
     assert stroke.travelled == pytest.approx(0.032, abs=p.roll_speed * d["arm"].dt)
     assert d["arm"].force is None  # stopped at its travel
+
+
+def test_the_jaws_never_come_down_astride_a_thin_wall(bushing) -> None:
+    """A part 19 mm off the +x wall, its axis along y (seed 20601 of the tipped bin): opened
+    around it, the outer finger would come down just outside the 5 mm wall and the 2F-85's body
+    onto the wall's top (273 N in the twin). The tool's model is points 10-12 mm apart; the wall
+    must still be seen between them."""
+    part, _ = bushing
+    walls = bin_walls(ROI, 0.0, 0.08, 0.005)
+    f = PivotFrame(part.section(W), np.array([0.7008, -0.0658, 0.017]), math.radians(-90.4), 0.0)
+    assert not _pinch_clear(f, part, RepositionParams(), walls, W, Grip())
