@@ -530,13 +530,11 @@ class Reposition(SequenceSkill):
             # lowered until the part touches the floor, however it hangs in the pinch: aimed
             # ``lift`` below where it would lie, ended by the touch
             lying = pinch_pose(plan.target, part, p, _lowered(plan.grip, plan.drop + p.lift, p))
-            self.lower: ContactMove | None = ContactMove(
+            set_down = ContactMove(
                 "lay it down", dev, p.descent_guard, lambda: lying, p.drag_speed,
                 p.acceleration, p.contact_force,
-            )
-            set_down = self.lower.motion
+            ).motion
         else:
-            self.lower = None
             set_down = dev.move("set it down", g, lambda: self._move_by(-up * p.lift, p.speed))
         self.sequence = Sequence(
             "reposition",

@@ -426,13 +426,7 @@ class PlanPick(Behaviour):
                 if up is not None:
                     clear[id(d)] = up
                     continue
-                left.append(
-                    {
-                        "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
-                        "reason": "standing: no side clears the grasp from above",
-                        "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
-                    }
-                )
+                left.append(_left(d, "standing: no side clears the grasp from above"))
                 continue
             frame = PivotFrame(
                 section,
@@ -450,14 +444,9 @@ class PlanPick(Behaviour):
                 if down is not None:
                     drags[id(d)] = down
                     continue
-                left.append(
-                    {
-                        "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
-                        "reason": f"off the floor ({'leaning, ' if d.tilted else ''}its axis "
-                        f"{1e3 * axis:.0f} mm up): no lay down clears",
-                        "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
-                    }
-                )
+                how = "leaning, " if d.tilted else ""
+                reason = f"off the floor ({how}its axis {1e3 * axis:.0f} mm up): no lay down clears"
+                left.append(_left(d, reason))
                 continue
             choice = choose_end(
                 frame, pivot, [*walls, *neighbours], width, ctx.part.open_ends, reach=ctx.reach
@@ -471,13 +460,17 @@ class PlanPick(Behaviour):
             if move is not None:
                 drags[id(d)] = move
                 continue
-            left.append(
-                {
-                    "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
-                    "reason": f"no pivot clears: {choice.clearance.reason()}; no drag frees it",
-                    "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
-                }
-            )
+            reason = f"no pivot clears: {choice.clearance.reason()}; no drag frees it"
+            left.append(_left(d, reason))
+
+
+def _left(d: Detection, reason: str) -> dict[str, Any]:
+    """A part plan_pick passes over, as the bin-empty event names it: where, why."""
+    return {
+        "part": f"{d.part} at ({d.center[0]:.3f}, {d.center[1]:.3f}) m",
+        "reason": reason,
+        "at": [round(float(d.center[0]), 4), round(float(d.center[1]), 4)],
+    }
 
 
 def _exhaust(work: Iterator[None]) -> None:

@@ -877,6 +877,7 @@ def _on_something(
     axis: NDArray[np.float64],
     across: NDArray[np.float64],
     s: NDArray[np.float64],
+    c: NDArray[np.float64],
     outer: float,
     c_mid: float,
 ) -> _Placement | None:
@@ -896,8 +897,7 @@ def _on_something(
         return None
     if seg.outer - part.outer < MIN_FOOT:
         return None  # as high as its size: on the floor, and the height fit found nothing
-    if not _lying_profile(inputs.uv[seg.idx].astype(np.float64) - mean, h, seg.outer, across,
-                          c_mid, outer, part):
+    if not _lying_profile(c - c_mid, h, seg.outer, outer, part):
         return None
     center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across  # exact: the middle
     axis_height = seg.outer - 0.5 * part.outer  # exact: the axis is half the size under the top
@@ -906,20 +906,13 @@ def _on_something(
 
 
 def _lying_profile(
-    uv: NDArray[np.float64],
-    h: NDArray[np.float64],
-    top: float,
-    across: NDArray[np.float64],
-    c_mid: float,
-    width: float,
-    part: Part,
+    c: NDArray[np.float64], h: NDArray[np.float64], top: float, width: float, part: Part
 ) -> bool:
-    """Whether the heights ``h`` across a level segment (``uv`` from its mean, ``across`` its
-    direction, ``c_mid`` its middle, ``width`` wide, ``top`` high) are ``part`` lying: a round
+    """Whether the heights ``h`` across a level segment (``c`` each point's distance across
+    from its middle, ``width`` wide, ``top`` high) are ``part`` lying: a round
     part's crest in the middle at the top and both flanks falling away from it by what a
     cylinder's do (the median of each outer quarter and a half: :data:`ROUND_FALL` of the size),
     a box's top flat across."""
-    c = dot_last(uv, across) - c_mid
     middle = h[np.abs(c) < PROFILE_MIDDLE * width]
     sides = [h[c < -PROFILE_SIDE * width], h[c > PROFILE_SIDE * width]]
     if middle.size == 0 or any(x.size == 0 for x in sides):
@@ -961,7 +954,7 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
         # Level: on the floor the height fit said what it shows. Level on something (a part
         # lying on a duct): its width and length are its sizes, its top higher than its size,
         # its profile across a lying part's; a piece of a flat top or between parts is not.
-        return _on_something(seg, inputs, h, mean, axis, across, s, outer, c_mid)
+        return _on_something(seg, inputs, h, mean, axis, across, s, c, outer, c_mid)
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
     part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)
