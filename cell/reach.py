@@ -23,7 +23,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.pose import Pose
-from drivers.ur5.kinematics import HOME_JOINTS, REACH_TOLERANCE, forward_kinematics, solve_ik
+from drivers.ur5.kinematics import (
+    ARM_LIMIT,
+    HOME_JOINTS,
+    REACH_TOLERANCE,
+    forward_kinematics,
+    solve_ik,
+)
+from skills.travel import ArmModel
 
 #: m of TCP travel between two poses the check solves on the way to the first pose (a step the
 #: DLS solve follows on the branch it starts on; the twin's arm and a UR track far finer)
@@ -99,7 +106,23 @@ def reach_from_or_home(
     return reach
 
 
+def _ur5_joints_for(pose: Pose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The UR5's joints at ``pose`` solved from ``q`` (rad), on the branch ``q`` is on, or
+    None where the solve does not reach it."""
+    goal, miss = solve_ik(pose, q, iterations=DIRECT_ITERATIONS)
+    if miss > REACH_TOLERANCE:
+        return None
+    # Each joint turns +-360 deg: the same pose a whole turn nearer is the shorter joint move
+    # (the solve, turning the wrist by 190-200 deg for a 160-170 deg turn, took the long way).
+    nearer = goal - np.round((goal - q) / math.tau) * math.tau
+    return np.where(np.abs(nearer) <= ARM_LIMIT, nearer, goal)
+
+
+#: The UR5's kinematics as the skills take them, for travelling by a joint move.
+UR5_MODEL = ArmModel(solve=_ur5_joints_for, forward=forward_kinematics)
+
+
 __all__ = [
-    "REACH_STEP", "REACH_TURN", "reach_from", "reach_from_or_home", "ur5_reach",
+    "REACH_STEP", "REACH_TURN", "UR5_MODEL", "reach_from", "reach_from_or_home", "ur5_reach",
     "ur5_reach_along",
 ]

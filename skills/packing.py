@@ -38,16 +38,19 @@ from skills.motion import Guard, GuardedMotion, Sequence, Settled, wait
 from skills.params import guard_field, si
 from skills.slot import (
     GRAVITY,
+    JOINT_TRAVEL_ACCELERATION,
+    JOINT_TRAVEL_SPEED,
     ContactMove,
     SequenceSkill,
+    Travel,
     WrenchReference,
     check,
     grasp_offset,
     hold_pose,
     horizontal,
-    travel_path,
 )
 from skills.status import Failure
+from skills.travel import ArmModel
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,8 @@ class PackParams:
     travel_z: float = si(0.13, "m", 0.0, 0.5, "the lowest the part's bottom travels at")
     min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
     travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
+    joint_speed: float = si(*JOINT_TRAVEL_SPEED)
+    joint_acceleration: float = si(*JOINT_TRAVEL_ACCELERATION)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
     push_speed: float = si(0.01, "m/s", 0.001, 0.1, "of every push")
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
@@ -202,13 +207,21 @@ class PackInBox(SequenceSkill):
         dev: Devices,
         params: PackParams | None = None,
         top_z: float | None = None,
+        arm_model: ArmModel | None = None,
         **overrides: Any,
     ) -> None:
         """``place``: (x, y, z) of the part's bottom centre in the box (m; z the box floor), as
         :func:`tray_places` gives. ``top_z``: height (m) of the highest thing in or around the
-        box (default: the top of a packed part). ``overrides``: fields of :class:`PackParams`."""
+        box (default: the top of a packed part). ``arm_model``: the arm's kinematics, for
+        travelling by a joint move (None: straight travel paths only). ``overrides``: fields of
+        :class:`PackParams`."""
         p = replace(params or PackParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
+        self.travel = Travel(
+            arm_model, p.travel_speed, p.acceleration, p.joint_speed, p.joint_acceleration,
+            p.min_radius,
+        )
+        self.joint_travel = False  #: the travel over the place was a joint move
         target = np.asarray(place, float)
         self.place_xy, self.floor_z = target[XY].copy(), float(target[Z])
         self._top = self.floor_z + part.length if top_z is None else float(top_z)
@@ -381,8 +394,7 @@ class PackInBox(SequenceSkill):
     def _over_place(self) -> None:
         arm, p = self.dev.arm, self.params
         target = self._pose(max(self._top + p.clear_height, p.travel_z))
-        arm.move_path(travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed,
-                      p.acceleration)
+        self.joint_travel = self.travel.start(arm, target)
 
     def _move_by(self, dx: float, dy: float, dz: float = 0.0) -> None:
         p = self.params

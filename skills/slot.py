@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from drivers.arm import MotionState
+from drivers.arm import Arm, MotionState
 from drivers.camera import Frame
 from drivers.devices import Devices
 from drivers.parts import Part
@@ -52,6 +52,7 @@ from skills.params import guard_field, si
 from skills.perception import UprightPart, locate_upright_part
 from skills.pivot.align import hole_grasp_rotation, pinched_span
 from skills.status import Failure, StepResult
+from skills.travel import ArmModel, joint_goal
 
 GRAVITY = 9.81  #: m/s^2
 #: the length below which a vector is taken to have no direction (a direction's horizontal
@@ -67,6 +68,18 @@ ARC_STEP = math.radians(40.0)
 #: m, the rise or descent to the travel height is left out when shorter than this: the start
 #: is already at that height, a tenth of a millimetre is no move to make
 SAME_HEIGHT = 1e-4
+
+#: The travel by joint move (:mod:`skills.travel`): default, unit, range and sentence of the
+#: joint speed (0: straight travel paths only) and acceleration, shared with the packing's
+JOINT_TRAVEL_SPEED = (
+    math.radians(60.0), "rad/s", 0.0, math.radians(180.0),
+    "of the joint moving most in a travel by joint move; 0: straight travel paths only",
+)
+#: (its acceleration; the shipped cell's way home runs at 120 deg/s and 300 deg/s^2)
+JOINT_TRAVEL_ACCELERATION = (
+    math.radians(120.0), "rad/s^2", math.radians(6.0), math.radians(600.0),
+    "of the joint moving most in a travel by joint move",
+)
 
 
 @dataclass(frozen=True)
@@ -95,6 +108,8 @@ class SlotParams:
     )
     min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
     travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
+    joint_speed: float = si(*JOINT_TRAVEL_SPEED)
+    joint_acceleration: float = si(*JOINT_TRAVEL_ACCELERATION)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
     insert_speed: float = si(0.01, "m/s", 0.001, 0.1, "into the pocket and onto its floor")
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
@@ -198,6 +213,42 @@ def travel_path(start: Pose, target: Pose, min_radius: float) -> list[Pose]:
     if up.distance(start)[0] < SAME_HEIGHT:
         points = points[1:]
     return points
+
+
+@dataclass(frozen=True)
+class Travel:
+    """How a skill travels between fixtures: by a joint move where :mod:`skills.travel` finds
+    its swept path clear (``model`` given, ``joint_speed`` above 0), else along
+    :func:`travel_path`."""
+
+    model: ArmModel | None
+    speed: float  #: m/s, the TCP along a travel path
+    acceleration: float  #: m/s^2
+    joint_speed: float  #: rad/s, the joint moving most in a joint move; 0: never one
+    joint_acceleration: float  #: rad/s^2
+    min_radius: float  #: m from the base axis a travel path keeps
+
+    def start(self, arm: Arm, target: Pose) -> bool:
+        """Start the travel to ``target``; True when it is a joint move."""
+        q = None
+        if self.joint_speed > 0:
+            q = joint_goal(self.model, arm.joint_positions(), target, self.min_radius)
+        if q is None:
+            path = travel_path(arm.tool_pose(), target, self.min_radius)
+            arm.move_path(path, self.speed, self.acceleration)
+            return False
+        arm.move_joints(q, self.joint_speed, self.joint_acceleration)
+        return True
+
+
+def rise_to(arm: Arm, z: float, speed: float, acceleration: float) -> None:
+    """Start a straight vertical move of the TCP up to height ``z`` (m); one already at or
+    above it stays where it is (the move ends at once)."""
+    tool = arm.tool_pose()
+    arm.move_to(
+        Pose(np.array([*tool.position[XY], max(z, tool.position[Z])]), tool.rotation),
+        speed, acceleration,
+    )
 
 
 #: Share of a weight check's hold not averaged: the motion before it is still stopping there
@@ -360,9 +411,15 @@ class _SlotSkill(SequenceSkill):
         dev: Devices,
         params: SlotParams | None,
         overrides: dict[str, Any],
+        arm_model: ArmModel | None = None,
     ) -> None:
         p = replace(params or SlotParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
+        self.travel = Travel(
+            arm_model, p.travel_speed, p.acceleration, p.joint_speed, p.joint_acceleration,
+            p.min_radius,
+        )
+        self.joint_travel = False  #: the last travel was a joint move
         slot = np.asarray(slot_center, float)
         self.slot_xy, self.slot_floor_z = slot[XY].copy(), float(slot[Z])
         self.machine_top_z = self.slot_floor_z + p.slot_depth
@@ -414,11 +471,14 @@ class FeedSlot(_SlotSkill):
         part: Part,
         dev: Devices,
         params: SlotParams | None = None,
+        arm_model: ArmModel | None = None,
         **overrides: Any,
     ) -> None:
         """``slot_center``: (x, y, z) of the centre of the pocket's floor (m, base frame);
-        ``overrides``: fields of :class:`SlotParams` to change (``grip_depth=0.02``)."""
-        super().__init__(slot_center, part, dev, params, overrides)
+        ``arm_model``: the arm's kinematics, for travelling by a joint move (None: straight
+        travel paths only); ``overrides``: fields of :class:`SlotParams` to change
+        (``grip_depth=0.02``)."""
+        super().__init__(slot_center, part, dev, params, overrides, arm_model)
         p = self.params
         self._offset = grasp_offset(part, dev.gripper.finger_width)
         # Lowest the part's bottom may go: the outer fingertip stays above the machine.
@@ -441,6 +501,7 @@ class FeedSlot(_SlotSkill):
     def _carry_steps(self) -> list[GuardedMotion]:
         dev, g = self.dev, self.params.guard
         return [
+            dev.move("up to the travel height", g, self._up_to_travel),
             dev.move("over the slot", g, self._over_slot),
             dev.move("down to the slot", g, self._down_to_slot),
             *self._hold_still_and_read("hanging part"),
@@ -480,12 +541,17 @@ class FeedSlot(_SlotSkill):
         )
 
     # --- the steps' commands and checks ------------------------------------------------------
+    def _travel_target(self) -> Pose:
+        return self._pose(max(self._above, self.params.travel_z))
+
+    def _up_to_travel(self) -> None:
+        # Straight up first: the part may still be inside the bin, and the travel across may
+        # be a joint move, which also goes sideways.
+        p = self.params
+        rise_to(self.dev.arm, self._travel_target().position[Z], p.travel_speed, p.acceleration)
+
     def _over_slot(self) -> None:
-        arm, p = self.dev.arm, self.params
-        target = self._pose(max(self._above, p.travel_z))
-        arm.move_path(
-            travel_path(arm.tool_pose(), target, p.min_radius), p.travel_speed, p.acceleration
-        )
+        self.joint_travel = self.travel.start(self.dev.arm, self._travel_target())
 
     def _down_to_slot(self) -> None:
         p = self.params
@@ -572,10 +638,11 @@ class PickFromSlot(_SlotSkill):
         part: Part,
         dev: Devices,
         params: SlotParams | None = None,
+        arm_model: ArmModel | None = None,
         **overrides: Any,
     ) -> None:
         """As :class:`FeedSlot`."""
-        super().__init__(slot_center, part, dev, params, overrides)
+        super().__init__(slot_center, part, dev, params, overrides, arm_model)
         p = self.params
         self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
         self._offset = grasp_offset(part, dev.gripper.finger_width)

@@ -951,6 +951,7 @@ class FeedSlot(SkillBehaviour):
             self.ctx.part,
             self.ctx.devices,
             self.settings(),
+            arm_model=self.ctx.arm_model,
         )
 
     def on_success(self) -> None:
@@ -996,6 +997,7 @@ class PickFromSlot(SkillBehaviour):
             self.ctx.part,
             self.ctx.devices,
             self.settings(),
+            arm_model=self.ctx.arm_model,
         )
 
     def on_success(self) -> None:
@@ -1024,6 +1026,7 @@ class PackInBox(SkillBehaviour):
             self.ctx.part,
             self.ctx.devices,
             self.settings(),
+            arm_model=self.ctx.arm_model,
         )
 
     def on_success(self) -> None:

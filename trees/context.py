@@ -27,6 +27,7 @@ from skills.pivot.clearance import Reach
 from skills.reposition import RepositionParams
 from skills.slot import SlotParams
 from skills.status import Failure
+from skills.travel import ArmModel
 
 #: The ``skills:`` sections of a cell's configuration: name -> the parameter dataclass whose
 #: :func:`~skills.params.si` fields are its keys. A leaf of the tree names the section it reads.
@@ -119,6 +120,9 @@ class CellContext:
     #: The reach from where the arm stands, along straight moves (None: ``reach``): a plan
     #: that only ``reach`` clears is carried out from home.
     reach_here: Reach | None = None
+    #: The arm's kinematics for the skills' travel by joint moves (None: straight travel paths
+    #: only); the cell hands in its arm's.
+    arm_model: ArmModel | None = None
     limits: WorkflowLimits = field(default_factory=WorkflowLimits)
     #: The safety section's abort force and torque, for leaves whose node gives none.
     default_guard: Guard = field(default_factory=Guard)

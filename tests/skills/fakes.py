@@ -38,6 +38,9 @@ class FakeArm:
         #: in force mode the TCP moves at its speed limit unless something holds it (the test)
         self.blocked = False
         self.dt = 0.008
+        #: joints -> TCP pose: given, a joint move ends at that pose (else where it started)
+        self.forward = None
+        self.q = np.zeros(6)  #: joints, as the last joint move left them
 
     def tool_pose(self) -> Pose:
         return self.pose
@@ -54,7 +57,11 @@ class FakeArm:
 
     def move_joints(self, q, speed: float, acceleration: float) -> None:
         self.commands.append(("joints", tuple(q)))
-        self.queue = [self.pose]
+        if self.forward is not None:  # a test that gives the arm's kinematics moves the TCP
+            self.q = np.asarray(q, float)
+            self.queue = [self.forward(self.q)]
+        else:
+            self.queue = [self.pose]
         self.remaining = self.ticks_per_move
         self.state = MotionState.MOVING
 
@@ -81,7 +88,7 @@ class FakeArm:
         return ArmStatus(self.state)
 
     def joint_positions(self) -> np.ndarray:
-        return np.zeros(6)
+        return self.q
 
     def tick(self) -> None:
         if self.state is MotionState.MOVING and self.force is not None:
