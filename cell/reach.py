@@ -106,23 +106,47 @@ def reach_from_or_home(
     return reach
 
 
-def _ur5_joints_for(pose: Pose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """The UR5's joints at ``pose`` solved from ``q`` (rad), on the branch ``q`` is on, or
-    None where the solve does not reach it."""
-    goal, miss = solve_ik(pose, q, iterations=DIRECT_ITERATIONS)
-    if miss > REACH_TOLERANCE:
+def _bearing(position: NDArray[np.float64]) -> float:
+    return math.atan2(position[1], position[0])
+
+
+def _turned(q: NDArray[np.float64], pose: Pose) -> NDArray[np.float64]:
+    """``q`` with the base turned so that its TCP has ``pose``'s bearing about the base axis."""
+    turn = _bearing(pose.position) - _bearing(forward_kinematics(q).position)
+    seed = q.copy()
+    seed[0] += (turn + math.pi) % math.tau - math.pi
+    return seed
+
+
+def ur5_model(home: ArrayLike) -> ArmModel:
+    """The UR5's kinematics as the skills take them, for travelling by a joint move; ``home``
+    (rad) is the cell's home joints."""
+    q_home = np.asarray(home, float)
+
+    def joints_for(pose: Pose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
+        """The joints at ``pose`` for a joint move from ``q`` (rad), or None where no solve
+        reaches it. Seeds, in turn: ``q`` with the base turned to the pose's bearing (the
+        arm's own branch; from ``q`` itself a pose far round the base is solved across the
+        TCP's straight line, which passes near the base axis, singular there, and the solve
+        missed); ``q``; home turned likewise (home's branch: the one every pose the cell
+        plans was checked on; a joint move may change branch, its swept path is checked)."""
+        for seed in (_turned(q, pose), q, _turned(q_home, pose)):
+            goal, miss = solve_ik(pose, seed, iterations=DIRECT_ITERATIONS)
+            if miss <= REACH_TOLERANCE:
+                # Each joint turns +-360 deg: the same pose a whole turn nearer is the
+                # shorter joint move (the solve turned the wrist 190-200 deg for 160-170).
+                nearer = goal - np.round((goal - q) / math.tau) * math.tau
+                return np.where(np.abs(nearer) <= ARM_LIMIT, nearer, goal)
         return None
-    # Each joint turns +-360 deg: the same pose a whole turn nearer is the shorter joint move
-    # (the solve, turning the wrist by 190-200 deg for a 160-170 deg turn, took the long way).
-    nearer = goal - np.round((goal - q) / math.tau) * math.tau
-    return np.where(np.abs(nearer) <= ARM_LIMIT, nearer, goal)
+
+    return ArmModel(solve=joints_for, forward=forward_kinematics)
 
 
-#: The UR5's kinematics as the skills take them, for travelling by a joint move.
-UR5_MODEL = ArmModel(solve=_ur5_joints_for, forward=forward_kinematics)
+#: :func:`ur5_model` with the default home
+UR5_MODEL = ur5_model(HOME_JOINTS)
 
 
 __all__ = [
-    "REACH_STEP", "REACH_TURN", "UR5_MODEL", "reach_from", "reach_from_or_home", "ur5_reach",
-    "ur5_reach_along",
+    "REACH_STEP", "REACH_TURN", "UR5_MODEL", "reach_from", "reach_from_or_home", "ur5_model",
+    "ur5_reach", "ur5_reach_along",
 ]

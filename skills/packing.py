@@ -48,6 +48,7 @@ from skills.slot import (
     grasp_offset,
     hold_pose,
     horizontal,
+    rise_to,
 )
 from skills.status import Failure
 from skills.travel import ArmModel
@@ -315,6 +316,7 @@ class PackInBox(SequenceSkill):
     def _over_place_steps(self) -> list[GuardedMotion]:
         dev, p, g = self.dev, self.params, self.params.guard
         return [
+            dev.move("up to the travel height", g, self._up_to_travel),
             dev.move("over the place", g, self._over_place),
             self.reference.hold("hold still", g, p.settle),
             check("read the hanging part", dev, g, self.reference.read),
@@ -391,10 +393,17 @@ class PackInBox(SequenceSkill):
         return Pose(tool.position + np.array([dx, dy, dz]), tool.rotation)
 
     # --- the steps' commands and checks ------------------------------------------------------
+    def _travel_target(self) -> Pose:
+        p = self.params
+        return self._pose(max(self._top + p.clear_height, p.travel_z))
+
+    def _up_to_travel(self) -> None:
+        # Straight up first, as in the feed: the travel across may be a joint move.
+        p = self.params
+        rise_to(self.dev.arm, self._travel_target().position[Z], p.travel_speed, p.acceleration)
+
     def _over_place(self) -> None:
-        arm, p = self.dev.arm, self.params
-        target = self._pose(max(self._top + p.clear_height, p.travel_z))
-        self.joint_travel = self.travel.start(arm, target)
+        self.joint_travel = self.travel.start(self.dev.arm, self._travel_target())
 
     def _move_by(self, dx: float, dy: float, dz: float = 0.0) -> None:
         p = self.params

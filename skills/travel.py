@@ -38,6 +38,10 @@ JOINT_CHECK_STEP = math.radians(1.0)
 #: m the TCP may dip below the leg's lower end between checks and in the solve's residual
 #: (numerical: the straight path itself is followed to a fraction of it)
 HEIGHT_SLACK = 0.001
+#: m the start may lie below the target and still count as risen to its height: a move is
+#: reported done within about a millimetre of its goal (the twin's 1 mm), so a rise to the
+#: travel height can end that much short of it
+RISEN_SLACK = 0.005
 #: rad the tool may tilt more than at either end (numerical, the slerp's own rounding)
 TILT_SLACK = math.radians(0.5)
 
@@ -90,7 +94,7 @@ def joint_goal(
     if model is None:
         return None
     q0 = np.asarray(q_start, float)
-    if model.forward(q0).position[Z] < target.position[Z] - HEIGHT_SLACK:
+    if model.forward(q0).position[Z] < target.position[Z] - RISEN_SLACK:
         return None  # the rise comes first, straight up: a joint move would also go sideways
     q1 = model.solve(target, q0)
     if q1 is None or swept_problem(model, q0, q1, min_radius) is not None:

@@ -142,4 +142,6 @@ def test_the_packing_travels_over_the_place_by_a_joint_move() -> None:
 
     result, _ = run(pack, d, on_tick=on_tick)
     assert result.status is Status.SUCCESS, result.message
-    assert pack.joint_travel and arm.commands[0][0] == "joints"
+    # from home, above the travel height: the rise stays where it is, then the joint move
+    assert pack.joint_travel and [c[0] for c in arm.commands[:2]] == ["path", "joints"]
+    assert np.allclose(arm.commands[0][1][0].position, forward_kinematics(HOME_JOINTS).position)
