@@ -708,13 +708,20 @@ class PickFromSlot(_SlotSkill):
         return Pose(position, self._rotation)
 
     # --- the steps' commands and checks ------------------------------------------------------
-    def _view(self) -> None:
-        camera, p = self.dev.camera, self.params
-        assert camera is not None
+    def view_pose(self) -> Pose | None:
+        """The TCP pose the slot is looked at from (None without a camera): a caller that
+        brings the arm there first (while the machine runs) leaves this skill no way to go."""
+        camera = self.dev.camera
+        if not self._looking or camera is None:
+            return None
         cam = camera.tool_T_camera().position
-        target = np.array([*self.slot_xy, self._rim_z + p.view_height]) - self._rotation @ cam
-        pose = Pose(target, self._rotation)
-        arm = self.dev.arm
+        target = np.array([*self.slot_xy, self._rim_z + self.params.view_height])
+        return Pose(target - self._rotation @ cam, self._rotation)
+
+    def _view(self) -> None:
+        pose = self.view_pose()
+        assert pose is not None
+        arm, p = self.dev.arm, self.params
         arm.move_path(
             travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed, p.acceleration
         )

@@ -86,15 +86,18 @@ def swept_problem(
 
 
 def joint_goal(
-    model: ArmModel | None, q_start: ArrayLike, target: Pose, min_radius: float
+    model: ArmModel | None, q_start: ArrayLike, target: Pose, min_radius: float,
+    rise_first: bool = True,
 ) -> NDArray[np.float64] | None:
     """The joints to move to ``target`` by a joint move from ``q_start``, or None where a joint
-    move must not be made (no model, a start below the target, out of reach from there, or its
-    swept path not clear)."""
+    move must not be made (no model, a start below the target while ``rise_first``, out of
+    reach from there, or its swept path not clear). ``rise_first`` False: the start is above
+    every fixture already (an empty hand at a camera's view, or clear above the part it just
+    let go), so the move may rise as it goes, never below its start."""
     if model is None:
         return None
     q0 = np.asarray(q_start, float)
-    if model.forward(q0).position[Z] < target.position[Z] - RISEN_SLACK:
+    if rise_first and model.forward(q0).position[Z] < target.position[Z] - RISEN_SLACK:
         return None  # the rise comes first, straight up: a joint move would also go sideways
     q1 = model.solve(target, q0)
     if q1 is None or swept_problem(model, q0, q1, min_radius) is not None:

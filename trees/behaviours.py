@@ -968,20 +968,37 @@ class FeedSlot(SkillBehaviour):
     MOTION,
 )
 class BackOverSlot(SkillBehaviour):
-    """Return over the slot by a joint move to the joints the feed ended at, so the pick from
-    the slot starts where it always does. Why not a straight move: from the look over the bin
-    to the slot's view the tool turns by about 100 deg, and straight moves there ran the twin's
-    arm into its joint speed limit (read as 90-95 N at the wrist as it stopped); a joint move
-    has no such pose on its way, and its joints are known, so no inverse kinematics. A cell
-    resumed with a part in the slot has no such joints: it goes home instead."""
+    """Return over the slot by a joint move: to the pose the pick from the slot looks at the
+    slot from, where the arm's kinematics solve it and the swept path is clear (the pick then
+    starts with its look, no travel left: 1.6 s of each cycle's travel done while the machine
+    runs), else to the joints the feed ended at, so the pick starts where it always did. Why
+    not a straight move: from the look over the bin to the slot's view the tool turns by about
+    100 deg, and straight moves there ran the twin's arm into its joint speed limit (read as
+    90-95 N at the wrist as it stopped). A cell resumed with a part in the slot has no feed's
+    joints: it goes home instead."""
 
     section = "go_home"
 
     def make_skill(self) -> Skill:
-        joints = self.ctx.feed_end_joints
+        from skills.slot import PickFromSlot as PickFromSlotSkill
+        from skills.travel import joint_goal
+
+        ctx = self.ctx
+        joints = ctx.feed_end_joints
         if joints is None:  # a resumed cell: no feed in this run; home, as a resume starts
-            joints = self.ctx.geometry.home_joints
-        return go_home(self.ctx.devices, joints, self.settings())
+            return go_home(ctx.devices, ctx.geometry.home_joints, self.settings())
+        slot = self.settings("slot")
+        view = PickFromSlotSkill(
+            np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices, slot
+        ).view_pose()
+        if view is not None:
+            here = ctx.devices.arm.joint_positions()
+            # An empty hand above every fixture (at the look's last view, or its fingertips
+            # clear of the fed part's rim where no look ran): it may rise as it goes, never
+            # below where it starts.
+            there = joint_goal(ctx.arm_model, here, view, slot.min_radius, rise_first=False)
+            joints = joints if there is None else there
+        return go_home(ctx.devices, joints, self.settings())
 
 
 @declare("pick_from_slot", "the same hole grasp on the part in the slot", "Action", MOTION)
