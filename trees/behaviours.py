@@ -963,7 +963,8 @@ class FeedSlot(SkillBehaviour):
 
 @declare(
     "back_over_slot",
-    "joint move back to where feed_slot left the arm (after a look while the machine runs)",
+    "joint move over the slot (after a look while the machine runs): to where pick_from_slot "
+    "looks from, or where feed_slot left the arm",
     "Action",
     MOTION,
 )

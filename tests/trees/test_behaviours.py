@@ -378,3 +378,33 @@ def test_back_over_slot_is_a_joint_move_to_where_the_feed_ended_or_home(ctx) -> 
     assert statuses[-1] == Status.SUCCESS
     assert ctx.devices.arm.commands[-1][0] == "joints"
     assert np.allclose(ctx.devices.arm.commands[-1][1], over_slot)
+
+
+def test_back_over_slot_ends_where_the_pick_looks_at_the_slot_from(ctx) -> None:
+    import dataclasses
+
+    from cell.reach import UR5_MODEL
+    from drivers.ur5.kinematics import HOME_JOINTS, forward_kinematics
+    from skills.slot import PickFromSlot
+    from tests.trees.test_leaves import FakeCamera
+
+    ctx.devices = dataclasses.replace(ctx.devices, camera=FakeCamera())
+    ctx.arm_model = UR5_MODEL
+    arm = ctx.devices.arm
+    arm.forward, arm.q = forward_kinematics, HOME_JOINTS.copy()  # at home, as after a look
+    arm.pose = forward_kinematics(arm.q)
+    ctx.feed_end_joints = np.array([1.2, -1.1, 1.4, -1.8, -1.6, 0.3])
+    node = lv.BackOverSlot("back", ctx)
+    assert tick_tree(node, ctx, ticks=10)[-1] == Status.SUCCESS
+    kind, joints = arm.commands[-1]
+    view = PickFromSlot(
+        np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices
+    ).view_pose()
+    assert kind == "joints" and view is not None
+    pos_err, ang_err = forward_kinematics(np.asarray(joints)).distance(view)
+    assert pos_err < 1e-6 and ang_err < 1e-6
+    # without the arm's kinematics: the feed's joints, as before
+    ctx.arm_model = None
+    node = lv.BackOverSlot("back", ctx)
+    assert tick_tree(node, ctx, ticks=10)[-1] == Status.SUCCESS
+    assert np.allclose(arm.commands[-1][1], ctx.feed_end_joints)
