@@ -26,7 +26,7 @@ from cell.config import (
     skill_settings,
     twin_servo,
 )
-from cell.reach import reach_from, reach_from_or_home, ur5_model, ur5_reach
+from cell.reach import UR5_MODEL, reach_from, reach_from_or_home, ur5_reach
 from cell.runner import Backend, CellState
 from drivers.gripper_spec import GripperSpec
 from drivers.layout import CellLayout
@@ -193,7 +193,7 @@ def prepare(config: CellConfig, doc: LinedDocument) -> Prepared:
         events=state,
         reach=reach_from_or_home(arm_joints, geometry.home_joints),
         reach_here=reach_from(arm_joints),
-        arm_model=ur5_model(geometry.home_joints),
+        arm_model=UR5_MODEL,
         limits=WorkflowLimits(
             max_failures_per_part=config.workflow.max_failures_per_part,
             max_failed_cycles=config.workflow.max_failed_cycles,

@@ -41,6 +41,12 @@ REACH_TURN = math.radians(15.0)
 REACH_ITERATIONS = 30
 #: DLS iterations for a pose itself
 DIRECT_ITERATIONS = 200
+#: m (and m per rad of turn, as the solve's residual counts it) a joint move's goal may miss its
+#: pose by: the moves after it start from there, the packing's reading of the hanging part and
+#: the slot's view among them (the solve reaches about 1e-9)
+JOINT_GOAL_TOLERANCE = 1e-4
+#: the joints whose whole turns :func:`ur5_model` may drop: the base and the three wrists
+WRAPPED_JOINTS = (0, 3, 4, 5)
 
 
 def _first_unreached(poses: Sequence[Pose], q: NDArray[np.float64]) -> int | None:
@@ -118,35 +124,38 @@ def _turned(q: NDArray[np.float64], pose: Pose) -> NDArray[np.float64]:
     return seed
 
 
-def ur5_model(home: ArrayLike) -> ArmModel:
-    """The UR5's kinematics as the skills take them, for travelling by a joint move; ``home``
-    (rad) is the cell's home joints."""
-    q_home = np.asarray(home, float)
-
-    def joints_for(pose: Pose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
-        """The joints at ``pose`` for a joint move from ``q`` (rad), or None where no solve
-        reaches it. Seeds, in turn: ``q`` with the base turned to the pose's bearing (the
-        arm's own branch; from ``q`` itself a pose far round the base is solved across the
-        TCP's straight line, which passes near the base axis, singular there, and the solve
-        missed); ``q``; home turned likewise (home's branch: the one every pose the cell
-        plans was checked on; a joint move may change branch, its swept path is checked)."""
-        for seed in (_turned(q, pose), q, _turned(q_home, pose)):
-            goal, miss = solve_ik(pose, seed, iterations=DIRECT_ITERATIONS)
-            if miss <= REACH_TOLERANCE:
-                # Each joint turns +-360 deg: the same pose a whole turn nearer is the
-                # shorter joint move (the solve turned the wrist 190-200 deg for 160-170).
-                nearer = goal - np.round((goal - q) / math.tau) * math.tau
-                return np.where(np.abs(nearer) <= ARM_LIMIT, nearer, goal)
-        return None
-
-    return ArmModel(solve=joints_for, forward=forward_kinematics)
+def _branch(q: NDArray[np.float64]) -> tuple[bool, bool]:
+    """Which side the elbow and the wrist are on (the signs of sin of joints 3 and 5): a UR5's
+    branches that a joint move between would fold the forearm or flip the wrist."""
+    return bool(math.sin(q[2]) >= 0.0), bool(math.sin(q[4]) >= 0.0)
 
 
-#: :func:`ur5_model` with the default home
-UR5_MODEL = ur5_model(HOME_JOINTS)
+def _ur5_joints_for(pose: Pose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """The UR5's joints at ``pose`` for a joint move from ``q`` (rad), on ``q``'s branch,
+    or None. Seeds, in turn: ``q`` with the base turned to the pose's bearing (from ``q``
+    itself a pose far round the base is solved across the TCP's straight line, which
+    passes near the base axis, singular there, and the solve missed); ``q``."""
+    for seed in (_turned(q, pose), q):
+        goal, miss = solve_ik(pose, seed, iterations=DIRECT_ITERATIONS)
+        if miss > JOINT_GOAL_TOLERANCE or _branch(goal) != _branch(q):
+            continue
+        # The base and the wrists turn +-360 deg: the same pose a whole turn nearer is
+        # the shorter joint move (the solve turned the wrist 190-200 deg for 160-170).
+        # Not the shoulder and elbow: a turn there folds the arm through itself.
+        nearer = goal.copy()
+        for j in WRAPPED_JOINTS:
+            turned = goal[j] - round((goal[j] - q[j]) / math.tau) * math.tau
+            if abs(turned) <= ARM_LIMIT:
+                nearer[j] = turned
+        return nearer
+    return None
+
+
+#: The UR5's kinematics as the skills take them, for travelling by a joint move.
+UR5_MODEL = ArmModel(solve=_ur5_joints_for, forward=forward_kinematics)
 
 
 __all__ = [
-    "REACH_STEP", "REACH_TURN", "UR5_MODEL", "reach_from", "reach_from_or_home", "ur5_model",
-    "ur5_reach", "ur5_reach_along",
+    "REACH_STEP", "REACH_TURN", "UR5_MODEL", "reach_from", "reach_from_or_home", "ur5_reach",
+    "ur5_reach_along",
 ]

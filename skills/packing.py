@@ -40,6 +40,7 @@ from skills.slot import (
     GRAVITY,
     JOINT_TRAVEL_ACCELERATION,
     JOINT_TRAVEL_SPEED,
+    JOINT_TRAVEL_TCP_SPEED,
     ContactMove,
     SequenceSkill,
     Travel,
@@ -72,11 +73,16 @@ class PackParams:
         0.012, "m", 0.001, 0.1, "beyond the place a push may go before nothing to push on"
     )
     clear_height: float = si(0.02, "m", 0.0, 0.2, "above the highest thing in the box")
-    travel_z: float = si(0.13, "m", 0.0, 0.5, "the lowest the part's bottom travels at")
+    travel_z: float = si(
+        0.13, "m", 0.0, 0.5,
+        "the lowest the part's bottom travels at; it must clear every fixture the arm travels "
+        "over (a joint move sweeps an arc about the base, off the straight line)",
+    )
     min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
     travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
     joint_speed: float = si(*JOINT_TRAVEL_SPEED)
     joint_acceleration: float = si(*JOINT_TRAVEL_ACCELERATION)
+    joint_tcp_speed: float = si(*JOINT_TRAVEL_TCP_SPEED)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
     push_speed: float = si(0.01, "m/s", 0.001, 0.1, "of every push")
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
@@ -218,10 +224,7 @@ class PackInBox(SequenceSkill):
         :class:`PackParams`."""
         p = replace(params or PackParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
-        self.travel = Travel(
-            arm_model, p.travel_speed, p.acceleration, p.joint_speed, p.joint_acceleration,
-            p.min_radius,
-        )
+        self.travel = Travel.of(arm_model, p)
         self.joint_travel = False  #: the travel over the place was a joint move
         target = np.asarray(place, float)
         self.place_xy, self.floor_z = target[XY].copy(), float(target[Z])

@@ -75,6 +75,12 @@ JOINT_TRAVEL_SPEED = (
     math.radians(60.0), "rad/s", 0.0, math.radians(180.0),
     "of the joint moving most in a travel by joint move; 0: straight travel paths only",
 )
+#: (the TCP's own limit in a joint move: at 120 deg/s the cell's travels peaked at 1.0-1.35 m/s
+#: with the part held, where the straight paths ran at 0.2-0.3 m/s)
+JOINT_TRAVEL_TCP_SPEED = (
+    1.0, "m/s", 0.05, 3.0,
+    "the fastest the TCP may go in a travel by joint move (the joints slow to keep it)",
+)
 #: (its acceleration; the shipped cell's way home runs at 120 deg/s and 300 deg/s^2)
 JOINT_TRAVEL_ACCELERATION = (
     math.radians(120.0), "rad/s^2", math.radians(6.0), math.radians(600.0),
@@ -104,12 +110,16 @@ class SlotParams:
         0.02, "m", 0.0, 0.2, "between the part (or fingertips) and the machine's top"
     )
     travel_z: float = si(
-        0.13, "m", 0.0, 0.5, "the lowest the part's bottom (or the fingertips) travels at"
+        0.13, "m", 0.0, 0.5,
+        "the lowest the part's bottom (or the fingertips) travels at; it must clear every "
+        "fixture the arm travels over (a joint move sweeps an arc about the base, off the "
+        "straight line)"
     )
     min_radius: float = si(0.30, "m", 0.0, 0.8, "from the base axis a travel path keeps")
     travel_speed: float = si(0.15, "m/s", 0.01, 1.0, "of the TCP travelling")
     joint_speed: float = si(*JOINT_TRAVEL_SPEED)
     joint_acceleration: float = si(*JOINT_TRAVEL_ACCELERATION)
+    joint_tcp_speed: float = si(*JOINT_TRAVEL_TCP_SPEED)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
     insert_speed: float = si(0.01, "m/s", 0.001, 0.1, "into the pocket and onto its floor")
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
@@ -226,18 +236,26 @@ class Travel:
     acceleration: float  #: m/s^2
     joint_speed: float  #: rad/s, the joint moving most in a joint move; 0: never one
     joint_acceleration: float  #: rad/s^2
+    joint_tcp_speed: float  #: m/s, the TCP's limit in a joint move (the joints slow to it)
     min_radius: float  #: m from the base axis a travel path keeps
+
+    @classmethod
+    def of(cls, model: ArmModel | None, p: Any) -> Travel:
+        """From a skill's parameters (:class:`SlotParams`, the packing's: the same fields)."""
+        return cls(model, p.travel_speed, p.acceleration, p.joint_speed, p.joint_acceleration,
+                   p.joint_tcp_speed, p.min_radius)
 
     def start(self, arm: Arm, target: Pose) -> bool:
         """Start the travel to ``target``; True when it is a joint move."""
-        q = None
+        move = None
         if self.joint_speed > 0:
-            q = joint_goal(self.model, arm.joint_positions(), target, self.min_radius)
-        if q is None:
+            move = joint_goal(self.model, arm.joint_positions(), target, self.min_radius)
+        if move is None:
             path = travel_path(arm.tool_pose(), target, self.min_radius)
             arm.move_path(path, self.speed, self.acceleration)
             return False
-        arm.move_joints(q, self.joint_speed, self.joint_acceleration)
+        speed = move.joint_speed(self.joint_speed, self.joint_tcp_speed)
+        arm.move_joints(move.goal, speed, self.joint_acceleration)
         return True
 
 
@@ -415,11 +433,8 @@ class _SlotSkill(SequenceSkill):
     ) -> None:
         p = replace(params or SlotParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
-        self.travel = Travel(
-            arm_model, p.travel_speed, p.acceleration, p.joint_speed, p.joint_acceleration,
-            p.min_radius,
-        )
-        self.joint_travel = False  #: the last travel was a joint move
+        self.travel = Travel.of(arm_model, p)
+        self.joint_travel = False  #: the feed's travel over the slot was a joint move
         slot = np.asarray(slot_center, float)
         self.slot_xy, self.slot_floor_z = slot[XY].copy(), float(slot[Z])
         self.machine_top_z = self.slot_floor_z + p.slot_depth
@@ -638,11 +653,10 @@ class PickFromSlot(_SlotSkill):
         part: Part,
         dev: Devices,
         params: SlotParams | None = None,
-        arm_model: ArmModel | None = None,
         **overrides: Any,
     ) -> None:
-        """As :class:`FeedSlot`."""
-        super().__init__(slot_center, part, dev, params, overrides, arm_model)
+        """As :class:`FeedSlot` (its travel is the look's, or the caller's: no joint move)."""
+        super().__init__(slot_center, part, dev, params, overrides)
         p = self.params
         self._outer, self._inner = pinched_span(part, dev.gripper.finger_width)
         self._offset = grasp_offset(part, dev.gripper.finger_width)

@@ -17,6 +17,7 @@ Blackboard keys, each written by one behaviour only:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from typing import Any, Protocol
@@ -992,14 +993,18 @@ class BackOverSlot(SkillBehaviour):
         view = PickFromSlotSkill(
             np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices, slot
         ).view_pose()
+        home = self.settings()
         if view is not None:
             here = ctx.devices.arm.joint_positions()
             # An empty hand above every fixture (at the look's last view, or its fingertips
             # clear of the fed part's rim where no look ran): it may rise as it goes, never
-            # below where it starts.
-            there = joint_goal(ctx.arm_model, here, view, slot.min_radius, rise_first=False)
-            joints = joints if there is None else there
-        return go_home(ctx.devices, joints, self.settings())
+            # below the lower of its ends.
+            move = joint_goal(ctx.arm_model, here, view, slot.min_radius, rise_first=False)
+            if move is not None:
+                joints = move.goal
+                speed = move.joint_speed(home.joint_speed, slot.joint_tcp_speed)
+                home = dataclasses.replace(home, joint_speed=speed)
+        return go_home(ctx.devices, joints, home)
 
 
 @declare("pick_from_slot", "the same hole grasp on the part in the slot", "Action", MOTION)
@@ -1015,7 +1020,6 @@ class PickFromSlot(SkillBehaviour):
             self.ctx.part,
             self.ctx.devices,
             self.settings(),
-            arm_model=self.ctx.arm_model,
         )
 
     def on_success(self) -> None:

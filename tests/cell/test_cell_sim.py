@@ -20,7 +20,7 @@ bin:
   parts: 2
 workflow:
   cycles: 1
-  machining_time_s: 1.0
+  machining_time_s: 3.0  # longer than the way back over the slot: the wait shows
 log:
   tick_log: {log}
   state_file: {state}

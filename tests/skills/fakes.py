@@ -40,6 +40,8 @@ class FakeArm:
         self.dt = 0.008
         #: joints -> TCP pose: given, a joint move ends at that pose (else where it started)
         self.forward = None
+        #: (pose, joints) -> joints: given, a Cartesian move's end updates the joints too
+        self.inverse = None
         self.q = np.zeros(6)  #: joints, as the last joint move left them
 
     def tool_pose(self) -> Pose:
@@ -103,6 +105,8 @@ class FakeArm:
                 self.pose = self.queue[-1]
                 self.queue = []
                 self.state = MotionState.DONE
+                if self.inverse is not None:
+                    self.q = self.inverse(self.pose, self.q)
 
 
 class FakeGripper:
