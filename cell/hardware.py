@@ -25,6 +25,11 @@ from trees.yaml_lines import ConfigError
 
 DEVICES = ("arm", "gripper", "ft", "camera")
 SWITCH_INTERVAL_S = 0.0005  #: the interpreter's thread switch interval on hardware (s)
+#: m and rad the controller's TCP pose may differ from the UR5 model's at the same joints: the
+#: joint moves' goals and every reach check are solved on the model (its TCP `TCP_Z` along the
+#: flange's z axis, drivers/tool.py); a controller with another TCP set lands them elsewhere
+TCP_MATCH_M = 0.002
+TCP_MATCH_RAD = math.radians(1.0)
 _ADDRESS = {
     "arm": lambda d: f"{d.arm.host}:30004",
     "gripper": lambda d: (
@@ -254,6 +259,26 @@ def _refuse(prep: Any, opened: dict[str, Any], why: str) -> ConfigError:
                        f"start-up checks failed, nothing moved: {why}")
 
 
+def _tcp_mismatch(arm: Any) -> str | None:
+    """Why the controller's TCP is not the model's (None: it is), read at the joints the arm
+    reports: the skills' joint moves and reach checks are solved on the model."""
+    from drivers.tool import TCP_Z
+    from drivers.ur5.kinematics import forward_kinematics
+
+    try:
+        off, turn = forward_kinematics(arm.joint_positions()).distance(arm.tool_pose())
+    except (DeviceError, RuntimeError) as exc:
+        return f"reading the arm's joints and TCP: {exc}"
+    if off <= TCP_MATCH_M and turn <= TCP_MATCH_RAD:
+        return None
+    return (
+        f"the controller's TCP is {1e3 * off:.1f} mm and {math.degrees(turn):.1f} deg from the "
+        f"UR5 model's at the same joints (limit {1e3 * TCP_MATCH_M:.0f} mm, "
+        f"{math.degrees(TCP_MATCH_RAD):.0f} deg): set the TCP in PolyScope to "
+        f"z = {1e3 * TCP_Z:.1f} mm, no offset or rotation otherwise"
+    )
+
+
 def open_hardware(prep: Any) -> HardwareBackend:
     """Connect and check every device before anything moves; refuse with the reasons. (The
     configuration's gripper values were checked against the gripper's description when it was
@@ -284,6 +309,9 @@ def open_hardware(prep: Any) -> HardwareBackend:
         raise
     if problems:
         raise _refuse(prep, opened, "; ".join(problems))
+    tcp = _tcp_mismatch(opened["arm"])
+    if tcp is not None:
+        raise _refuse(prep, opened, tcp)
     # Every width the skills command or read goes through the gripper's calibration: the counts
     # where this unit's fingers stop. Nominal counts (0 and 255) put a 2F-85 that stops at 3 and
     # 228 up to 10 mm off (the emulated cell opened 7 mm where it asked for 13 and struck the

@@ -10,12 +10,23 @@ from cell.assemble import prepare
 from cell.config import config_from_text
 from drivers.devices import Devices
 from drivers.health import CheckResult, DeviceError
+from drivers.pose import Pose
+from drivers.ur5.kinematics import HOME_JOINTS, forward_kinematics
 from trees.yaml_lines import ConfigError
 
 
 class _Dev:
     def __init__(self, name: str, ok: bool = True) -> None:
         self.name, self.ok, self.calls = name, ok, []
+        #: the arm's controller: its TCP where the UR5 model puts it (a test moves it)
+        self.q = HOME_JOINTS.copy()
+        self.tcp = forward_kinematics(self.q)
+
+    def joint_positions(self):  # type: ignore[no-untyped-def]
+        return self.q
+
+    def tool_pose(self):  # type: ignore[no-untyped-def]
+        return self.tcp
 
     def check(self, activate: bool = False, min_valid_fraction: float = 0.2) -> CheckResult:
         self.calls.append(("check", activate) if self.name != "camera" else
@@ -212,3 +223,26 @@ def test_the_watchdog_is_armed_on_the_first_tick_not_during_the_start_up() -> No
     assert names.index("set_watchdog") < names.index("kick_watchdog")
     # polled every step (kicked as often as the watchdog needs: the clock stands still here)
     assert names.count("safety_status_bits") == 3
+
+
+def test_a_controller_tcp_other_than_the_models_is_refused_before_anything_moves(
+        monkeypatch) -> None:
+    made: dict[str, _Dev] = {}
+
+    def opener(name: str):
+        def make(cfg, layout, clock):  # type: ignore[no-untyped-def]
+            made[name] = _Dev(name)
+            if name == "arm":  # PolyScope's TCP 20 mm shorter than the model's
+                tcp = made[name].tcp
+                made[name].tcp = Pose(tcp.position - 0.02 * tcp.rotation[:, 2], tcp.rotation)
+            return made[name]
+
+        return make
+
+    monkeypatch.setattr(hardware, "OPENERS", {n: opener(n) for n in hardware.DEVICES})
+    with pytest.raises(ConfigError) as info:
+        hardware.open_hardware(_prep())
+    text = str(info.value)
+    assert "nothing moved" in text and "20.0 mm" in text and "set the TCP in PolyScope" in text
+    assert "bias" not in made["ft"].calls and "calibrate" not in made["gripper"].calls
+    assert made["arm"].calls[-2:] == ["stop", "close"]
