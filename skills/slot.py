@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from drivers.arm import Arm, MotionState
-from drivers.camera import Frame
+from drivers.camera import Camera, Frame
 from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
@@ -429,12 +429,9 @@ class _SlotSkill(SequenceSkill):
         dev: Devices,
         params: SlotParams | None,
         overrides: dict[str, Any],
-        arm_model: ArmModel | None = None,
     ) -> None:
         p = replace(params or SlotParams(), **overrides)
         self.part, self.dev, self.params = part, dev, p
-        self.travel = Travel.of(arm_model, p)
-        self.joint_travel = False  #: the feed's travel over the slot was a joint move
         slot = np.asarray(slot_center, float)
         self.slot_xy, self.slot_floor_z = slot[XY].copy(), float(slot[Z])
         self.machine_top_z = self.slot_floor_z + p.slot_depth
@@ -493,8 +490,10 @@ class FeedSlot(_SlotSkill):
         ``arm_model``: the arm's kinematics, for travelling by a joint move (None: straight
         travel paths only); ``overrides``: fields of :class:`SlotParams` to change
         (``grip_depth=0.02``)."""
-        super().__init__(slot_center, part, dev, params, overrides, arm_model)
+        super().__init__(slot_center, part, dev, params, overrides)
         p = self.params
+        self.travel = Travel.of(arm_model, p)
+        self.joint_travel = False  #: the travel over the slot was a joint move
         self._offset = grasp_offset(part, dev.gripper.finger_width)
         # Lowest the part's bottom may go: the outer fingertip stays above the machine.
         lowest = self.machine_top_z + p.finger_clearance - part.length + p.grip_depth
@@ -634,6 +633,25 @@ class FeedSlot(_SlotSkill):
 
 
 # --------------------------------------------------------------------------- PickFromSlot
+def pick_finger_dir(slot_xy: ArrayLike, params: SlotParams) -> NDArray[np.float64]:
+    """Tool x of the pick from the slot: ``finger_dir``, or towards the robot base."""
+    if params.finger_dir:
+        return horizontal(params.finger_dir + (0.0,))
+    return horizontal(-np.array([*np.asarray(slot_xy, float)[XY], 0.0]))
+
+
+def slot_view_pose(
+    slot_xy: ArrayLike, rim_z: float, x: ArrayLike, camera: Camera, params: SlotParams
+) -> Pose:
+    """The TCP pose the wrist camera looks at the part standing in the slot from:
+    ``view_height`` over its rim (``rim_z``, m), tool x along ``x`` (the pick's). Also where
+    the cell brings the arm while the machine runs, so the pick has no way left to go."""
+    rotation = hole_grasp_rotation(np.asarray(x, float))
+    cam = camera.tool_T_camera().position
+    target = np.array([*np.asarray(slot_xy, float)[XY], rim_z + params.view_height])
+    return Pose(target - rotation @ cam, rotation)
+
+
 class PickFromSlot(_SlotSkill):
     """Take the hole grasp on the part standing in the slot and lift it out.
 
@@ -663,9 +681,7 @@ class PickFromSlot(_SlotSkill):
         self._rim_z = self.slot_floor_z + part.length
         self.seen: UprightPart | None = None
         self._looking = p.use_camera and dev.camera is not None
-        self._x = horizontal(
-            p.finger_dir + (0.0,) if p.finger_dir else -np.array([*self.slot_xy, 0])
-        )
+        self._x = pick_finger_dir(self.slot_xy, p)
         self._rotation = hole_grasp_rotation(self._x)
         self.sequence = Sequence(
             "pick from slot",
@@ -722,19 +738,9 @@ class PickFromSlot(_SlotSkill):
         return Pose(position, self._rotation)
 
     # --- the steps' commands and checks ------------------------------------------------------
-    def view_pose(self) -> Pose | None:
-        """The TCP pose the slot is looked at from (None without a camera): a caller that
-        brings the arm there first (while the machine runs) leaves this skill no way to go."""
-        camera = self.dev.camera
-        if not self._looking or camera is None:
-            return None
-        cam = camera.tool_T_camera().position
-        target = np.array([*self.slot_xy, self._rim_z + self.params.view_height])
-        return Pose(target - self._rotation @ cam, self._rotation)
-
     def _view(self) -> None:
-        pose = self.view_pose()
-        assert pose is not None
+        assert self.dev.camera is not None
+        pose = slot_view_pose(self.slot_xy, self._rim_z, self._x, self.dev.camera, self.params)
         arm, p = self.dev.arm, self.params
         arm.move_path(
             travel_path(arm.tool_pose(), pose, p.min_radius), p.travel_speed, p.acceleration

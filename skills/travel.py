@@ -114,13 +114,6 @@ def sweep(
     return None, per_rad
 
 
-def swept_problem(
-    model: ArmModel, q_start: ArrayLike, q_goal: ArrayLike, min_radius: float
-) -> str | None:
-    """:func:`sweep`'s verdict alone."""
-    return sweep(model, q_start, q_goal, min_radius)[0]
-
-
 def joint_goal(
     model: ArmModel | None, q_start: ArrayLike, target: Pose, min_radius: float,
     rise_first: bool = True,
@@ -147,4 +140,4 @@ def joint_goal(
     return None if problem is not None else JointMove(q1, per_rad)
 
 
-__all__ = ["ArmModel", "JointMove", "joint_goal", "sweep", "swept_problem"]
+__all__ = ["ArmModel", "JointMove", "joint_goal", "sweep"]

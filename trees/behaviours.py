@@ -982,19 +982,19 @@ class BackOverSlot(SkillBehaviour):
     section = "go_home"
 
     def make_skill(self) -> Skill:
-        from skills.slot import PickFromSlot as PickFromSlotSkill
+        from skills.slot import pick_finger_dir, slot_view_pose
         from skills.travel import joint_goal
 
         ctx = self.ctx
         joints = ctx.feed_end_joints
         if joints is None:  # a resumed cell: no feed in this run; home, as a resume starts
             return go_home(ctx.devices, ctx.geometry.home_joints, self.settings())
-        slot = self.settings("slot")
-        view = PickFromSlotSkill(
-            np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices, slot
-        ).view_pose()
+        slot, camera = self.settings("slot"), ctx.devices.camera
         home = self.settings()
-        if view is not None:
+        if slot.use_camera and camera is not None:  # the pick looks first: go where it looks
+            center = np.asarray(ctx.geometry.slot_center, float)
+            view = slot_view_pose(center[:2], center[2] + ctx.part.length,
+                                  pick_finger_dir(center[:2], slot), camera, slot)
             here = ctx.devices.arm.joint_positions()
             # An empty hand above every fixture (at the look's last view, or its fingertips
             # clear of the fed part's rim where no look ran): it may rise as it goes, never

@@ -875,7 +875,6 @@ def _on_something(
     h: NDArray[np.float64],
     mean: NDArray[np.float64],
     axis: NDArray[np.float64],
-    across: NDArray[np.float64],
     s: NDArray[np.float64],
     c: NDArray[np.float64],
     outer: float,
@@ -899,6 +898,7 @@ def _on_something(
         return None  # as high as its size: on the floor, and the height fit found nothing
     if not _lying_profile(c - c_mid, h, seg.outer, outer, part):
         return None
+    across = np.array([-axis[1], axis[0]])  # as the caller measured ``c`` along
     center_uv = mean + 0.5 * (s_lo + s_hi) * axis + c_mid * across  # exact: the middle
     axis_height = seg.outer - 0.5 * part.outer  # exact: the axis is half the size under the top
     return _Placement(part, err, False, axis, across, center_uv, length, tilted=True,
@@ -954,7 +954,7 @@ def _raised(seg: _Segment, inputs: _FitInputs) -> _Placement | None:
         # Level: on the floor the height fit said what it shows. Level on something (a part
         # lying on a duct): its width and length are its sizes, its top higher than its size,
         # its profile across a lying part's; a piece of a flat top or between parts is not.
-        return _on_something(seg, inputs, h, mean, axis, across, s, c, outer, c_mid)
+        return _on_something(seg, inputs, h, mean, axis, s, c, outer, c_mid)
     s_lo, s_hi = float(np.percentile(s, EXTENT_LO)), float(np.percentile(s, EXTENT_HI))
     length = (s_hi - s_lo) * math.sqrt(1.0 + slope * slope)
     part, err = _match(length, outer, inputs.catalogue, settings.match_tolerance)

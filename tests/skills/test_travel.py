@@ -14,7 +14,7 @@ from drivers.ur5.kinematics import HOME_JOINTS, forward_kinematics, solve_ik
 from skills.packing import PackInBox
 from skills.slot import FeedSlot
 from skills.status import Status
-from skills.travel import ArmModel, JointMove, joint_goal, sweep, swept_problem
+from skills.travel import ArmModel, JointMove, joint_goal, sweep
 from tests.skills.fakes import FakeArm, FakeClock, FakeFT, FakeGripper, run
 from tests.skills.test_slot_packing_fakes import PACK_CONTACTS, PLACE, SLOT, push_back
 
@@ -48,14 +48,14 @@ def q(angle: float) -> np.ndarray:
 def test_a_sweep_that_dips_below_the_leg_is_refused() -> None:
     # the TCP's height falls by 50 mm half way round the swing and rises again
     model = toy(lambda q: 0.2 - 0.05 * math.sin(abs(q[0])))
-    assert "below the leg" in (swept_problem(model, q(0.0), q(math.pi), 0.3) or "")
+    assert "below the leg" in (sweep(model, q(0.0), q(math.pi), 0.3)[0] or "")
     level = toy(lambda q: 0.2)
-    assert swept_problem(level, q(0.0), q(math.pi), 0.3) is None
+    assert sweep(level, q(0.0), q(math.pi), 0.3)[0] is None
 
 
 def test_a_sweep_that_tilts_the_tool_more_than_its_ends_is_refused() -> None:
     model = toy(lambda q: 0.2, tilt=lambda q: 0.3 * math.sin(q[0]))
-    assert "tilt" in (swept_problem(model, q(0.0), q(math.pi), 0.3) or "")
+    assert "tilt" in (sweep(model, q(0.0), q(math.pi), 0.3)[0] or "")
 
 
 def test_a_sweep_nearer_the_base_than_the_straight_path_may_is_refused() -> None:
@@ -64,7 +64,7 @@ def test_a_sweep_nearer_the_base_than_the_straight_path_may_is_refused() -> None
         return Pose(np.array([0.5 * math.cos(j[0]), 0.0, 0.2]), DOWN)
 
     model = ArmModel(solve=lambda pose, j: j, forward=forward)
-    assert "base axis" in (swept_problem(model, q(0.0), q(math.pi), 0.3) or "")
+    assert "base axis" in (sweep(model, q(0.0), q(math.pi), 0.3)[0] or "")
 
 
 def test_no_joint_move_from_below_the_target_nor_without_the_arms_model() -> None:

@@ -397,10 +397,11 @@ def test_back_over_slot_ends_where_the_pick_looks_at_the_slot_from(ctx) -> None:
     node = lv.BackOverSlot("back", ctx)
     assert tick_tree(node, ctx, ticks=10)[-1] == Status.SUCCESS
     kind, joints = arm.commands[-1]
-    view = PickFromSlot(
-        np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices
-    ).view_pose()
-    assert kind == "joints" and view is not None
+    # where the pick from the slot's own look goes (its first step's target)
+    pick = PickFromSlot(np.asarray(ctx.geometry.slot_center, float), ctx.part, ctx.devices)
+    pick.tick()
+    view = arm.commands[-1][1][-1]
+    assert kind == "joints" and arm.commands[-1][0] == "path"
     pos_err, ang_err = forward_kinematics(np.asarray(joints)).distance(view)
     assert pos_err < 1e-6 and ang_err < 1e-6
     # without the arm's kinematics: the feed's joints, as before
