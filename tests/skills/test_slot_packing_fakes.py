@@ -70,6 +70,44 @@ def test_feed_slot_stops_on_the_floor_lets_go_and_drags_out() -> None:
     assert d["arm"].pose.position[2] > feed.insert.contact_pose.position[2] + 0.02
 
 
+def _bottom(feed: FeedSlot, pose: Pose) -> float:
+    """The held part's bottom (m) with the tool at ``pose``."""
+    p = feed.params
+    return float(pose.position[2]) - p.tip_offset + p.grip_depth - PART.length
+
+
+def test_feed_slot_inserts_fast_only_away_from_the_pockets_edge_and_floor() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d), weight_check=0.0, pocket_speed=0.06, insert_speed=0.02,
+                    slow_margin=0.005)
+    result, _ = run(feed, d, on_tick=contact_when(feed, d, "into the slot", (0, 0, 10.0)))
+    assert result.status is Status.SUCCESS, result.message
+    assert feed.on_floor and feed.insert.contact
+    legs = [c for c in d["arm"].commands if c[0] == "path"][3:7]  # after travel, over, down
+    bottoms = [_bottom(feed, c[1][-1]) for c in legs]
+    top, floor = SLOT[2] + 0.040, SLOT[2]
+    assert bottoms[:3] == pytest.approx([top + 0.005, top - 0.005, floor + 0.005])
+    assert bottoms[3] < floor  # the last aims below the floor: the contact stops it
+    assert d["arm"].speeds[3:7] == [0.06, 0.02, 0.06, 0.02]
+
+
+def test_feed_slot_ends_the_insertion_on_the_first_contact() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d), pocket_speed=0.06)
+
+    def on_tick(_: int) -> None:  # the part lands on the pocket's edge in the slow leg
+        if feed.step == "into the pocket" and d["arm"].state is MotionState.MOVING:
+            push_back(d, (0, 0, 10.0))
+
+    result, _ = run(feed, d, on_tick=on_tick)
+    assert result.status is Status.FAILURE
+    assert "above the slot floor" in result.message and "not in the slot" in result.message
+    edge = next(leg for leg in feed.legs if leg.contact)
+    later = [c for c in d["arm"].commands if c[0] == "path"][5:7]
+    # the legs after the contact command where the tool stands: nothing moves further down
+    assert all(c[1][-1].position[2] >= edge.contact_pose.position[2] - 1e-9 for c in later)
+
+
 def test_feed_slot_fails_when_the_part_meets_the_machine_above_the_pocket() -> None:
     d = devices()
     feed = FeedSlot(SLOT, PART, dev(d))
