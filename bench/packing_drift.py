@@ -12,8 +12,9 @@ second, so the second row is pushed against the first.
 Printed, per step of :class:`~skills.packing.PackInBox`: the mean and the largest horizontal
 move of the part being packed and of the parts packed before it, read from the twin at each
 step's end. Then, as the twin's packing verdict of ``cell sim`` judges it: how far each packed
-part ended from where it stood after its own packing (its limit there is 2 mm), and how well
-that is predicted by how far the part's own let go moved it (the next push closes that gap).
+part but the last ended from where it stood after its own packing (its limit there is 2 mm), and
+how well that is predicted by how far the part's own let go moved it (the next push closes that
+gap).
 """
 
 from __future__ import annotations
@@ -110,6 +111,9 @@ def main() -> None:
                     failures.append(f"seed {seed} part {k}: grasp: {failure}")
                     break
                 moves, failure = pack_one(tw, places[k], p, k)
+                if failure is not None:
+                    failures.append(f"seed {seed} part {k}: pack: {failure}")
+                    break
                 tw.settle(SETTLE_S)
                 for name, d in moves.items():
                     own.setdefault(name, []).append(d[k])
@@ -119,10 +123,7 @@ def main() -> None:
                     shoved = float(np.linalg.norm(now[k - 1] - put[k - 1]))
                     drift_then_moved.append((drift[-1], shoved))
                 put.append(now[k].copy())
-                drift.append(float(np.linalg.norm(sum(moves.get(s, 0.0) for s in AFTER_PUSHES)[k])))
-                if failure is not None:
-                    failures.append(f"seed {seed} part {k}: pack: {failure}")
-                    break
+                drift.append(float(np.linalg.norm(sum(moves[s] for s in AFTER_PUSHES)[k])))
             else:
                 now = np.array([b.pose().position[:2] for b in tw.bodies])
                 ended.extend(np.linalg.norm(now - np.array(put), axis=1)[:-1])

@@ -9,8 +9,9 @@ in. :class:`FeedSlot`:
    cell's configuration, never from the simulator), fingers down, so the part's axis is over the
    pocket's centre;
 2. hold still and read the wrench with the part hanging (the reference for contact and weight);
-3. lower the part into the pocket slowly until the slot floor pushes back (the force along the
-   motion rises by ``contact_force`` over the reference), or until the outer finger would come
+3. lower the part into the pocket slowly (with ``pocket_speed`` set: slowly only near the
+   pocket's edge and its floor) until the slot floor pushes back (the force along the motion
+   rises by ``contact_force`` over the reference), or until the outer finger would come
    within ``finger_clearance`` of the machine's top (a deep grasp: the part is then let go a few
    millimetres above the floor, guided by the pocket);
 4. ease the jaws (release) and drag the gripper up: the finger in the hole slides out while the
@@ -122,10 +123,11 @@ class SlotParams:
     joint_tcp_speed: float = si(*JOINT_TRAVEL_TCP_SPEED)
     approach_speed: float = si(0.05, "m/s", 0.001, 0.5, "of the TCP approaching")
     insert_speed: float = si(0.01, "m/s", 0.001, 0.1, "into the pocket and onto its floor")
-    #: The insertion is slow only where the part can meet something: the pocket's edge and its
-    #: floor. Between them the pocket's walls guide it, and above the machine nothing is nearer
-    #: than the edge; the whole way at ``insert_speed`` (0.02 m/s in the shipped example) took
-    #: 2.7 s of each feed, 60 mm of which only about 20 mm are near the edge or the floor.
+    #: The insertion need be slow only where the part can meet something: at the pocket's edge
+    #: and near its floor. Between them the pocket's walls guide it, and above the machine
+    #: nothing is nearer than the edge. The whole 60 mm at ``insert_speed`` (0.02 m/s in the
+    #: shipped example) took about 3 s of each feed. A contact in a fast leg ends the insertion
+    #: as a failure: only the last, slow leg may find the floor.
     pocket_speed: float = si(
         0.0, "m/s", 0.0, 0.5,
         "of the feed's insertion away from the pocket's edge and floor (0: insert_speed the "
@@ -133,8 +135,8 @@ class SlotParams:
     )
     slow_margin: float = si(
         0.005, "m", 0.001, 0.05,
-        "above and below the pocket's edge, and above its floor, the insertion keeps to "
-        "insert_speed (with pocket_speed set)",
+        "above and below the pocket's edge, and above depth_tolerance over its floor, the "
+        "insertion keeps to insert_speed (with pocket_speed set)",
     )
     acceleration: float = si(0.3, "m/s^2", 0.01, 3.0, "of the TCP")
     settle: float = si(0.2, "s", 0.0, 5.0, "held still before the reference wrench is read")
@@ -364,13 +366,19 @@ class ContactMove:
         name: str,
         dev: Devices,
         guard: Guard,
-        target: Callable[[], Pose],
+        target: Callable[[], Pose | None],
         speed: float,
         acceleration: float,
         threshold: float,
+        reference: Callable[[], ArrayLike | None] | None = None,
     ) -> None:
+        """``target``: read when the move starts; None: the move is not made (it ends at once,
+        without contact). ``reference``: the force on the tool (N, base frame) that counts as
+        nothing touched (default, or when it gives None: the reading at the start)."""
         self.dev, self._target, self.threshold = dev, target, threshold
         self._speed, self._acc = speed, acceleration
+        self._reference = reference
+        self._skipped = False
         self.contact = False
         self.contact_pose: Pose | None = None
         self.resisting = 0.0  #: N, the newest force against the motion (above the reference)
@@ -383,14 +391,20 @@ class ContactMove:
 
     def _start(self) -> None:
         target = self._target()
+        self.contact, self.contact_pose = False, None
+        self._skipped = target is None
+        if target is None:
+            return
         start = self.dev.arm.tool_pose().position
         d = target.position - start
         self._dir = d / max(float(np.linalg.norm(d)), NO_DIRECTION)
-        self.reference = world_force(self.dev)
-        self.contact, self.contact_pose = False, None
+        given = None if self._reference is None else self._reference()
+        self.reference = world_force(self.dev) if given is None else np.asarray(given, float)
         self.dev.arm.move_to(target, self._speed, self._acc)
 
     def _finished(self) -> bool:
+        if self._skipped:
+            return True
         self.resisting = -float((world_force(self.dev) - self.reference) @ self._dir)
         if self.resisting > self.threshold:
             self.dev.arm.stop()
@@ -399,6 +413,8 @@ class ContactMove:
         return self.dev.arm.status().state is MotionState.DONE
 
     def _failed(self) -> Failed | None:
+        if self._skipped:  # the arm stands where a contact before stopped it
+            return None
         return arm_failure(self.dev.arm, self.contact)
 
 
@@ -519,23 +535,26 @@ class FeedSlot(_SlotSkill):
         self.reason: str | None = None
         #: the insertion's legs, in order: one, unless ``pocket_speed`` is set
         self.legs: list[ContactMove] = []
-
-        def leg(name: str, bottom: float, speed: float) -> ContactMove:
-            k = len(self.legs)
-            move = ContactMove(
-                name, dev, p.insert_guard, lambda: self._leg_pose(bottom, self.legs[:k]),
-                speed, p.acceleration, p.contact_force,
-            )
-            self.legs.append(move)
-            return move
-
+        #: where the last leg starts: a floor contact may end only that slow leg
+        floor_leg = max(self.slot_floor_z, lowest) + p.depth_tolerance + p.slow_margin
+        legs = [("into the slot", self._bottom_goal, p.insert_speed)]
         if p.pocket_speed > 0:
-            top, floor = self.machine_top_z, self.slot_floor_z
-            leg("down to the pocket's edge", top + p.slow_margin, p.pocket_speed)
-            leg("into the pocket", top - p.slow_margin, p.insert_speed)
-            leg("down the pocket", floor + p.slow_margin, p.pocket_speed)
-        #: the last leg: onto the floor at ``insert_speed`` (the whole insertion by default)
-        self.insert = leg("into the slot", self._bottom_goal, p.insert_speed)
+            top = self.machine_top_z
+            legs = [
+                ("down to the pocket's edge", top + p.slow_margin, p.pocket_speed),
+                ("into the pocket", top - p.slow_margin, p.insert_speed),
+                ("down the pocket", floor_leg, p.pocket_speed),
+                *legs,
+            ]
+        # Each leg ends below the one before (a margin too large for the pocket merges legs;
+        # one of no length is left out) and never below the insertion's goal.
+        above = self._above
+        for name, bottom, speed in legs:
+            end = max(min(bottom, above), self._bottom_goal)
+            if end < above - SAME_HEIGHT or name == legs[-1][0]:
+                self._leg(name, end, speed)
+                above = end
+        self.insert = self.legs[-1]  #: the last leg, onto the floor at ``insert_speed``
         self.sequence = Sequence(
             "feed slot", [*self._carry_steps(), *self._insert_steps(), *self._let_go_steps()]
         )
@@ -596,13 +615,24 @@ class FeedSlot(_SlotSkill):
     def _over_slot(self) -> None:
         self.joint_travel = self.travel.start(self.dev.arm, self._travel_target())
 
-    def _leg_pose(self, bottom: float, before: list[ContactMove]) -> Pose:
-        """Where an insertion leg ends: the part's bottom at ``bottom``, never below the
-        insertion's goal; where a leg ``before`` it met something, where the tool is (the leg
-        does not move: the insertion ended on that contact)."""
+    def _leg(self, name: str, bottom: float, speed: float) -> None:
+        """Add an insertion leg down to the part's bottom at ``bottom`` (m). Every leg measures
+        contact from the hanging part's reading (before the first leg): read at its own start,
+        a leg would take the braking of the leg before, or a contact it pressed, for nothing."""
+        p, before = self.params, list(self.legs)
+        single = self.params.pocket_speed <= 0  # the one leg reads its own start, as it did
+        self.legs.append(ContactMove(
+            name, self.dev, p.insert_guard, lambda: self._leg_pose(bottom, before), speed,
+            p.acceleration, p.contact_force,
+            reference=None if single else (lambda: self.reference.force),
+        ))
+
+    def _leg_pose(self, bottom: float, before: list[ContactMove]) -> Pose | None:
+        """Where an insertion leg ends: the part's bottom at ``bottom``; None (the leg does
+        not move) once a leg ``before`` it met something: that contact ended the insertion."""
         if any(leg.contact for leg in before):
-            return self.dev.arm.tool_pose()
-        return self._pose(max(bottom, self._bottom_goal))
+            return None
+        return self._pose(bottom)
 
     def _down_to_slot(self) -> None:
         p = self.params
@@ -617,11 +647,12 @@ class FeedSlot(_SlotSkill):
         above_floor = bottom - self.slot_floor_z
         met = next((leg for leg in self.legs if leg.contact), None)
         if met is not None:
-            if above_floor > p.depth_tolerance:
+            if met is not self.insert or above_floor > p.depth_tolerance:
+                where = "" if met is self.insert else f" in '{met.motion.name}'"
                 return (
                     f"the part met resistance {1e3 * above_floor:.1f} mm above the slot "
-                    f"floor ({met.resisting:.1f} N): it is on the machine or the "
-                    "pocket's edge, not in the slot"
+                    f"floor{where} ({met.resisting:.1f} N): it is on the machine, on the "
+                    "pocket's edge or on something in the pocket, not in the slot"
                 )
             self.on_floor = True
             return None
