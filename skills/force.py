@@ -14,7 +14,9 @@ from drivers.pose import Pose
 from skills.axes import DIM, FORCE, WRENCH_DIM
 from skills.motion import Failed, Guard, GuardedMotion, arm_failure
 
-__all__ = ["CONTACT_RATIO", "FORCE_SETTLE", "STILL_SPEED", "ForcePush", "world_force"]
+__all__ = [
+    "CONTACT_RATIO", "FORCE_SETTLE", "STILL_SPEED", "ForcePush", "nothing_pressed", "world_force",
+]
 
 # The contact test of a push whose caller gives none of its own: the values the packing pushes
 # were measured with (their contact_settle_s and still_speed_m_s defaults).
@@ -32,6 +34,15 @@ CONTACT_RATIO = 0.7
 def world_force(dev: Devices) -> NDArray[np.float64]:
     """The force (N) the environment applies to the tool, in the base frame."""
     return dev.arm.tool_pose().rotation @ np.asarray(dev.ft.wrench()[FORCE], float)
+
+
+def nothing_pressed(
+    dev: Devices, reference: Callable[[], ArrayLike | None] | None
+) -> NDArray[np.float64]:
+    """The force on the tool (N, base frame) a contact is measured from: ``reference()``
+    where it is given and gives one, else the reading now."""
+    given = None if reference is None else reference()
+    return world_force(dev) if given is None else np.asarray(given, float)
 
 
 class ForcePush:
@@ -112,8 +123,7 @@ class ForcePush:
 
     def _start(self) -> None:
         arm = self.dev.arm
-        given = None if self._reference is None else self._reference()
-        self._ref = world_force(self.dev) if given is None else np.asarray(given, float)
+        self._ref = nothing_pressed(self.dev, self._reference)
         self._start_pos = arm.tool_pose().position.copy()
         self._limit = float(self._reach())
         self.contact, self.contact_pose, self.travelled = False, None, 0.0

@@ -46,7 +46,7 @@ from drivers.devices import Devices
 from drivers.parts import Part
 from drivers.pose import Pose
 from skills.axes import FZ, XY, Z
-from skills.force import world_force
+from skills.force import nothing_pressed, world_force
 from skills.frames import frame_step
 from skills.motion import Failed, Guard, GuardedMotion, Sequence, arm_failure
 from skills.params import guard_field, si
@@ -398,8 +398,7 @@ class ContactMove:
         start = self.dev.arm.tool_pose().position
         d = target.position - start
         self._dir = d / max(float(np.linalg.norm(d)), NO_DIRECTION)
-        given = None if self._reference is None else self._reference()
-        self.reference = world_force(self.dev) if given is None else np.asarray(given, float)
+        self.reference = nothing_pressed(self.dev, self._reference)
         self.dev.arm.move_to(target, self._speed, self._acc)
 
     def _finished(self) -> bool:
@@ -549,9 +548,9 @@ class FeedSlot(_SlotSkill):
         # Each leg ends below the one before (a margin too large for the pocket merges legs;
         # one of no length is left out) and never below the insertion's goal.
         above = self._above
-        for name, bottom, speed in legs:
+        for k, (name, bottom, speed) in enumerate(legs):
             end = max(min(bottom, above), self._bottom_goal)
-            if end < above - SAME_HEIGHT or name == legs[-1][0]:
+            if end < above - SAME_HEIGHT or k == len(legs) - 1:
                 self._leg(name, end, speed)
                 above = end
         self.insert = self.legs[-1]  #: the last leg, onto the floor at ``insert_speed``
@@ -620,11 +619,9 @@ class FeedSlot(_SlotSkill):
         contact from the hanging part's reading (before the first leg): read at its own start,
         a leg would take the braking of the leg before, or a contact it pressed, for nothing."""
         p, before = self.params, list(self.legs)
-        single = self.params.pocket_speed <= 0  # the one leg reads its own start, as it did
         self.legs.append(ContactMove(
             name, self.dev, p.insert_guard, lambda: self._leg_pose(bottom, before), speed,
-            p.acceleration, p.contact_force,
-            reference=None if single else (lambda: self.reference.force),
+            p.acceleration, p.contact_force, reference=lambda: self.reference.force,
         ))
 
     def _leg_pose(self, bottom: float, before: list[ContactMove]) -> Pose | None:
