@@ -239,6 +239,7 @@ class PackInBox(SequenceSkill):
         self._jaws_still = Settled(dev.gripper, dev.clock, p.settle)  #: the let go's end
         self._open_from = 0.0  #: m, the jaws' reported opening when the let go began
         self._let_go_from = Pose()  #: the TCP's pose when the let go began
+        self._let_go_started = False
         self._came_up: str | None = None  #: why the weight check failed (None: it passed)
         self._closing_seen = False  #: the jaws were seen moving since the re-grip began
         self._make_contact_moves()
@@ -307,8 +308,12 @@ class PackInBox(SequenceSkill):
         # wall: a flat pad in a round (or 12-sided) hole touches it with a corner once the part
         # has turned a little in the grasp, and the twin measured 22-25 N on that corner and a
         # whole packed row dragged 6 mm off its wall. Giving way, the corner slides off the wall.
-        self.withdraw = ForcePush(
-            "withdraw up", dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
+        self.withdraw = self._withdraw_move()
+
+    def _withdraw_move(self) -> ForcePush:
+        p = self.params
+        return ForcePush(
+            "withdraw up", self.dev, p.guard, (0.0, 0.0, 1.0), p.contact_force, p.approach_speed,
             lambda: self._tip_depth() + min(p.rim_margin, p.clear_height),
             settle=p.contact_settle,
             still_speed=p.still_speed,
@@ -361,7 +366,7 @@ class PackInBox(SequenceSkill):
         ]
 
     def _let_go_steps(self) -> list[GuardedMotion]:
-        dev, p, g = self.dev, self.params, self.params.guard
+        dev, g = self.dev, self.params.guard
         return [
             # Hold where the part actually is, not where the push aimed: letting go under the
             # push's preload (up to 50 N seen) wedges the fingers.
@@ -373,13 +378,44 @@ class PackInBox(SequenceSkill):
             GuardedMotion("let go", self._release, self._follow_opening, dev.arm, dev.ft,
                           dev.clock, g),
             dev.move("off the wall", g, self._off_the_wall),
-            self.withdraw.motion,
-            check("withdrawn", dev, g, self._withdrawn),
+            *self._way_up_steps(self.withdraw),
+        ]
+
+    def _way_up_steps(self, withdraw: ForcePush) -> list[GuardedMotion]:
+        dev, p, g = self.dev, self.params, self.params.guard
+        return [
+            withdraw.motion,
+            check("withdrawn", dev, g, lambda: self._withdrawn(withdraw)),
             dev.move("up clear", g, self._up_clear),
             self.reference.hold("settle", g, p.settle),
             GuardedMotion("part left in the box", self._grip_if_lifted, self._gripped_again,
                           dev.arm, dev.ft, dev.clock, g, self._came_up_reason),
         ]
+
+    # --- after a failure past the let go ----------------------------------------------------
+    @property
+    def let_go_started(self) -> bool:
+        """The jaws were told to open on the part in its place: from here on the part is in
+        the box (unless the weight check finds it came up), whatever stops the skill."""
+        return self._let_go_started
+
+    def leave(self) -> SequenceSkill:
+        """The rest of the way out of the box from wherever this skill stopped after its let
+        go began (a protective stop, a force-torque spike, a lost link on the way up): the jaws
+        opened the whole way about a still arm, the open hand off the wall unless that move
+        already ran, then the way up giving way in the plane and the weight check, as the
+        packing itself would have ended. Why not a new packing: the hand is empty and the
+        part stands where it was pushed; a new packing would start by looking for a part to
+        hold."""
+        if not self._let_go_started:
+            raise RuntimeError("leave() before the let go: the part is still held")
+        dev, g = self.dev, self.params.guard
+        steps = [GuardedMotion("open the jaws", self._open_fully, self._jaws_still, dev.arm,
+                               dev.ft, dev.clock, g)]
+        if not self.sequence.passed("off the wall"):
+            steps.append(dev.move("off the wall", g, self._off_the_wall))
+        return _Steps(Sequence("leave the box", [*steps, *self._way_up_steps(
+            self._withdraw_move())]))
 
     # --- where the part goes -----------------------------------------------------------------
     def _pose(self, bottom_z: float) -> Pose:
@@ -453,8 +489,16 @@ class PackInBox(SequenceSkill):
         gripper, p = self.dev.gripper, self.params
         self._open_from = gripper.width()
         self._let_go_from = self.dev.arm.tool_pose()
+        self._let_go_started = True
         self._jaws_still.reset()
         gripper.open(self._open_from + p.release, p.release_speed)
+
+    def _open_fully(self) -> None:
+        """The let go's opening again, to the same width (a no-op for jaws already there),
+        the arm held where it stopped."""
+        p = self.params
+        self._jaws_still.reset()
+        self.dev.gripper.open(self._open_from + p.release, p.release_speed)
 
     def _follow_opening(self) -> bool:
         """Keep the arm ``release_follow`` of the *reported* opening after the outer finger (0,
@@ -504,11 +548,12 @@ class PackInBox(SequenceSkill):
             return None
         return self.reference.force + np.array([0.0, 0.0, self.part.mass * GRAVITY])
 
-    def _withdrawn(self) -> str | None:
-        if self.withdraw.contact:
+    @staticmethod
+    def _withdrawn(withdraw: ForcePush) -> str | None:
+        if withdraw.contact:
             return (
-                f"the open hand was held down on its way up ({self.withdraw.resisting:.1f} N) "
-                f"{1e3 * self.withdraw.travelled:.0f} mm above where it let go"
+                f"the open hand was held down on its way up ({withdraw.resisting:.1f} N) "
+                f"{1e3 * withdraw.travelled:.0f} mm above where it let go"
             )
         return None
 
@@ -547,3 +592,10 @@ class PackInBox(SequenceSkill):
                 f"{part.mass * GRAVITY:.2f} N weight"
             )
         return None
+
+
+class _Steps(SequenceSkill):
+    """A :class:`SequenceSkill` over a sequence built elsewhere (:meth:`PackInBox.leave`)."""
+
+    def __init__(self, sequence: Sequence) -> None:
+        self.sequence = sequence

@@ -30,6 +30,7 @@ from drivers.events import EventKind, SlotState
 from drivers.health import DeviceError
 from skills.home import go_home, put_back
 from skills.offtick import OffTick, runs_in_real_time
+from skills.packing import PackInBox as PackInBoxSkill
 from skills.params import apply_config, with_limits
 from skills.perception.bin_parts import Detection
 from skills.perception.look import Look, tool_yaw
@@ -125,6 +126,11 @@ class SkillBehaviour(Behaviour):
     def on_success(self) -> None:
         """Publish what the finished skill found or did."""
 
+    def on_unfinished(self) -> None:
+        """Remember what a skill that ended without success left behind for the tree to
+        finish: it failed (called after its abort is reported), or a parent halted it (a
+        force-torque guard, a timeout, the cell stopping)."""
+
     # -- py_trees lifecycle ------------------------------------------------------------------
     def initialise(self) -> None:
         self.skill, self._setup_error = None, None
@@ -152,6 +158,7 @@ class SkillBehaviour(Behaviour):
             return Status.SUCCESS
         self.failure = result.code
         self.ctx.events.abort(self.feedback_message, result.code, self.name)
+        self.on_unfinished()
         return Status.FAILURE
 
     def terminate(self, new_status: Status) -> None:
@@ -160,6 +167,7 @@ class SkillBehaviour(Behaviour):
             self.skill.halt()
             if new_status == Status.INVALID:
                 self.feedback_message = f"{self.name}: halted by a parent; motion stopped"
+                self.on_unfinished()
 
 
 # ---------------------------------------------------------------------------------- leaves
@@ -1035,8 +1043,6 @@ class PackInBox(SkillBehaviour):
         return {"/cell/place": common.Access.WRITE}
 
     def make_skill(self) -> Skill:
-        from skills.packing import PackInBox as PackInBoxSkill
-
         places = self.ctx.geometry.tray_places
         free = [i for i in range(len(places)) if i not in self.ctx.filled]
         if not free:
@@ -1051,8 +1057,55 @@ class PackInBox(SkillBehaviour):
             arm_model=self.ctx.arm_model,
         )
 
+    def initialise(self) -> None:
+        self.ctx.left_in_box = None  # a part in the hand again: nothing left half packed
+        super().initialise()
+
     def on_success(self) -> None:
         self.ctx.filled.add(self.index)
+        self.ctx.events.event(EventKind.PACKED, place=self.index)
+
+    def on_unfinished(self) -> None:
+        """Past the let go the part stands in its place and the hand is open: the place is
+        taken, and ``leave_box`` finishes the way out. A part that came up with the hand and
+        was gripped again is held: the packing is simply run again."""
+        skill = self.skill
+        if not isinstance(skill, PackInBoxSkill) or not skill.let_go_started:
+            return
+        try:
+            held = self.ctx.devices.gripper.object_detected()
+        except DeviceError:
+            held = False  # unknown: the part was let go in its place
+        if not held:
+            self.ctx.filled.add(self.index)
+            self.ctx.left_in_box = (self.index, skill)
+
+
+@declare(
+    "leave_box",
+    "after a packing stopped past its let go: the open hand out of the box, the part left",
+    "Action",
+    MOTION,
+)
+class LeaveBox(SkillBehaviour):
+    """The way out of the box of a packing that stopped after it let go of the part (a
+    force-torque spike or a protective stop on the way up): the jaws opened the whole way, the
+    hand off the wall, up giving way in the plane, the weight check. The part stands where the
+    packing pushed it, so it is reported packed in that place once the hand is out and empty.
+    Fails at once (nothing moves) when no packing was left half done, so it can follow the
+    packing in a selector."""
+
+    section = "pack_in_box"
+
+    def make_skill(self) -> Skill:
+        pending = self.ctx.left_in_box
+        if pending is None:
+            raise SetupError("no packing was left after its let go")
+        self.index, packing = pending
+        return packing.leave()
+
+    def on_success(self) -> None:
+        self.ctx.left_in_box = None
         self.ctx.events.event(EventKind.PACKED, place=self.index)
 
 
@@ -1066,6 +1119,7 @@ __all__ = [
     "FeedSlot",
     "GoHome",
     "Grasp",
+    "LeaveBox",
     "PackInBox",
     "Perceive",
     "PickFromSlot",

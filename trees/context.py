@@ -20,7 +20,7 @@ from drivers.parts import Part
 from skills.home import HomeParams, PutBackParams
 from skills.mechanics.planner import PivotPlan
 from skills.motion import Guard
-from skills.packing import PackParams
+from skills.packing import PackInBox, PackParams
 from skills.perception.look import LookParams
 from skills.pivot import PivotParams
 from skills.pivot.clearance import Reach
@@ -148,6 +148,10 @@ class CellContext:
     #: machine runs returns there by a joint move, and the pick from the slot starts where it
     #: always does.
     feed_end_joints: NDArray[np.float64] | None = None
+    #: A packing that stopped after its let go began (a spike, a protective stop on the way
+    #: up): the place it let go in and the stopped skill, whose ``leave()`` finishes the way
+    #: out (``leave_box``). None when no packing is left half done.
+    left_in_box: tuple[int, PackInBox] | None = None
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

@@ -533,3 +533,61 @@ def test_a_part_that_came_up_but_the_jaws_close_on_nothing_says_so() -> None:
     result, _ = run_pack(pack, d, watch)
     assert result.status is Status.FAILURE and result.code is Failure.CHECK_FAILED
     assert "closed empty" in result.message
+
+
+@pytest.mark.parametrize("stop_in", ["off the wall", "withdraw up", "up clear"])
+def test_a_packing_stopped_past_its_let_go_leaves_the_box_from_where_it_stopped(
+    stop_in: str,
+) -> None:
+    """A spike on the way up fails the packing with the part already standing in its place and
+    the hand open. ``leave()`` finishes the way out from where the arm stopped: the jaws open
+    the whole way (no close), the open hand off the wall only if that move had not run, up
+    giving way in force mode, then clear of the rim; the weight check passes (the hand is
+    empty)."""
+    from skills.slot import GRAVITY
+
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+    hanging = (0.0, 0.0, -PART.mass * GRAVITY)
+    spiked: list[str] = []
+
+    def watch(step: str) -> None:
+        if step in ("hold still", "read the hanging part"):
+            push_back(d, hanging)
+        if step == stop_in and not spiked:
+            spiked.append(step)
+            d["ft"].value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])  # one sample
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.FAILURE and "force-torque guard" in result.message
+    assert pack.let_go_started
+    open_width = d["gripper"].width()
+    stopped_at = d["arm"].pose.position.copy()
+    d["ft"].value = np.zeros(6)
+    before = len(d["arm"].commands)
+    leave = pack.leave()
+    names = [s.name for s in leave.sequence.steps]
+    assert ("off the wall" in names) == (stop_in == "off the wall")
+    assert names[-1] == "part left in the box"
+    result, _ = run(leave, d)
+    assert result.status is Status.SUCCESS, result.message
+    assert d["gripper"].closed_on is None and d["gripper"].width() >= open_width - 1e-9
+    later = d["arm"].commands[before:]
+    assert any(c[0] == "force" and c[1][2] > 0.0 for c in later)  # up, giving way
+    tips = d["arm"].pose.position[2] - pack.params.tip_offset
+    assert tips >= PLACE[2] + PART.length + pack.params.clear_height - 1e-9
+    assert d["arm"].pose.position[:2] == pytest.approx(stopped_at[:2], abs=0.005)
+
+
+def test_leave_before_the_let_go_is_refused_the_part_is_still_held() -> None:
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+
+    def spike(_: int) -> None:
+        if pack.step == "push +x":
+            d["ft"].value = np.array([150.0, 0, 0, 0, 0, 0])
+
+    result, _ = run_pack(pack, d, lambda step: spike(0))
+    assert result.status is Status.FAILURE and not pack.let_go_started
+    with pytest.raises(RuntimeError, match="still held"):
+        pack.leave()

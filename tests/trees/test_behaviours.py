@@ -409,3 +409,72 @@ def test_back_over_slot_ends_where_the_pick_looks_at_the_slot_from(ctx) -> None:
     node = lv.BackOverSlot("back", ctx)
     assert tick_tree(node, ctx, ticks=10)[-1] == Status.SUCCESS
     assert np.allclose(arm.commands[-1][1], ctx.feed_end_joints)
+
+
+def test_a_packing_stopped_past_its_let_go_is_finished_by_leave_box_not_lost(ctx) -> None:
+    """The shipped tree's packing: a retry of (holding the part, then pack) or else leave the
+    box. A spike on the way up, after the let go: the hand is empty, so the retry's second
+    attempt cannot pack again; it takes the hand out of the box instead, and the part counts as
+    packed in the place it was let go in (one PACKED event, the place filled once)."""
+    from skills.slot import GRAVITY
+    from tests.skills.test_slot_packing_fakes import PACK_CONTACTS
+
+    dev = ctx.devices
+    dev.gripper.object_width = 0.003
+    dev.gripper.close(20.0)
+    dev.gripper.tick()
+    pack = lv.PackInBox("pack", ctx)
+    leave = lv.LeaveBox("leave", ctx)
+    body = py_trees.composites.Selector(
+        "pack, or finish leaving the box",
+        memory=False,
+        children=[
+            py_trees.composites.Sequence(
+                "pack while held",
+                memory=True,
+                children=[lv.HoldingPart("held", ctx), FTGuard("g1", pack, ctx, 60.0, 8.0)],
+            ),
+            FTGuard("g2", leave, ctx, 60.0, 8.0),  # as the tree builder wraps every motion
+        ],
+    )
+    retry = Retry("pack the part", body, ctx, attempts=2)
+    root = _beside_sampler(FTSampler("ft", ctx), retry)
+    spiked: list[str] = []
+    hanging = np.array([0.0, 0.0, -ctx.part.mass * GRAVITY])
+    for _ in range(5000):
+        root.tick_once()
+        if root.status != Status.RUNNING:
+            break
+        skill = pack.skill if pack.status == Status.RUNNING else None
+        step = skill.step if skill is not None else ""
+        arm = dev.arm
+        rot = arm.pose.rotation
+        arm.blocked = step in PACK_CONTACTS
+        if step in PACK_CONTACTS and arm.force is not None:
+            dev.ft.value = np.concatenate([rot.T @ np.asarray(PACK_CONTACTS[step], float),
+                                           np.zeros(3)])
+        elif step in ("hold still", "read the hanging part"):
+            dev.ft.value = np.concatenate([rot.T @ hanging, np.zeros(3)])
+        elif step == "withdraw up" and not spiked:
+            spiked.append(step)
+            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+        else:
+            dev.ft.value = np.zeros(6)
+        arm.tick()
+        dev.gripper.tick()
+        dev.clock.t += dev.clock.dt
+    assert spiked
+    assert root.status == Status.SUCCESS, root.feedback_message
+    # one abort: the leave waited for the spike to pass before it started
+    assert len(ctx.events.aborts) == 1 and "197.0 N" in ctx.events.aborts[0]
+    assert retry.failures == 0  # finished in the same attempt: the selector's second branch
+    assert ctx.events.kinds() == ["packed"] and ctx.events.events[0][1] == {"place": 0}
+    assert ctx.filled == {0} and ctx.left_in_box is None
+    assert not dev.gripper.object_detected()
+
+
+def test_leave_box_fails_without_moving_when_no_packing_was_left_half_done(ctx) -> None:
+    leave = lv.LeaveBox("leave", ctx)
+    leave.tick_once()
+    assert leave.status == Status.FAILURE and "no packing was left" in leave.feedback_message
+    assert ctx.devices.arm.commands == [] and ctx.events.aborts == []
