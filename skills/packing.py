@@ -43,6 +43,7 @@ from skills.slot import (
     JOINT_TRAVEL_TCP_SPEED,
     ContactMove,
     SequenceSkill,
+    StepsSkill,
     Travel,
     WrenchReference,
     check,
@@ -414,7 +415,7 @@ class PackInBox(SequenceSkill):
                                dev.ft, dev.clock, g)]
         if not self.sequence.passed("off the wall"):
             steps.append(dev.move("off the wall", g, self._off_the_wall))
-        return _Steps(Sequence("leave the box", [*steps, *self._way_up_steps(
+        return StepsSkill(Sequence("leave the box", [*steps, *self._way_up_steps(
             self._withdraw_move())]))
 
     # --- where the part goes -----------------------------------------------------------------
@@ -593,9 +594,3 @@ class PackInBox(SequenceSkill):
             )
         return None
 
-
-class _Steps(SequenceSkill):
-    """A :class:`SequenceSkill` over a sequence built elsewhere (:meth:`PackInBox.leave`)."""
-
-    def __init__(self, sequence: Sequence) -> None:
-        self.sequence = sequence

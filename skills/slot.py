@@ -447,6 +447,14 @@ class SequenceSkill:
         return self.sequence.current
 
 
+class StepsSkill(SequenceSkill):
+    """A :class:`SequenceSkill` over steps another skill built: the rest of that skill's work
+    after it stopped (``leave()`` of :class:`FeedSlot` and of the packing)."""
+
+    def __init__(self, sequence: Sequence) -> None:
+        self.sequence = sequence
+
+
 class _SlotSkill(SequenceSkill):
     """The start FeedSlot and PickFromSlot share: their parameters (with overrides), where the
     slot's floor and the machine's top are, and the wrench reference of the weight check."""
@@ -532,6 +540,8 @@ class FeedSlot(_SlotSkill):
         self._x: NDArray[np.float64] | None = None  #: tool x over the slot, fixed at the start
         self.on_floor = False
         self.reason: str | None = None
+        self._open_to: float | None = None  #: m, the let go's opening (None: not begun)
+        self._drag_from = Pose()  #: the TCP's pose when the let go began
         #: the insertion's legs, in order: one, unless ``pocket_speed`` is set
         self.legs: list[ContactMove] = []
         #: where the last leg starts: a floor contact may end only that slow leg
@@ -576,13 +586,34 @@ class FeedSlot(_SlotSkill):
 
     def _let_go_steps(self) -> list[GuardedMotion]:
         dev, g = self.dev, self.params.guard
+        return [dev.grip("let go", g, self._release), *self._way_out_steps()]
+
+    def _way_out_steps(self) -> list[GuardedMotion]:
+        dev, g = self.dev, self.params.guard
         return [
-            dev.grip("let go", g, self._release),
             dev.move("drag the gripper out", g, self._drag_out),
             *self._settle_and_check(
                 "part left in the slot", self._let_go_of_weight, Failure.CHECK_FAILED
             ),
         ]
+
+    @property
+    def let_go_started(self) -> bool:
+        """The jaws were told to open on the part in the pocket: from here on the part is in
+        the slot (unless the weight check finds it came out), whatever stops the skill."""
+        return self._open_to is not None
+
+    def leave(self) -> SequenceSkill:
+        """The rest of the way out of the slot from wherever this skill stopped after its let
+        go began (a protective stop or a force-torque spike while dragging out): the jaws
+        opened the whole way, the hand up to where the drag ends, the weight check. Why not
+        a new feed: the hand is empty and the part stands in the pocket."""
+        if self._open_to is None:
+            raise RuntimeError("leave() before the let go: the part is still held")
+        dev, g = self.dev, self.params.guard
+        return StepsSkill(Sequence("leave the slot", [
+            dev.grip("open the jaws", g, self._open_fully), *self._way_out_steps(),
+        ]))
 
     # --- where the part goes -----------------------------------------------------------------
     def _x_dir(self) -> NDArray[np.float64]:
@@ -675,13 +706,22 @@ class FeedSlot(_SlotSkill):
 
     def _release(self) -> None:
         gripper = self.dev.gripper
-        gripper.open(gripper.width() + self.params.release)
+        self._open_to = gripper.width() + self.params.release
+        self._drag_from = self.dev.arm.tool_pose()
+        gripper.open(self._open_to)
+
+    def _open_fully(self) -> None:
+        """The let go's opening again, to the same width (a no-op for jaws already there)."""
+        assert self._open_to is not None
+        self.dev.gripper.open(self._open_to)
 
     def _drag_out(self) -> None:
-        # The finger in the hole slides up out of it; the pocket holds the part down.
+        # The finger in the hole slides up out of it; the pocket holds the part down. Up from
+        # where the let go began, to the same height from wherever a stopped drag left it.
         arm, p = self.dev.arm, self.params
         tool = arm.tool_pose()
-        rise = p.grip_depth + p.clear_height
+        top = float(self._drag_from.position[Z]) + p.grip_depth + p.clear_height
+        rise = max(0.0, top - float(tool.position[Z]))
         target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
         arm.move_to(target, p.approach_speed, p.acceleration)
 

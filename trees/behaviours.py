@@ -50,6 +50,7 @@ from skills.pivot.clearance import (
 )
 from skills.reposition import Reposition as RepositionSkill
 from skills.reposition import RepositionPlan, plan_lay_down, plan_reposition
+from skills.slot import FeedSlot as FeedSlotSkill
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
@@ -947,13 +948,27 @@ class SlotMachined(SlotHoldsPart):
 
 
 # ------------------------------------------------------------------ slot and box (skills/)
+def _let_go_of(skill: FeedSlotSkill | PackInBoxSkill, ctx: CellContext) -> bool:
+    """The skill stopped after its let go began and the hand holds nothing: the part stays
+    where it was let go, and only the hand's way out is left to do. A gripper that cannot be
+    read counts as empty (it was told to open)."""
+    if not skill.let_go_started:
+        return False
+    try:
+        return not ctx.devices.gripper.object_detected()
+    except DeviceError:
+        return True
+
+
 @declare("feed_slot", "part into the machine slot, release, drag away", "Action", MOTION)
 class FeedSlot(SkillBehaviour):
     section = "slot"
 
-    def make_skill(self) -> Skill:
-        from skills.slot import FeedSlot as FeedSlotSkill
+    def initialise(self) -> None:
+        self.ctx.left_in_slot = None  # a part in the hand again: nothing left half fed
+        super().initialise()
 
+    def make_skill(self) -> Skill:
         g = self.ctx.geometry
         return FeedSlotSkill(
             np.asarray(g.slot_center, float),
@@ -964,10 +979,47 @@ class FeedSlot(SkillBehaviour):
         )
 
     def on_success(self) -> None:
-        self.ctx.slot_state = SlotState.FED
-        self.ctx.machining_started = False  # a part just fed: its machining has not begun
-        self.ctx.feed_end_joints = np.asarray(self.ctx.devices.arm.joint_positions(), float)
-        self.ctx.events.event(EventKind.FED)
+        _fed(self.ctx)
+
+    def on_unfinished(self) -> None:
+        """Past the let go the part stands in the pocket and the hand is open: ``leave_slot``
+        finishes the way out."""
+        skill = self.skill
+        if isinstance(skill, FeedSlotSkill) and _let_go_of(skill, self.ctx):
+            self.ctx.left_in_slot = skill
+
+
+def _fed(ctx: CellContext) -> None:
+    ctx.slot_state = SlotState.FED
+    ctx.machining_started = False  # a part just fed: its machining has not begun
+    ctx.feed_end_joints = np.asarray(ctx.devices.arm.joint_positions(), float)
+    ctx.events.event(EventKind.FED)
+
+
+@declare(
+    "leave_slot",
+    "after a feed_slot stopped past its let go: the open hand out of the slot, the part left",
+    "Action",
+    MOTION,
+)
+class LeaveSlot(SkillBehaviour):
+    """The way out of the slot of a feed that stopped after it let go of the part (a
+    force-torque spike or a protective stop while dragging out): the jaws opened the whole
+    way, up to where the drag ends, the weight check; the part then counts as fed. Fails at
+    once (nothing moves) when no feed was left half done, so it can follow the feed in a
+    selector."""
+
+    section = "slot"
+
+    def make_skill(self) -> Skill:
+        pending = self.ctx.left_in_slot
+        if pending is None:
+            raise SetupError("no feed was left after its let go")
+        return pending.leave()
+
+    def on_success(self) -> None:
+        self.ctx.left_in_slot = None
+        _fed(self.ctx)
 
 
 @declare(
@@ -1070,13 +1122,7 @@ class PackInBox(SkillBehaviour):
         taken, and ``leave_box`` finishes the way out. A part that came up with the hand and
         was gripped again is held: the packing is simply run again."""
         skill = self.skill
-        if not isinstance(skill, PackInBoxSkill) or not skill.let_go_started:
-            return
-        try:
-            held = self.ctx.devices.gripper.object_detected()
-        except DeviceError:
-            held = False  # unknown: the part was let go in its place
-        if not held:
+        if isinstance(skill, PackInBoxSkill) and _let_go_of(skill, self.ctx):
             self.ctx.filled.add(self.index)
             self.ctx.left_in_box = (self.index, skill)
 
@@ -1120,6 +1166,7 @@ __all__ = [
     "GoHome",
     "Grasp",
     "LeaveBox",
+    "LeaveSlot",
     "PackInBox",
     "Perceive",
     "PickFromSlot",

@@ -25,7 +25,7 @@ from skills.perception.look import LookParams
 from skills.pivot import PivotParams
 from skills.pivot.clearance import Reach
 from skills.reposition import RepositionParams
-from skills.slot import SlotParams
+from skills.slot import FeedSlot, SlotParams
 from skills.status import Failure
 from skills.travel import ArmModel
 
@@ -152,6 +152,9 @@ class CellContext:
     #: up): the place it let go in and the stopped skill, whose ``leave()`` finishes the way
     #: out (``leave_box``). None when no packing is left half done.
     left_in_box: tuple[int, PackInBox] | None = None
+    #: A feed that stopped after its let go began: its ``leave()`` finishes the way out of
+    #: the slot (``leave_slot``). None when no feed is left half done.
+    left_in_slot: FeedSlot | None = None
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

@@ -159,6 +159,50 @@ def test_feed_slot_force_spike_fails_with_a_reason_and_stops_the_arm() -> None:
     assert d["arm"].stops >= 1 and d["arm"].state is MotionState.STOPPED
 
 
+@pytest.mark.parametrize("ticks_into_drag", [0, 2])
+def test_a_feed_stopped_while_dragging_out_leaves_the_slot_from_where_it_stopped(
+    ticks_into_drag: int,
+) -> None:
+    """A spike while the hand drags out of the part's hole fails the feed with the part in the
+    pocket and the jaws open; ``leave()`` finishes the way out: the jaws at the let go's
+    opening (no close), up to the height the drag would have ended at, whatever part of the
+    way it had gone."""
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d), weight_check=0.0)
+    landed = contact_when(feed, d, "into the slot", (0, 0, 10.0))
+    seen: dict[str, object] = {}
+
+    def on_tick(i: int) -> None:
+        landed(i)
+        if feed.step == "let go":
+            seen.setdefault("z", float(d["arm"].pose.position[2]))
+        if feed.step == "drag the gripper out":
+            seen["ticks"] = int(seen.get("ticks", 0)) + 1  # type: ignore[call-overload]
+            if seen["ticks"] > ticks_into_drag:
+                d["ft"].value = np.array([0, 0, 200.0, 0, 0, 0])
+
+    result, _ = run(feed, d, on_tick=on_tick)
+    assert result.status is Status.FAILURE and "drag the gripper out" in result.message
+    assert feed.let_go_started
+    d["ft"].value = np.zeros(6)
+    opened = d["gripper"].width()
+    result, _ = run(feed.leave(), d)
+    assert result.status is Status.SUCCESS, result.message
+    assert d["gripper"].closed_on is None and d["gripper"].width() == pytest.approx(opened)
+    p = feed.params
+    assert d["arm"].pose.position[2] == pytest.approx(seen["z"] + p.grip_depth + p.clear_height)
+
+
+def test_a_feed_stopped_before_its_let_go_has_no_leave() -> None:
+    d = devices()
+    feed = FeedSlot(SLOT, PART, dev(d))
+    feed.tick()
+    feed.halt()
+    assert not feed.let_go_started
+    with pytest.raises(RuntimeError, match="still held"):
+        feed.leave()
+
+
 def test_feed_slot_halt_stops_the_arm_and_is_idempotent() -> None:
     d = devices()
     feed = FeedSlot(SLOT, PART, dev(d))

@@ -478,3 +478,63 @@ def test_leave_box_fails_without_moving_when_no_packing_was_left_half_done(ctx) 
     leave.tick_once()
     assert leave.status == Status.FAILURE and "no packing was left" in leave.feedback_message
     assert ctx.devices.arm.commands == [] and ctx.events.aborts == []
+
+
+def test_a_feed_stopped_while_dragging_out_is_finished_by_leave_slot(ctx) -> None:
+    """As for the packing: the shipped feed is a retry of (holding, feed) or else leave the
+    slot. A spike while dragging out: the part is in the pocket, the hand open; the hand comes
+    out and the part counts as fed once (FED, the slot's state fed)."""
+    from drivers.events import SlotState
+
+    dev = ctx.devices
+    dev.gripper.object_width = 0.003
+    dev.gripper.close(20.0)
+    dev.gripper.tick()
+    feed = lv.FeedSlot("feed", ctx, weight_check=0.0)
+    leave = lv.LeaveSlot("leave", ctx, weight_check=0.0)
+    body = py_trees.composites.Selector(
+        "feed, or finish leaving the slot",
+        memory=False,
+        children=[
+            py_trees.composites.Sequence(
+                "feed while held",
+                memory=True,
+                children=[lv.HoldingPart("held", ctx), FTGuard("g1", feed, ctx, 60.0, 8.0)],
+            ),
+            FTGuard("g2", leave, ctx, 60.0, 8.0),
+        ],
+    )
+    retry = Retry("feed the slot", body, ctx, attempts=2)
+    root = _beside_sampler(FTSampler("ft", ctx), retry)
+    spiked: list[str] = []
+    for _ in range(5000):
+        root.tick_once()
+        if root.status != Status.RUNNING:
+            break
+        step = feed.skill.step if feed.status == Status.RUNNING and feed.skill else ""
+        arm = dev.arm
+        if step.startswith("into the slot") and arm.queue:
+            arm.pose = arm.queue[-1]  # the floor stops the part: contact
+            dev.ft.value = np.concatenate([arm.pose.rotation.T @ np.array([0, 0, 10.0]),
+                                           np.zeros(3)])
+        elif step == "drag the gripper out" and not spiked:
+            spiked.append(step)
+            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+        else:
+            dev.ft.value = np.zeros(6)
+        arm.tick()
+        dev.gripper.tick()
+        dev.clock.t += dev.clock.dt
+    assert spiked
+    assert root.status == Status.SUCCESS, root.feedback_message
+    assert len(ctx.events.aborts) == 1 and "197.0 N" in ctx.events.aborts[0]
+    assert retry.failures == 0
+    assert ctx.events.kinds() == ["fed"] and ctx.slot_state is SlotState.FED
+    assert ctx.left_in_slot is None and ctx.feed_end_joints is not None
+
+
+def test_leave_slot_fails_without_moving_when_no_feed_was_left_half_done(ctx) -> None:
+    leave = lv.LeaveSlot("leave", ctx)
+    leave.tick_once()
+    assert leave.status == Status.FAILURE and "no feed was left" in leave.feedback_message
+    assert ctx.devices.arm.commands == [] and ctx.events.aborts == []
