@@ -786,6 +786,7 @@ class PickFromSlot(_SlotSkill):
         self._offset = grasp_offset(part, dev.gripper.finger_width)
         self._rim_z = self.slot_floor_z + part.length
         self.seen: UprightPart | None = None
+        self._pinched_at: Pose | None = None  #: the TCP's pose when the pinch was checked
         self._looking = p.use_camera and dev.camera is not None
         self._x = pick_finger_dir(self.slot_xy, p)
         self._rotation = hole_grasp_rotation(self._x)
@@ -894,14 +895,35 @@ class PickFromSlot(_SlotSkill):
     def _pinched(self) -> str | None:
         if not self.dev.gripper.object_detected():
             return "the hole grasp closed on nothing"
+        self._pinched_at = self.dev.arm.tool_pose()
         return None
 
     def _lift_out(self) -> None:
+        # Up from where the pinch was checked, to the same height from wherever a stopped lift
+        # left it.
         arm, p = self.dev.arm, self.params
+        assert self._pinched_at is not None
         tool = arm.tool_pose()
         rise = (self.machine_top_z + p.clear_height) - self.slot_floor_z
-        target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
+        top = float(self._pinched_at.position[Z]) + rise
+        target = Pose(tool.position + np.array([0.0, 0.0, max(0.0, top - tool.position[Z])]),
+                      tool.rotation)
         arm.move_to(target, p.approach_speed, p.acceleration)
+
+    @property
+    def pinched(self) -> bool:
+        """The hole grasp closed on the part and was checked: from here on the part is in the
+        hand, whatever stops the skill."""
+        return self._pinched_at is not None
+
+    def finish(self) -> SequenceSkill:
+        """The rest of the pick from wherever this skill stopped after its pinch was checked
+        (a protective stop or a force-torque spike while lifting out): up to where the lift
+        ends, the weight check. Why not a new pick: the part is in the hand, half out of the
+        slot; a new pick would start by looking for it in the slot."""
+        if self._pinched_at is None:
+            raise RuntimeError("finish() before the pinch: nothing is held")
+        return StepsSkill(Sequence("lift from slot", self._lift_steps()))
 
     def _weight_felt(self) -> str | None:
         if not self._weight_checked():

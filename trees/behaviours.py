@@ -51,6 +51,7 @@ from skills.pivot.clearance import (
 from skills.reposition import Reposition as RepositionSkill
 from skills.reposition import RepositionPlan, plan_lay_down, plan_reposition
 from skills.slot import FeedSlot as FeedSlotSkill
+from skills.slot import PickFromSlot as PickFromSlotSkill
 from skills.status import Failure, StepResult
 from skills.status import Status as SkillStatus
 from trees.context import CellContext
@@ -1071,9 +1072,11 @@ class BackOverSlot(SkillBehaviour):
 class PickFromSlot(SkillBehaviour):
     section = "slot"
 
-    def make_skill(self) -> Skill:
-        from skills.slot import PickFromSlot as PickFromSlotSkill
+    def initialise(self) -> None:
+        self.ctx.lifting_from_slot = None  # a pick afresh: no lift left half done
+        super().initialise()
 
+    def make_skill(self) -> Skill:
         g = self.ctx.geometry
         return PickFromSlotSkill(
             np.asarray(g.slot_center, float),
@@ -1083,8 +1086,50 @@ class PickFromSlot(SkillBehaviour):
         )
 
     def on_success(self) -> None:
-        self.ctx.slot_state = SlotState.EMPTY
-        self.ctx.events.event(EventKind.PICKED_FROM_SLOT)
+        _picked_from_slot(self.ctx)
+
+    def on_unfinished(self) -> None:
+        """Past the checked pinch, with the part still held: ``lift_from_slot`` finishes the
+        lift. A hand that lost the part is a pick to start again."""
+        skill = self.skill
+        if not isinstance(skill, PickFromSlotSkill) or not skill.pinched:
+            return
+        try:
+            held = self.ctx.devices.gripper.object_detected()
+        except DeviceError:
+            held = False  # unknown: look again
+        if held:
+            self.ctx.lifting_from_slot = skill
+
+
+def _picked_from_slot(ctx: CellContext) -> None:
+    ctx.slot_state = SlotState.EMPTY
+    ctx.events.event(EventKind.PICKED_FROM_SLOT)
+
+
+@declare(
+    "lift_from_slot",
+    "after a pick_from_slot stopped past its pinch with the part held: the rest of the lift",
+    "Action",
+    MOTION,
+)
+class LiftFromSlot(SkillBehaviour):
+    """The rest of a pick from the slot that stopped after its pinch was checked, the part
+    still in the hand (a force-torque spike or a protective stop while lifting out): up to
+    where the lift ends, the weight check. Fails at once (nothing moves) when no pick was left
+    so, so it can follow the pick in a selector."""
+
+    section = "slot"
+
+    def make_skill(self) -> Skill:
+        pending = self.ctx.lifting_from_slot
+        if pending is None:
+            raise SetupError("no pick from the slot was left holding the part")
+        return pending.finish()
+
+    def on_success(self) -> None:
+        self.ctx.lifting_from_slot = None
+        _picked_from_slot(self.ctx)
 
 
 @declare("pack_in_box", "push -z, +x, +y until contact, release", "Action", MOTION)
@@ -1167,6 +1212,7 @@ __all__ = [
     "Grasp",
     "LeaveBox",
     "LeaveSlot",
+    "LiftFromSlot",
     "PackInBox",
     "Perceive",
     "PickFromSlot",

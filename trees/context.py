@@ -25,7 +25,7 @@ from skills.perception.look import LookParams
 from skills.pivot import PivotParams
 from skills.pivot.clearance import Reach
 from skills.reposition import RepositionParams
-from skills.slot import FeedSlot, SlotParams
+from skills.slot import FeedSlot, PickFromSlot, SlotParams
 from skills.status import Failure
 from skills.travel import ArmModel
 
@@ -155,6 +155,9 @@ class CellContext:
     #: A feed that stopped after its let go began: its ``leave()`` finishes the way out of
     #: the slot (``leave_slot``). None when no feed is left half done.
     left_in_slot: FeedSlot | None = None
+    #: A pick from the slot that stopped after its pinch, the part still held: its
+    #: ``finish()`` lifts it the rest of the way (``lift_from_slot``).
+    lifting_from_slot: PickFromSlot | None = None
     #: Parts perception may match (the bin may hold others than ``part``); empty: ``[part]``.
     catalogue: list[Part] = field(default_factory=list)
 

@@ -246,6 +246,34 @@ def test_pick_from_slot_fails_when_the_grasp_closes_on_nothing() -> None:
     assert result.status is Status.FAILURE and "closed on nothing" in result.message
 
 
+def test_a_pick_stopped_while_lifting_out_finishes_the_lift_with_the_part_held() -> None:
+    """A spike while lifting the pinched part out of the slot fails the pick with the part in
+    the hand; ``finish()`` lifts it to the height the lift would have ended at and never opens
+    the jaws. Before the pinch there is nothing to finish."""
+    d = devices()
+    pick = PickFromSlot(SLOT, PART, dev(d), weight_check=0.0)
+    assert not pick.pinched
+    with pytest.raises(RuntimeError, match="nothing is held"):
+        pick.finish()
+    seen: dict[str, float] = {}
+
+    def spike(_: int) -> None:
+        if pick.step == "lift out of the slot" and "z" not in seen:
+            seen["z"] = float(d["arm"].pose.position[2])
+            d["ft"].value = np.array([0, 0, 200.0, 0, 0, 0])
+
+    result, _ = run(pick, d, on_tick=spike)
+    assert result.status is Status.FAILURE and "lift out of the slot" in result.message
+    assert pick.pinched and d["gripper"].object_detected()
+    d["ft"].value = np.zeros(6)
+    opens = d["gripper"]._target
+    result, _ = run(pick.finish(), d)
+    assert result.status is Status.SUCCESS, result.message
+    assert d["gripper"].object_detected() and d["gripper"]._target == opens  # never opened
+    rise = (SLOT[2] + 0.040 + pick.params.clear_height) - SLOT[2]
+    assert d["arm"].pose.position[2] == pytest.approx(seen["z"] + rise)
+
+
 def test_pick_from_slot_force_spike_and_halt_stop_the_arm() -> None:
     d = devices()
     pick = PickFromSlot(SLOT, PART, dev(d))

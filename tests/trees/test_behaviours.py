@@ -538,3 +538,42 @@ def test_leave_slot_fails_without_moving_when_no_feed_was_left_half_done(ctx) ->
     leave.tick_once()
     assert leave.status == Status.FAILURE and "no feed was left" in leave.feedback_message
     assert ctx.devices.arm.commands == [] and ctx.events.aborts == []
+
+
+def test_a_pick_from_the_slot_stopped_while_lifting_is_finished_by_lift_from_slot(ctx) -> None:
+    """The shipped pick from the slot: the pick, or else the rest of its lift. A spike while
+    lifting the pinched part: the part is in the hand, so the lift is finished (the jaws never
+    open) and the part counts as picked once; the slot is empty."""
+    from drivers.events import SlotState
+
+    dev = ctx.devices
+    dev.gripper.object_width = 0.003
+    ctx.slot_state = SlotState.MACHINED
+    pick = lv.PickFromSlot("pick", ctx, weight_check=0.0)  # no camera: the slot's centre
+    lift = lv.LiftFromSlot("lift", ctx, weight_check=0.0)
+    body = py_trees.composites.Selector(
+        "pick, or finish the lift",
+        memory=False,
+        children=[FTGuard("g1", pick, ctx, 60.0, 8.0), FTGuard("g2", lift, ctx, 60.0, 8.0)],
+    )
+    retry = Retry("pick from the slot", body, ctx, attempts=2)
+    root = _beside_sampler(FTSampler("ft", ctx), retry)
+    spiked: list[str] = []
+    for _ in range(5000):
+        root.tick_once()
+        if root.status != Status.RUNNING:
+            break
+        step = pick.skill.step if pick.status == Status.RUNNING and pick.skill else ""
+        if step == "lift out of the slot" and not spiked:
+            spiked.append(step)
+            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+        else:
+            dev.ft.value = np.zeros(6)
+        dev.arm.tick()
+        dev.gripper.tick()
+        dev.clock.t += dev.clock.dt
+    assert spiked
+    assert root.status == Status.SUCCESS, root.feedback_message
+    assert len(ctx.events.aborts) == 1 and retry.failures == 0
+    assert ctx.events.kinds() == ["picked_from_slot"] and ctx.slot_state is SlotState.EMPTY
+    assert ctx.lifting_from_slot is None and dev.gripper.object_detected()

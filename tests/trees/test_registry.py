@@ -119,6 +119,7 @@ def test_the_shipped_tree_has_the_limits_its_yaml_states(ctx) -> None:
     assert guards["pack in box"] == (60.0, 8.0, 40.0)
     assert guards["leave box"] == (60.0, 8.0, 20.0)  # a packing stopped past its let go
     assert guards["leave slot"] == (60.0, 8.0, 20.0)  # a feed stopped past its let go
+    assert guards["lift from slot"] == (60.0, 8.0, 20.0)  # a pick stopped past its pinch
     assert guards["reposition"] == (60.0, 8.0, 30.0)
     assert guards["look again"] == (80.0, 8.0, 20.0)
     assert guards["look ahead"] == (80.0, 8.0, 20.0)  # while the machine runs
@@ -126,7 +127,7 @@ def test_the_shipped_tree_has_the_limits_its_yaml_states(ctx) -> None:
     # every motion leaf in the shipped tree is guarded, and nothing else is
     moving = [n for n in root.iterate() if getattr(type(n), "moves", False)]
     assert guards["pick standing"] == (60.0, 8.0, 40.0)
-    assert len(moving) == len(guards) == 19
+    assert len(moving) == len(guards) == 20
     assert isinstance(root, Cycles)
 
 
@@ -380,7 +381,7 @@ def test_the_shipped_trees_limits_are_listed_for_cell_tree(ctx) -> None:
     root = TreeBuilder(ctx, doc, DEFAULTS).build(doc.data, ())
     lines = limits_table(root)
     assert "tilt: 90 N, 8 N*m, 40 s" in lines and "put back: 250 N, 30 N*m, 20 s" in lines
-    assert len(lines) == 19  # every guarded motion leaf, once
+    assert len(lines) == 20  # every guarded motion leaf, once
 
 
 @pytest.mark.parametrize("value", ["1", "maybe", "0.5"])
