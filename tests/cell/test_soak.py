@@ -174,11 +174,12 @@ def test_cell_soak_two_cycles_end_to_end(tmp_path: Path) -> None:
 
 
 def _one_cycle_with(
-    fault: str, after_event: str, in_leaf: str = ""
+    fault: str, after_event: str, in_leaf: str = "", at_step: str = ""
 ) -> tuple[Any, Any, dict[str, int], Any]:
     """One cycle of the shipped tree in a fresh twin with ``fault`` forced at the first chance
     after the workflow event ``after_event`` (and, given ``in_leaf``, once the running leaf's
-    name is that): (result, state, parts, injector)."""
+    name is that; given ``at_step`` too, once its skill's step is that): (result, state, parts,
+    injector)."""
     from cell.assemble import open_backend, prepare
     from cell.runner import TickLog, TickLoop
     from sim.faults import no_faults, twin_injector
@@ -196,6 +197,8 @@ def _one_cycle_with(
         if forced["done"] or not any(e["kind"] == after_event for e in prep.state.events):
             return
         tip = prep.root.tip()
+        if at_step and getattr(getattr(tip, "skill", None), "step", None) != at_step:
+            return
         if not in_leaf or (tip is not None and tip.name == in_leaf):
             injector.force(fault)
             forced["done"] = True
@@ -235,6 +238,30 @@ def test_an_ft_spike_while_packing_is_retried_with_the_part_held_not_a_stop() ->
     assert spikes and spikes[0].startswith("pack in box"), state.aborts
     assert result.status == "success" and state.stop_reason is None
     assert parts["packed"] == 1 and parts["in_hand"] == 0
+
+
+@pytest.mark.parametrize(
+    ("fault", "after", "leaf", "step"),
+    [
+        ("protective_stop", "picked_from_slot", "pack in box", "let go"),
+        ("ft_spike", "picked", "feed slot", "let go"),
+        ("protective_stop", "machined", "pick from slot", "holding the part"),
+    ],
+)
+def test_a_step_stopped_past_its_hand_over_is_finished_not_a_stop(
+    fault: str, after: str, leaf: str, step: str
+) -> None:
+    """A fault on the first motion after the part changed hands (the packing's and the feed's
+    let go, the pick's checked pinch) stops the step with the part already where it belongs:
+    the shipped tree finishes the step from where the arm stands instead of calling a person,
+    and the twin judges the part packed."""
+    result, state, parts, injector = _one_cycle_with(fault, after, in_leaf=leaf, at_step=step)
+    assert injector.injected[fault] == 1
+    assert len(state.aborts) == 1, state.aborts  # the fault's, and nothing after it
+    assert result.status == "success" and state.stop_reason is None, state.stop_reason
+    assert parts["packed"] == 1 and parts["in_hand"] == 0 and parts["in_slot"] == 0
+    kinds = [e["kind"] for e in state.events]
+    assert kinds.count("fed") == kinds.count("picked_from_slot") == kinds.count("packed") == 1
 
 
 def test_a_part_dropped_on_the_way_to_the_box_is_not_packed_again() -> None:
