@@ -949,6 +949,30 @@ class SlotMachined(SlotHoldsPart):
 
 
 # ------------------------------------------------------------------ slot and box (skills/)
+class _Finisher(SkillBehaviour):
+    """The rest of a step that stopped after its part changed hands (see the subclasses),
+    from where the arm stands. With nothing left halfway it fails at once, moving nothing and
+    saying nothing: it is the fallback after that step in a selector, and its not applying is
+    not why anything failed (the step's own failure is what a stop names)."""
+
+    def pending(self) -> Skill | None:  # pragma: no cover - abstract
+        """The rest of the stopped step, or None."""
+        raise NotImplementedError
+
+    def make_skill(self) -> Skill:
+        rest = self.pending()
+        if rest is None:
+            raise SetupError("nothing was left halfway")
+        return rest
+
+    def update(self) -> Status:
+        if self.skill is None:
+            self.feedback_message = ""
+            self.failure = Failure.CANNOT_START
+            return Status.FAILURE
+        return super().update()
+
+
 def _let_go_of(skill: FeedSlotSkill | PackInBoxSkill, ctx: CellContext) -> bool:
     """The skill stopped after its let go began and the hand holds nothing: the part stays
     where it was let go, and only the hand's way out is left to do. A gripper that cannot be
@@ -1003,20 +1027,16 @@ def _fed(ctx: CellContext) -> None:
     "Action",
     MOTION,
 )
-class LeaveSlot(SkillBehaviour):
+class LeaveSlot(_Finisher):
     """The way out of the slot of a feed that stopped after it let go of the part (a
     force-torque spike or a protective stop while dragging out): the jaws opened the whole
-    way, up to where the drag ends, the weight check; the part then counts as fed. Fails at
-    once (nothing moves) when no feed was left half done, so it can follow the feed in a
-    selector."""
+    way, up to where the drag ends, the weight check; the part then counts as fed."""
 
     section = "slot"
 
-    def make_skill(self) -> Skill:
-        pending = self.ctx.left_in_slot
-        if pending is None:
-            raise SetupError("no feed was left after its let go")
-        return pending.leave()
+    def pending(self) -> Skill | None:
+        feed = self.ctx.left_in_slot
+        return None if feed is None else feed.leave()
 
     def on_success(self) -> None:
         self.ctx.left_in_slot = None
@@ -1113,19 +1133,16 @@ def _picked_from_slot(ctx: CellContext) -> None:
     "Action",
     MOTION,
 )
-class LiftFromSlot(SkillBehaviour):
+class LiftFromSlot(_Finisher):
     """The rest of a pick from the slot that stopped after its pinch was checked, the part
     still in the hand (a force-torque spike or a protective stop while lifting out): up to
-    where the lift ends, the weight check. Fails at once (nothing moves) when no pick was left
-    so, so it can follow the pick in a selector."""
+    where the lift ends, the weight check."""
 
     section = "slot"
 
-    def make_skill(self) -> Skill:
-        pending = self.ctx.lifting_from_slot
-        if pending is None:
-            raise SetupError("no pick from the slot was left holding the part")
-        return pending.finish()
+    def pending(self) -> Skill | None:
+        pick = self.ctx.lifting_from_slot
+        return None if pick is None else pick.finish()
 
     def on_success(self) -> None:
         self.ctx.lifting_from_slot = None
@@ -1178,21 +1195,18 @@ class PackInBox(SkillBehaviour):
     "Action",
     MOTION,
 )
-class LeaveBox(SkillBehaviour):
+class LeaveBox(_Finisher):
     """The way out of the box of a packing that stopped after it let go of the part (a
     force-torque spike or a protective stop on the way up): the jaws opened the whole way, the
     hand off the wall, up giving way in the plane, the weight check. The part stands where the
-    packing pushed it, so it is reported packed in that place once the hand is out and empty.
-    Fails at once (nothing moves) when no packing was left half done, so it can follow the
-    packing in a selector."""
+    packing pushed it, so it is reported packed in that place once the hand is out and empty."""
 
     section = "pack_in_box"
 
-    def make_skill(self) -> Skill:
-        pending = self.ctx.left_in_box
-        if pending is None:
-            raise SetupError("no packing was left after its let go")
-        self.index, packing = pending
+    def pending(self) -> Skill | None:
+        if self.ctx.left_in_box is None:
+            return None
+        self.index, packing = self.ctx.left_in_box
         return packing.leave()
 
     def on_success(self) -> None:
