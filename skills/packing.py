@@ -241,6 +241,8 @@ class PackInBox(SequenceSkill):
         self._open_from = 0.0  #: m, the jaws' reported opening when the let go began
         self._let_go_from = Pose()  #: the TCP's pose when the let go began
         self._let_go_started = False
+        self._off_wall_xy: NDArray[np.float64] | None = None  #: m, where "off the wall" goes
+        self._leaves: list[Sequence] = []  #: the sequences :meth:`leave` handed out
         self._came_up: str | None = None  #: why the weight check failed (None: it passed)
         self._closing_seen = False  #: the jaws were seen moving since the re-grip began
         self._make_contact_moves()
@@ -394,29 +396,39 @@ class PackInBox(SequenceSkill):
         ]
 
     # --- after a failure past the let go ----------------------------------------------------
+    #: The last step, the weight check (and the re-grip of a part that came up): a stop there
+    #: is its own verdict, not an interruption, and the jaws may be closing on the part.
+    CHECK_STEP = "part left in the box"
+
     @property
     def let_go_started(self) -> bool:
-        """The jaws were told to open on the part in its place: from here on the part is in
-        the box (unless the weight check finds it came up), whatever stops the skill."""
+        """The jaws were told to open on the part in its place."""
         return self._let_go_started
+
+    @property
+    def finishable(self) -> bool:
+        """Stopped after the let go began and before the weight check: the part stands in its
+        place, the hand is open around it, and :meth:`leave` does the rest."""
+        return self._let_go_started and self.sequence.current != self.CHECK_STEP
 
     def leave(self) -> SequenceSkill:
         """The rest of the way out of the box from wherever this skill stopped after its let
-        go began (a protective stop, a force-torque spike, a lost link on the way up): the jaws
-        opened the whole way about a still arm, the open hand off the wall unless that move
-        already ran, then the way up giving way in the plane and the weight check, as the
-        packing itself would have ended. Why not a new packing: the hand is empty and the
-        part stands where it was pushed; a new packing would start by looking for a part to
-        hold."""
-        if not self._let_go_started:
-            raise RuntimeError("leave() before the let go: the part is still held")
+        go began (a force-torque spike, a timeout, a protective stop the arm came back from, on
+        the way up): the jaws opened again to the let go's width about a still arm, the open
+        hand off the wall unless that move already ran (to the same place in the plane, at the
+        height it stands), then the way up giving way in the plane and the weight check, as
+        the packing itself would have ended. Each call is a fresh try of that rest. Why not a
+        new packing: the hand is empty and the part stands where it was pushed."""
+        if not self.finishable:
+            raise RuntimeError("leave() outside the way out: the part is still held or checked")
         dev, g = self.dev, self.params.guard
         steps = [GuardedMotion("open the jaws", self._open_fully, self._jaws_still, dev.arm,
                                dev.ft, dev.clock, g)]
-        if not self.sequence.passed("off the wall"):
+        if not any(seq.passed("off the wall") for seq in (self.sequence, *self._leaves)):
             steps.append(dev.move("off the wall", g, self._off_the_wall))
-        return StepsSkill(Sequence("leave the box", [*steps, *self._way_up_steps(
-            self._withdraw_move())]))
+        leave = Sequence("leave the box", [*steps, *self._way_up_steps(self._withdraw_move())])
+        self._leaves.append(leave)
+        return StepsSkill(leave)
 
     # --- where the part goes -----------------------------------------------------------------
     def _pose(self, bottom_z: float) -> Pose:
@@ -515,10 +527,14 @@ class PackInBox(SequenceSkill):
     def _off_the_wall(self) -> None:
         """Move the open hand towards the hole's centre by ``release_clearance``: the finger
         in the hole, still touching the wall it gripped, dragged the part up and 5 mm aside as
-        it withdrew (the twin measured it)."""
+        it withdrew (the twin measured it). The place in the plane is fixed the first time,
+        from where the let go left the hand, so a move started again goes to the same place."""
         p = self.params
-        dx, dy = -p.release_clearance * self._x[XY]
-        self.dev.arm.move_to(self._shifted(float(dx), float(dy)), p.release_speed, p.acceleration)
+        tool = self.dev.arm.tool_pose()
+        if self._off_wall_xy is None:
+            self._off_wall_xy = tool.position[XY] - p.release_clearance * self._x[XY]
+        target = np.array([*self._off_wall_xy, tool.position[Z]])
+        self.dev.arm.move_to(Pose(target, tool.rotation), p.release_speed, p.acceleration)
 
     def _tip_depth(self) -> float:
         """How far (m) the fingertips reach below the part's rim, measured: the TCP's height

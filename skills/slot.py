@@ -597,19 +597,27 @@ class FeedSlot(_SlotSkill):
             ),
         ]
 
+    #: The last step, the weight check: a stop there is its verdict, not an interruption.
+    CHECK_STEP = "part left in the slot"
+
     @property
     def let_go_started(self) -> bool:
-        """The jaws were told to open on the part in the pocket: from here on the part is in
-        the slot (unless the weight check finds it came out), whatever stops the skill."""
+        """The jaws were told to open on the part in the pocket."""
         return self._open_to is not None
+
+    @property
+    def finishable(self) -> bool:
+        """Stopped after the let go began and before the weight check: the part stands in the
+        pocket, the hand is open, and :meth:`leave` does the rest."""
+        return self._open_to is not None and self.sequence.current != self.CHECK_STEP
 
     def leave(self) -> SequenceSkill:
         """The rest of the way out of the slot from wherever this skill stopped after its let
-        go began (a protective stop or a force-torque spike while dragging out): the jaws
-        opened the whole way, the hand up to where the drag ends, the weight check. Why not
-        a new feed: the hand is empty and the part stands in the pocket."""
-        if self._open_to is None:
-            raise RuntimeError("leave() before the let go: the part is still held")
+        go began (a force-torque spike or a timeout while dragging out): the jaws opened again
+        to the let go's width, the hand up to where the drag ends, the weight check. Why not a
+        new feed: the hand is empty and the part stands in the pocket."""
+        if not self.finishable:
+            raise RuntimeError("leave() outside the way out: the part is still held or checked")
         dev, g = self.dev, self.params.guard
         return StepsSkill(Sequence("leave the slot", [
             dev.grip("open the jaws", g, self._open_fully), *self._way_out_steps(),
@@ -910,19 +918,27 @@ class PickFromSlot(_SlotSkill):
                       tool.rotation)
         arm.move_to(target, p.approach_speed, p.acceleration)
 
+    #: The last step, the weight check: a stop there is its verdict, not an interruption.
+    CHECK_STEP = "part in the hand"
+
     @property
     def pinched(self) -> bool:
-        """The hole grasp closed on the part and was checked: from here on the part is in the
-        hand, whatever stops the skill."""
+        """The hole grasp closed on the part and was checked."""
         return self._pinched_at is not None
+
+    @property
+    def finishable(self) -> bool:
+        """Stopped after the pinch was checked and before the weight check: the part is in the
+        hand, on its way out of the slot, and :meth:`finish` does the rest."""
+        return self._pinched_at is not None and self.sequence.current != self.CHECK_STEP
 
     def finish(self) -> SequenceSkill:
         """The rest of the pick from wherever this skill stopped after its pinch was checked
-        (a protective stop or a force-torque spike while lifting out): up to where the lift
-        ends, the weight check. Why not a new pick: the part is in the hand, half out of the
-        slot; a new pick would start by looking for it in the slot."""
-        if self._pinched_at is None:
-            raise RuntimeError("finish() before the pinch: nothing is held")
+        (a force-torque spike or a timeout while lifting out): up to where the lift ends, the
+        weight check. Why not a new pick: the part is in the hand, half out of the slot; a new
+        pick would start by opening over the wall."""
+        if not self.finishable:
+            raise RuntimeError("finish() outside the lift: nothing is held, or it was checked")
         return StepsSkill(Sequence("lift from slot", self._lift_steps()))
 
     def _weight_felt(self) -> str | None:

@@ -953,7 +953,10 @@ class _Finisher(SkillBehaviour):
     """The rest of a step that stopped after its part changed hands (see the subclasses),
     from where the arm stands. With nothing left halfway it fails at once, moving nothing and
     saying nothing: it is the fallback after that step in a selector, and its not applying is
-    not why anything failed (the step's own failure is what a stop names)."""
+    not why anything failed (the step's own failure is what a stop names). It runs with the
+    stopped step's own parameters and limits, so it takes none of its own."""
+
+    section = None
 
     def pending(self) -> Skill | None:  # pragma: no cover - abstract
         """The rest of the stopped step, or None."""
@@ -974,10 +977,12 @@ class _Finisher(SkillBehaviour):
 
 
 def _let_go_of(skill: FeedSlotSkill | PackInBoxSkill, ctx: CellContext) -> bool:
-    """The skill stopped after its let go began and the hand holds nothing: the part stays
-    where it was let go, and only the hand's way out is left to do. A gripper that cannot be
-    read counts as empty (it was told to open)."""
-    if not skill.let_go_started:
+    """The skill stopped after its let go began, before its weight check, and the hand holds
+    nothing: the part stays where it was let go, and only the hand's way out is left to do. A
+    gripper that cannot be read counts as empty (it was told to open). A stop in the weight
+    check itself is its verdict (a part that came up, perhaps being gripped again): a person
+    is told, as before."""
+    if not skill.finishable:
         return False
     try:
         return not ctx.devices.gripper.object_detected()
@@ -1029,10 +1034,8 @@ def _fed(ctx: CellContext) -> None:
 )
 class LeaveSlot(_Finisher):
     """The way out of the slot of a feed that stopped after it let go of the part (a
-    force-torque spike or a protective stop while dragging out): the jaws opened the whole
-    way, up to where the drag ends, the weight check; the part then counts as fed."""
-
-    section = "slot"
+    force-torque spike or a timeout while dragging out): the jaws opened again to the let
+    go's width, up to where the drag ends, the weight check; the part then counts as fed."""
 
     def pending(self) -> Skill | None:
         feed = self.ctx.left_in_slot
@@ -1092,11 +1095,10 @@ class BackOverSlot(SkillBehaviour):
 class PickFromSlot(SkillBehaviour):
     section = "slot"
 
-    def initialise(self) -> None:
-        self.ctx.lifting_from_slot = None  # a pick afresh: no lift left half done
-        super().initialise()
-
     def make_skill(self) -> Skill:
+        if self.ctx.lifting_from_slot is not None:
+            # the part is in the hand: a fresh pick would open the jaws over the wall
+            raise SetupError("the part is in the hand, its lift out of the slot unfinished")
         g = self.ctx.geometry
         return PickFromSlotSkill(
             np.asarray(g.slot_center, float),
@@ -1112,7 +1114,7 @@ class PickFromSlot(SkillBehaviour):
         """Past the checked pinch, with the part still held: ``lift_from_slot`` finishes the
         lift. A hand that lost the part is a pick to start again."""
         skill = self.skill
-        if not isinstance(skill, PickFromSlotSkill) or not skill.pinched:
+        if not isinstance(skill, PickFromSlotSkill) or not skill.finishable:
             return
         try:
             held = self.ctx.devices.gripper.object_detected()
@@ -1135,10 +1137,8 @@ def _picked_from_slot(ctx: CellContext) -> None:
 )
 class LiftFromSlot(_Finisher):
     """The rest of a pick from the slot that stopped after its pinch was checked, the part
-    still in the hand (a force-torque spike or a protective stop while lifting out): up to
-    where the lift ends, the weight check."""
-
-    section = "slot"
+    still in the hand (a force-torque spike or a timeout while lifting out): up to where the
+    lift ends, the weight check."""
 
     def pending(self) -> Skill | None:
         pick = self.ctx.lifting_from_slot
@@ -1197,11 +1197,10 @@ class PackInBox(SkillBehaviour):
 )
 class LeaveBox(_Finisher):
     """The way out of the box of a packing that stopped after it let go of the part (a
-    force-torque spike or a protective stop on the way up): the jaws opened the whole way, the
-    hand off the wall, up giving way in the plane, the weight check. The part stands where the
-    packing pushed it, so it is reported packed in that place once the hand is out and empty."""
-
-    section = "pack_in_box"
+    force-torque spike or a timeout on the way up): the jaws opened again to the let go's
+    width, the hand off the wall, up giving way in the plane, the weight check. The part stands
+    where the packing pushed it, so it is reported packed in that place once the hand is out
+    and empty."""
 
     def pending(self) -> Skill | None:
         if self.ctx.left_in_box is None:

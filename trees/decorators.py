@@ -395,7 +395,7 @@ class StopOnFailure(_LeanDecorator):
             why = f"{self.reason}: {_deepest_feedback(self.decorated)}"
             # A retry's last attempt may fail on its precondition ("the hand is empty"): the
             # person needs what went wrong first.
-            for node in self.decorated.iterate():
+            for node in _failure_path(self.decorated):
                 if (
                     isinstance(node, Retry)
                     and node.status == Status.FAILURE
@@ -577,6 +577,15 @@ def leaf_name(node: Behaviour) -> str:
     return node.name
 
 
+def _failure_path(node: Behaviour) -> Iterator[Behaviour]:
+    """``node`` and, depth-first, every node below it reached through failed children only
+    (see :func:`_first_feedback`: what failed in an earlier run of a subtree is not here)."""
+    yield node
+    for child in node.children:
+        if child.status is Status.FAILURE:
+            yield from _failure_path(child)
+
+
 def _deepest_feedback(node: Behaviour) -> str:
     """The most specific reason under ``node``: for a failure, the first node that failed in
     depth-first order (the leaf, or the guard that stopped it); while running, the tip."""
@@ -586,13 +595,18 @@ def _deepest_feedback(node: Behaviour) -> str:
 
 def _first_feedback(node: Behaviour, wanted: Status) -> str | None:
     """The feedback of the first node in ``node.iterate()`` order (children first, depth-first,
-    then the node) whose status is ``wanted`` and whose feedback is not empty, or None.
+    then the node) whose status is ``wanted`` and whose feedback is not empty, or None --
+    looking only below children that are ``wanted`` themselves.
 
-    The same nodes in the same order as ``iterate()``, as a plain recursion: ``iterate()``
-    resumes one generator per level for every node it yields, and :class:`Cycles` asks this on
-    every tick while the cycle runs."""
+    Why only there: a node keeps the status of its last run, so a subtree that ended otherwise
+    may still hold old failures (an optional look that failed and was passed over, a fallback
+    that did not apply in an earlier attempt); they are not why this node failed. The same
+    order as ``iterate()``, as a plain recursion: ``iterate()`` resumes one generator per level
+    for every node it yields, and :class:`Cycles` asks this on every tick while the cycle runs."""
     for child in node.children:
         if child.children:
+            if child.status is not wanted:
+                continue
             found = _first_feedback(child, wanted)
             if found is not None:
                 return found

@@ -241,21 +241,36 @@ def test_an_ft_spike_while_packing_is_retried_with_the_part_held_not_a_stop() ->
 
 
 @pytest.mark.parametrize(
-    ("fault", "after", "leaf", "step"),
+    ("fault", "after", "leaf", "step", "finisher"),
     [
-        ("protective_stop", "picked_from_slot", "pack in box", "let go"),
-        ("ft_spike", "picked", "feed slot", "let go"),
-        ("protective_stop", "machined", "pick from slot", "holding the part"),
+        ("protective_stop", "picked_from_slot", "pack in box", "let go", "LeaveBox"),
+        ("ft_spike", "picked", "feed slot", "let go", "LeaveSlot"),
+        ("protective_stop", "machined", "pick from slot", "holding the part", "LiftFromSlot"),
     ],
 )
 def test_a_step_stopped_past_its_hand_over_is_finished_not_a_stop(
-    fault: str, after: str, leaf: str, step: str
+    fault: str, after: str, leaf: str, step: str, finisher: str,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A fault on the first motion after the part changed hands (the packing's and the feed's
     let go, the pick's checked pinch) stops the step with the part already where it belongs:
     the shipped tree finishes the step from where the arm stands instead of calling a person,
-    and the twin judges the part packed."""
+    and the twin judges the part packed. (A protective stop: the twin's arm, like the UR's
+    controller, takes the next motion command after it; the cell's own UR driver asks a
+    person to unlock one.)"""
+    from trees import behaviours
+
+    finished: list[str] = []
+    cls = getattr(behaviours, finisher)
+    original = cls.on_success
+
+    def on_success(self: Any) -> None:
+        finished.append(type(self).__name__)
+        original(self)
+
+    monkeypatch.setattr(cls, "on_success", on_success)
     result, state, parts, injector = _one_cycle_with(fault, after, in_leaf=leaf, at_step=step)
+    assert finished == [finisher]  # the rest was done by the finisher, once
     assert injector.injected[fault] == 1
     assert len(state.aborts) == 1, state.aborts  # the fault's, and nothing after it
     assert result.status == "success" and state.stop_reason is None, state.stop_reason

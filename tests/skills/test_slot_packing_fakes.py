@@ -198,7 +198,7 @@ def test_a_feed_stopped_before_its_let_go_has_no_leave() -> None:
     feed = FeedSlot(SLOT, PART, dev(d))
     feed.tick()
     feed.halt()
-    assert not feed.let_go_started
+    assert not feed.let_go_started and not feed.finishable
     with pytest.raises(RuntimeError, match="still held"):
         feed.leave()
 
@@ -255,6 +255,7 @@ def test_a_pick_stopped_while_lifting_out_finishes_the_lift_with_the_part_held()
     assert not pick.pinched
     with pytest.raises(RuntimeError, match="nothing is held"):
         pick.finish()
+    assert not pick.finishable
     seen: dict[str, float] = {}
 
     def spike(_: int) -> None:
@@ -661,5 +662,64 @@ def test_leave_before_the_let_go_is_refused_the_part_is_still_held() -> None:
 
     result, _ = run_pack(pack, d, lambda step: spike(0))
     assert result.status is Status.FAILURE and not pack.let_go_started
+    assert not pack.finishable
     with pytest.raises(RuntimeError, match="still held"):
         pack.leave()
+
+
+def test_a_packing_stopped_in_its_weight_check_is_not_finishable() -> None:
+    """The weight check found the part came up and the jaws closed on it again: that is the
+    check's verdict, not an interruption; no way out is offered (opening would drop it)."""
+    from skills.slot import GRAVITY
+
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d))
+    hanging = (0.0, 0.0, -PART.mass * GRAVITY)
+
+    def watch(step: str) -> None:
+        if step in ("hold still", "read the hanging part", "settle", "part left in the box"):
+            push_back(d, hanging)
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.FAILURE and pack.let_go_started
+    assert pack.step == PackInBox.CHECK_STEP and not pack.finishable
+    with pytest.raises(RuntimeError):
+        pack.leave()
+
+
+def test_leaving_again_goes_off_the_wall_to_the_same_place_not_further() -> None:
+    """A stop in "off the wall", then a stop in the first leave's way up: each leave moves the
+    hand off the wall to the one place fixed from where the let go left it, at the height it
+    stands -- never a further release_clearance each time, never back down."""
+    d = devices()
+    pack = PackInBox(PLACE, PART, dev(d), weight_check=0.0)
+    stops = {"n": 0}
+
+    def watch(step: str) -> None:
+        if step == "let go":
+            stops["let_go_xy"] = d["arm"].pose.position[:2].copy()
+        if step == "off the wall" and stops["n"] == 0:
+            stops["n"] = 1
+            d["ft"].value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+
+    result, _ = run_pack(pack, d, watch)
+    assert result.status is Status.FAILURE and pack.finishable
+    d["ft"].value = np.zeros(6)
+    first = pack.leave()
+    assert "off the wall" in [m.name for m in first.sequence.steps]
+
+    def spike_up(_: int) -> None:
+        if first.step == "withdraw up":
+            d["ft"].value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+
+    result, _ = run(first, d, on_tick=spike_up)
+    assert result.status is Status.FAILURE
+    d["ft"].value = np.zeros(6)
+    z_before = d["arm"].pose.position[2]
+    second = pack.leave()
+    assert "off the wall" not in [m.name for m in second.sequence.steps]  # it ran once
+    result, _ = run(second, d)
+    assert result.status is Status.SUCCESS, result.message
+    off = stops["let_go_xy"] - pack.params.release_clearance * pack._x[:2]
+    assert d["arm"].pose.position[:2] == pytest.approx(off, abs=1e-9)
+    assert d["arm"].pose.position[2] >= z_before

@@ -411,11 +411,58 @@ def test_back_over_slot_ends_where_the_pick_looks_at_the_slot_from(ctx) -> None:
     assert np.allclose(arm.commands[-1][1], ctx.feed_end_joints)
 
 
+def _finisher_first(ctx, finisher, step, gate: bool):  # type: ignore[no-untyped-def]
+    """The shipped tree's shape around a step that hands the part over: a retry (3 attempts)
+    of a selector with memory -- the finisher, else the step (gated by ``holding_part`` for the
+    feed and the packing) -- each under an FT guard, beside the FT sampler."""
+    first = FTGuard("g1", finisher, ctx, 60.0, 8.0)
+    guarded = FTGuard("g2", step, ctx, 60.0, 8.0)
+    second = (
+        py_trees.composites.Sequence(
+            "while held", memory=True, children=[lv.HoldingPart("held", ctx), guarded]
+        )
+        if gate
+        else guarded
+    )
+    body = py_trees.composites.Selector("finish, or the step", memory=True,
+                                        children=[first, second])
+    retry = Retry("retry", body, ctx, attempts=3, pause_s=1.0)
+    return retry, _beside_sampler(FTSampler("ft", ctx), retry)
+
+
+def _run_with_spike(ctx, root, step_of, spike_step, contact=None):  # type: ignore[no-untyped-def]
+    """Tick ``root`` to its end; one 197 N sample as the step's skill enters ``spike_step``;
+    ``contact(step)`` gives the world force (N) the fakes feel in a step, if any."""
+    dev, spiked = ctx.devices, []
+    for _ in range(5000):
+        root.tick_once()
+        if root.status != Status.RUNNING:
+            break
+        step = step_of()
+        force = contact(step) if contact is not None else None
+        if step == spike_step and not spiked:
+            spiked.append(step)
+            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
+        elif force is not None:
+            dev.ft.value = np.concatenate([dev.arm.pose.rotation.T @ np.asarray(force, float),
+                                           np.zeros(3)])
+        else:
+            dev.ft.value = np.zeros(6)
+        dev.arm.tick()
+        dev.gripper.tick()
+        dev.clock.t += dev.clock.dt
+    assert spiked
+    return root.status
+
+
+def _step_of(node):  # type: ignore[no-untyped-def]
+    return lambda: node.skill.step if node.status == Status.RUNNING and node.skill else ""
+
+
 def test_a_packing_stopped_past_its_let_go_is_finished_by_leave_box_not_lost(ctx) -> None:
-    """The shipped tree's packing: a retry of (holding the part, then pack) or else leave the
-    box. A spike on the way up, after the let go: the hand is empty, so the retry's second
-    attempt cannot pack again; it takes the hand out of the box instead, and the part counts as
-    packed in the place it was let go in (one PACKED event, the place filled once)."""
+    """A spike on the way up, after the let go: the hand is empty, so the packing cannot start
+    again; the retry's next attempt takes the hand out of the box instead, and the part counts
+    as packed in the place it was let go in (one PACKED event, the place filled once)."""
     from skills.slot import GRAVITY
     from tests.skills.test_slot_packing_fakes import PACK_CONTACTS
 
@@ -423,51 +470,21 @@ def test_a_packing_stopped_past_its_let_go_is_finished_by_leave_box_not_lost(ctx
     dev.gripper.object_width = 0.003
     dev.gripper.close(20.0)
     dev.gripper.tick()
-    pack = lv.PackInBox("pack", ctx)
-    leave = lv.LeaveBox("leave", ctx)
-    body = py_trees.composites.Selector(
-        "pack, or finish leaving the box",
-        memory=False,
-        children=[
-            py_trees.composites.Sequence(
-                "pack while held",
-                memory=True,
-                children=[lv.HoldingPart("held", ctx), FTGuard("g1", pack, ctx, 60.0, 8.0)],
-            ),
-            FTGuard("g2", leave, ctx, 60.0, 8.0),  # as the tree builder wraps every motion
-        ],
-    )
-    retry = Retry("pack the part", body, ctx, attempts=2)
-    root = _beside_sampler(FTSampler("ft", ctx), retry)
-    spiked: list[str] = []
-    hanging = np.array([0.0, 0.0, -ctx.part.mass * GRAVITY])
-    for _ in range(5000):
-        root.tick_once()
-        if root.status != Status.RUNNING:
-            break
-        skill = pack.skill if pack.status == Status.RUNNING else None
-        step = skill.step if skill is not None else ""
-        arm = dev.arm
-        rot = arm.pose.rotation
-        arm.blocked = step in PACK_CONTACTS
-        if step in PACK_CONTACTS and arm.force is not None:
-            dev.ft.value = np.concatenate([rot.T @ np.asarray(PACK_CONTACTS[step], float),
-                                           np.zeros(3)])
-        elif step in ("hold still", "read the hanging part"):
-            dev.ft.value = np.concatenate([rot.T @ hanging, np.zeros(3)])
-        elif step == "withdraw up" and not spiked:
-            spiked.append(step)
-            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
-        else:
-            dev.ft.value = np.zeros(6)
-        arm.tick()
-        dev.gripper.tick()
-        dev.clock.t += dev.clock.dt
-    assert spiked
-    assert root.status == Status.SUCCESS, root.feedback_message
-    # one abort: the leave waited for the spike to pass before it started
+    pack, leave = lv.PackInBox("pack", ctx), lv.LeaveBox("leave", ctx)
+    retry, root = _finisher_first(ctx, leave, pack, gate=True)
+    hanging = (0.0, 0.0, -ctx.part.mass * GRAVITY)
+
+    def contact(step: str):  # type: ignore[no-untyped-def]
+        dev.arm.blocked = step in PACK_CONTACTS
+        if step in PACK_CONTACTS and dev.arm.force is not None:
+            return PACK_CONTACTS[step]
+        return hanging if step in ("hold still", "read the hanging part") else None
+
+    status = _run_with_spike(ctx, root, _step_of(pack), "withdraw up", contact)
+    assert status == Status.SUCCESS, retry.feedback_message
+    assert leave.status == Status.SUCCESS  # the finisher did it, not a packing run again
     assert len(ctx.events.aborts) == 1 and "197.0 N" in ctx.events.aborts[0]
-    assert retry.failures == 0  # finished in the same attempt: the selector's second branch
+    assert retry.failures == 1
     assert ctx.events.kinds() == ["packed"] and ctx.events.events[0][1] == {"place": 0}
     assert ctx.filled == {0} and ctx.left_in_box is None
     assert not dev.gripper.object_detected()
@@ -480,55 +497,34 @@ def test_leave_box_fails_without_moving_when_no_packing_was_left_half_done(ctx) 
     assert ctx.devices.arm.commands == [] and ctx.events.aborts == []
 
 
+def test_a_finisher_takes_no_parameters_of_its_own(ctx) -> None:
+    with pytest.raises(TypeError, match="takes no skill parameters"):
+        lv.LeaveSlot("leave", ctx, weight_check=0.0)
+
+
 def test_a_feed_stopped_while_dragging_out_is_finished_by_leave_slot(ctx) -> None:
-    """As for the packing: the shipped feed is a retry of (holding, feed) or else leave the
-    slot. A spike while dragging out: the part is in the pocket, the hand open; the hand comes
-    out and the part counts as fed once (FED, the slot's state fed)."""
+    """As for the packing: a spike while dragging out leaves the part in the pocket and the
+    hand open; the hand comes out and the part counts as fed once (FED, the slot fed)."""
     from drivers.events import SlotState
 
     dev = ctx.devices
     dev.gripper.object_width = 0.003
     dev.gripper.close(20.0)
     dev.gripper.tick()
-    feed = lv.FeedSlot("feed", ctx, weight_check=0.0)
-    leave = lv.LeaveSlot("leave", ctx, weight_check=0.0)
-    body = py_trees.composites.Selector(
-        "feed, or finish leaving the slot",
-        memory=False,
-        children=[
-            py_trees.composites.Sequence(
-                "feed while held",
-                memory=True,
-                children=[lv.HoldingPart("held", ctx), FTGuard("g1", feed, ctx, 60.0, 8.0)],
-            ),
-            FTGuard("g2", leave, ctx, 60.0, 8.0),
-        ],
-    )
-    retry = Retry("feed the slot", body, ctx, attempts=2)
-    root = _beside_sampler(FTSampler("ft", ctx), retry)
-    spiked: list[str] = []
-    for _ in range(5000):
-        root.tick_once()
-        if root.status != Status.RUNNING:
-            break
-        step = feed.skill.step if feed.status == Status.RUNNING and feed.skill else ""
-        arm = dev.arm
-        if step.startswith("into the slot") and arm.queue:
-            arm.pose = arm.queue[-1]  # the floor stops the part: contact
-            dev.ft.value = np.concatenate([arm.pose.rotation.T @ np.array([0, 0, 10.0]),
-                                           np.zeros(3)])
-        elif step == "drag the gripper out" and not spiked:
-            spiked.append(step)
-            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
-        else:
-            dev.ft.value = np.zeros(6)
-        arm.tick()
-        dev.gripper.tick()
-        dev.clock.t += dev.clock.dt
-    assert spiked
-    assert root.status == Status.SUCCESS, root.feedback_message
+    feed, leave = lv.FeedSlot("feed", ctx, weight_check=0.0), lv.LeaveSlot("leave", ctx)
+    retry, root = _finisher_first(ctx, leave, feed, gate=True)
+
+    def contact(step: str):  # type: ignore[no-untyped-def]
+        if step.startswith("into the slot") and dev.arm.queue:
+            dev.arm.pose = dev.arm.queue[-1]  # the floor stops the part: contact
+            return (0.0, 0.0, 10.0)
+        return None
+
+    status = _run_with_spike(ctx, root, _step_of(feed), "drag the gripper out", contact)
+    assert status == Status.SUCCESS, retry.feedback_message
+    assert leave.status == Status.SUCCESS
     assert len(ctx.events.aborts) == 1 and "197.0 N" in ctx.events.aborts[0]
-    assert retry.failures == 0
+    assert retry.failures == 1
     assert ctx.events.kinds() == ["fed"] and ctx.slot_state is SlotState.FED
     assert ctx.left_in_slot is None and ctx.feed_end_joints is not None
 
@@ -541,60 +537,77 @@ def test_leave_slot_fails_without_moving_when_no_feed_was_left_half_done(ctx) ->
 
 
 def test_a_pick_from_the_slot_stopped_while_lifting_is_finished_by_lift_from_slot(ctx) -> None:
-    """The shipped pick from the slot: the pick, or else the rest of its lift. A spike while
-    lifting the pinched part: the part is in the hand, so the lift is finished (the jaws never
-    open) and the part counts as picked once; the slot is empty."""
+    """A spike while lifting the pinched part: the part is in the hand, so the lift is
+    finished (the jaws never open again) and the part counts as picked once; the slot is
+    empty. A fresh pick cannot start while that lift is unfinished."""
     from drivers.events import SlotState
 
     dev = ctx.devices
     dev.gripper.object_width = 0.003
     ctx.slot_state = SlotState.MACHINED
-    pick = lv.PickFromSlot("pick", ctx, weight_check=0.0)  # no camera: the slot's centre
-    lift = lv.LiftFromSlot("lift", ctx, weight_check=0.0)
-    body = py_trees.composites.Selector(
-        "pick, or finish the lift",
-        memory=False,
-        children=[FTGuard("g1", pick, ctx, 60.0, 8.0), FTGuard("g2", lift, ctx, 60.0, 8.0)],
-    )
-    retry = Retry("pick from the slot", body, ctx, attempts=2)
-    root = _beside_sampler(FTSampler("ft", ctx), retry)
-    spiked: list[str] = []
-    for _ in range(5000):
-        root.tick_once()
-        if root.status != Status.RUNNING:
-            break
-        step = pick.skill.step if pick.status == Status.RUNNING and pick.skill else ""
-        if step == "lift out of the slot" and not spiked:
-            spiked.append(step)
-            dev.ft.value = np.array([0.0, 0.0, 197.0, 0.0, 0.0, 0.0])
-        else:
-            dev.ft.value = np.zeros(6)
-        dev.arm.tick()
-        dev.gripper.tick()
-        dev.clock.t += dev.clock.dt
-    assert spiked
-    assert root.status == Status.SUCCESS, root.feedback_message
-    assert len(ctx.events.aborts) == 1 and retry.failures == 0
+    pick, lift = lv.PickFromSlot("pick", ctx, weight_check=0.0), lv.LiftFromSlot("lift", ctx)
+    retry, root = _finisher_first(ctx, lift, pick, gate=False)
+    opens: list[int] = []
+    original_open = dev.gripper.open
+
+    def counted_open(*a, **k):  # type: ignore[no-untyped-def]
+        opens.append(1)
+        original_open(*a, **k)
+
+    dev.gripper.open = counted_open  # type: ignore[method-assign]
+    status = _run_with_spike(ctx, root, _step_of(pick), "lift out of the slot")
+    assert status == Status.SUCCESS, retry.feedback_message
+    assert lift.status == Status.SUCCESS and retry.failures == 1
+    assert len(opens) == 1  # the pick's own open over the wall, never again with the part
+    assert len(ctx.events.aborts) == 1
     assert ctx.events.kinds() == ["picked_from_slot"] and ctx.slot_state is SlotState.EMPTY
     assert ctx.lifting_from_slot is None and dev.gripper.object_detected()
+
+
+def test_no_fresh_pick_from_the_slot_while_a_lift_is_unfinished(ctx) -> None:
+    pick = lv.PickFromSlot("pick", ctx)
+    ctx.lifting_from_slot = object()  # type: ignore[assignment]
+    pick.tick_once()
+    assert pick.status == Status.FAILURE and "lift out of the slot unfinished" in (
+        pick.feedback_message
+    )
+    assert ctx.devices.arm.commands == []
 
 
 def test_a_stop_names_the_steps_failure_not_the_finisher_that_did_not_apply(ctx) -> None:
     """With nothing left halfway the finisher fails silently: the person is told what failed
     (here the empty hand), not that there was nothing to finish."""
-    body = py_trees.composites.Selector(
-        "pack, or finish leaving the box",
-        memory=False,
-        children=[
-            py_trees.composites.Sequence(
-                "pack while held", memory=True,
-                children=[lv.HoldingPart("held", ctx), lv.PackInBox("pack", ctx)],
-            ),
-            lv.LeaveBox("leave", ctx),
-        ],
-    )
-    node = StopOnFailure("s", Retry("r", body, ctx, attempts=2), ctx, "part lost")
-    for _ in range(3):
+    retry, _ = _finisher_first(ctx, lv.LeaveBox("leave", ctx), lv.PackInBox("pack", ctx),
+                               gate=True)
+    node = StopOnFailure("s", retry, ctx, "part lost")
+    for _ in range(1000):
         node.tick_once()
+        if node.status != Status.RUNNING:
+            break
+        ctx.devices.clock.t += ctx.devices.clock.dt
+    assert node.status == Status.FAILURE
+    assert ctx.events.stopped == "part lost: the hand is empty"
+
+
+def test_a_stop_does_not_name_an_old_failure_of_a_step_that_was_passed_over(ctx) -> None:
+    """A node keeps the status of its last run: an optional look that failed earlier in the
+    cycle is not why a later step failed, and the stop names the later step."""
+    from trees.decorators import OptionalStep
+
+    class Fails(py_trees.behaviour.Behaviour):
+        def __init__(self, name: str, why: str) -> None:
+            super().__init__(name=name)
+            self.why = why
+
+        def update(self) -> Status:
+            self.feedback_message = self.why
+            return Status.FAILURE
+
+    body = py_trees.composites.Sequence("machine and pack", memory=True, children=[
+        OptionalStep("while the machine runs", Fails("look", "no bushing left to pick"), ctx),
+        Fails("pack", "the hand is empty"),
+    ])
+    node = StopOnFailure("s", body, ctx, "part lost")
+    node.tick_once()
     assert node.status == Status.FAILURE
     assert ctx.events.stopped == "part lost: the hand is empty"
