@@ -609,4 +609,3 @@ class PackInBox(SequenceSkill):
                 f"{part.mass * GRAVITY:.2f} N weight"
             )
         return None
-

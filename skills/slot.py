@@ -726,12 +726,9 @@ class FeedSlot(_SlotSkill):
     def _drag_out(self) -> None:
         # The finger in the hole slides up out of it; the pocket holds the part down. Up from
         # where the let go began, to the same height from wherever a stopped drag left it.
-        arm, p = self.dev.arm, self.params
-        tool = arm.tool_pose()
+        p = self.params
         top = float(self._drag_from.position[Z]) + p.grip_depth + p.clear_height
-        rise = max(0.0, top - float(tool.position[Z]))
-        target = Pose(tool.position + np.array([0.0, 0.0, rise]), tool.rotation)
-        arm.move_to(target, p.approach_speed, p.acceleration)
+        rise_to(self.dev.arm, top, p.approach_speed, p.acceleration)
 
     def _let_go_of_weight(self) -> str | None:
         if not self._weight_checked():
@@ -909,22 +906,14 @@ class PickFromSlot(_SlotSkill):
     def _lift_out(self) -> None:
         # Up from where the pinch was checked, to the same height from wherever a stopped lift
         # left it.
-        arm, p = self.dev.arm, self.params
+        p = self.params
         assert self._pinched_at is not None
-        tool = arm.tool_pose()
         rise = (self.machine_top_z + p.clear_height) - self.slot_floor_z
         top = float(self._pinched_at.position[Z]) + rise
-        target = Pose(tool.position + np.array([0.0, 0.0, max(0.0, top - tool.position[Z])]),
-                      tool.rotation)
-        arm.move_to(target, p.approach_speed, p.acceleration)
+        rise_to(self.dev.arm, top, p.approach_speed, p.acceleration)
 
     #: The last step, the weight check: a stop there is its verdict, not an interruption.
     CHECK_STEP = "part in the hand"
-
-    @property
-    def pinched(self) -> bool:
-        """The hole grasp closed on the part and was checked."""
-        return self._pinched_at is not None
 
     @property
     def finishable(self) -> bool:

@@ -976,18 +976,21 @@ class _Finisher(SkillBehaviour):
         return super().update()
 
 
+def _holding(ctx: CellContext) -> bool | None:
+    """Whether the gripper feels something; None when it cannot be read."""
+    try:
+        return ctx.devices.gripper.object_detected()
+    except DeviceError:
+        return None
+
+
 def _let_go_of(skill: FeedSlotSkill | PackInBoxSkill, ctx: CellContext) -> bool:
     """The skill stopped after its let go began, before its weight check, and the hand holds
     nothing: the part stays where it was let go, and only the hand's way out is left to do. A
     gripper that cannot be read counts as empty (it was told to open). A stop in the weight
     check itself is its verdict (a part that came up, perhaps being gripped again): a person
     is told, as before."""
-    if not skill.finishable:
-        return False
-    try:
-        return not ctx.devices.gripper.object_detected()
-    except DeviceError:
-        return True
+    return skill.finishable and _holding(ctx) is not True
 
 
 @declare("feed_slot", "part into the machine slot, release, drag away", "Action", MOTION)
@@ -1114,13 +1117,8 @@ class PickFromSlot(SkillBehaviour):
         """Past the checked pinch, with the part still held: ``lift_from_slot`` finishes the
         lift. A hand that lost the part is a pick to start again."""
         skill = self.skill
-        if not isinstance(skill, PickFromSlotSkill) or not skill.finishable:
-            return
-        try:
-            held = self.ctx.devices.gripper.object_detected()
-        except DeviceError:
-            held = False  # unknown: look again
-        if held:
+        # a gripper that cannot be read: unknown, look again
+        if isinstance(skill, PickFromSlotSkill) and skill.finishable and _holding(self.ctx):
             self.ctx.lifting_from_slot = skill
 
 

@@ -252,10 +252,9 @@ def test_a_pick_stopped_while_lifting_out_finishes_the_lift_with_the_part_held()
     the jaws. Before the pinch there is nothing to finish."""
     d = devices()
     pick = PickFromSlot(SLOT, PART, dev(d), weight_check=0.0)
-    assert not pick.pinched
+    assert not pick.finishable
     with pytest.raises(RuntimeError, match="nothing is held"):
         pick.finish()
-    assert not pick.finishable
     seen: dict[str, float] = {}
 
     def spike(_: int) -> None:
@@ -265,7 +264,7 @@ def test_a_pick_stopped_while_lifting_out_finishes_the_lift_with_the_part_held()
 
     result, _ = run(pick, d, on_tick=spike)
     assert result.status is Status.FAILURE and "lift out of the slot" in result.message
-    assert pick.pinched and d["gripper"].object_detected()
+    assert pick.finishable and d["gripper"].object_detected()
     d["ft"].value = np.zeros(6)
     opens = d["gripper"]._target
     result, _ = run(pick.finish(), d)
